@@ -1,0 +1,307 @@
+//! Derive macros of `skill-sdk`. Skill authors use them through `skill_sdk::prelude`.
+//!
+//! Layout: one function per derive. Every generated path goes through `::skill_sdk` so a skill
+//! crate depends on `skill-sdk` alone (it never names iceoryx2).
+//!
+//! - [`Message`]: `#[repr(C)]` data types: the iceoryx2 `ZeroCopySend` impl with an explicit
+//!   type name (`#[message(type_name = "...")]`, default `skillfab.<Ident>`) and a run-time
+//!   schema (field names, types, offsets).
+//! - [`Params`]: a parameter struct: `#[param(default = .., min = .., max = ..)]` per field,
+//!   doc comments become the parameter's doc.
+//! - [`Inputs`] / [`Outputs`]: a struct of `Input<'a, T>` / `Output<'a, T>` fields, one per port.
+
+use proc_macro::TokenStream;
+use quote::quote;
+use syn::{Data, DeriveInput, Expr, Fields, Lit, parse_macro_input, spanned::Spanned};
+
+fn named_fields(input: &DeriveInput) -> syn::Result<Vec<&syn::Field>> {
+    match &input.data {
+        Data::Struct(s) => match &s.fields {
+            Fields::Named(f) => Ok(f.named.iter().collect()),
+            Fields::Unit => Ok(Vec::new()),
+            Fields::Unnamed(_) => Err(syn::Error::new(
+                input.span(),
+                "skill-sdk derives need a struct with named fields",
+            )),
+        },
+        _ => Err(syn::Error::new(input.span(), "skill-sdk derives only work on structs")),
+    }
+}
+
+fn doc_of(attrs: &[syn::Attribute]) -> String {
+    let mut lines = Vec::new();
+    for a in attrs {
+        if a.path().is_ident("doc")
+            && let syn::Meta::NameValue(nv) = &a.meta
+            && let Expr::Lit(l) = &nv.value
+            && let Lit::Str(s) = &l.lit
+        {
+            lines.push(s.value().trim().to_string());
+        }
+    }
+    lines.join(" ")
+}
+
+/// A `#[repr(C)]` message type: zero-copy across processes, with a schema.
+#[proc_macro_derive(Message, attributes(message))]
+pub fn derive_message(input: TokenStream) -> TokenStream {
+    let input = parse_macro_input!(input as DeriveInput);
+    match message(&input) {
+        Ok(t) => t.into(),
+        Err(e) => e.to_compile_error().into(),
+    }
+}
+
+fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
+    let ident = &input.ident;
+    if !input.generics.params.is_empty() {
+        return Err(syn::Error::new(input.generics.span(), "a Message cannot be generic"));
+    }
+    let has_repr_c = input.attrs.iter().any(|a| {
+        a.path().is_ident("repr")
+            && a.parse_args_with(
+                syn::punctuated::Punctuated::<syn::Meta, syn::Token![,]>::parse_terminated,
+            )
+            .map(|list| list.iter().any(|m| m.path().is_ident("C")))
+            .unwrap_or(false)
+    });
+    if !has_repr_c {
+        return Err(syn::Error::new(
+            input.span(),
+            "a Message must be #[repr(C)] so every process and language sees one layout",
+        ));
+    }
+    let mut type_name = format!("skillfab.{ident}");
+    for a in input.attrs.iter().filter(|a| a.path().is_ident("message")) {
+        a.parse_nested_meta(|meta| {
+            if meta.path.is_ident("type_name") {
+                let s: syn::LitStr = meta.value()?.parse()?;
+                type_name = s.value();
+                Ok(())
+            } else {
+                Err(meta.error("expected `type_name = \"...\"`"))
+            }
+        })?;
+    }
+    let fields = named_fields(input)?;
+    let doc = doc_of(&input.attrs);
+    let mut schema_fields = Vec::new();
+    let mut checks = Vec::new();
+    for f in &fields {
+        let name = f.ident.as_ref().map(|i| i.to_string()).unwrap_or_default();
+        let fid = &f.ident;
+        let ty = &f.ty;
+        schema_fields.push(quote! {
+            ::skill_sdk::schema::FieldSchema {
+                name: #name.to_string(),
+                offset: ::core::mem::offset_of!(#ident, #fid) as u32,
+                ty: <#ty as ::skill_sdk::schema::FieldType>::field_type(),
+            }
+        });
+        checks.push(quote! { assert_field::<#ty>(); });
+    }
+    Ok(quote! {
+        // SAFETY: the type is #[repr(C)] and every field is a `FieldType` (checked below), which
+        // only plain-old-data types implement: it has no pointers and one layout everywhere.
+        unsafe impl ::skill_sdk::__private::ZeroCopySend for #ident {
+            unsafe fn type_name() -> &'static str { #type_name }
+        }
+        // SAFETY: as above; every `FieldType` is valid when all its bytes are zero.
+        unsafe impl ::skill_sdk::schema::FieldType for #ident {
+            fn field_type() -> ::skill_sdk::schema::FieldKind {
+                ::skill_sdk::schema::FieldKind::Struct(<Self as ::skill_sdk::Message>::schema())
+            }
+        }
+        impl ::skill_sdk::Message for #ident {
+            const TYPE_NAME: &'static str = #type_name;
+            fn schema() -> ::skill_sdk::schema::MessageSchema {
+                ::skill_sdk::schema::MessageSchema {
+                    type_name: #type_name.to_string(),
+                    doc: #doc.to_string(),
+                    size: ::core::mem::size_of::<Self>() as u32,
+                    align: ::core::mem::align_of::<Self>() as u32,
+                    fields: vec![#(#schema_fields),*],
+                }
+            }
+        }
+        const _: () = {
+            const fn assert_field<T: ::skill_sdk::schema::FieldType>() {}
+            #(#checks)*
+        };
+    })
+}
+
+/// A skill's parameter struct: typed fields with default, bounds and doc.
+#[proc_macro_derive(Params, attributes(param))]
+pub fn derive_params(input: TokenStream) -> TokenStream {
+    let input = parse_macro_input!(input as DeriveInput);
+    match params(&input) {
+        Ok(t) => t.into(),
+        Err(e) => e.to_compile_error().into(),
+    }
+}
+
+fn params(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
+    let ident = &input.ident;
+    let fields = named_fields(input)?;
+    let mut specs = Vec::new();
+    let mut defaults = Vec::new();
+    let mut gets = Vec::new();
+    let mut sets = Vec::new();
+    for f in &fields {
+        let fid = f.ident.as_ref().ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
+        let name = fid.to_string();
+        let ty = &f.ty;
+        let doc = doc_of(&f.attrs);
+        let mut default: Option<Expr> = None;
+        let mut min: Option<Expr> = None;
+        let mut max: Option<Expr> = None;
+        for a in f.attrs.iter().filter(|a| a.path().is_ident("param")) {
+            a.parse_nested_meta(|meta| {
+                let slot = if meta.path.is_ident("default") {
+                    &mut default
+                } else if meta.path.is_ident("min") {
+                    &mut min
+                } else if meta.path.is_ident("max") {
+                    &mut max
+                } else {
+                    return Err(meta.error("expected `default`, `min` or `max`"));
+                };
+                *slot = Some(meta.value()?.parse()?);
+                Ok(())
+            })?;
+        }
+        let default = default.ok_or_else(|| {
+            syn::Error::new(f.span(), format!("parameter `{name}` needs #[param(default = ...)]"))
+        })?;
+        let to_bound = |e: &Option<Expr>| match e {
+            Some(e) => quote! { Some(::skill_sdk::params::ParamType::to_value(&(#e as #ty))) },
+            None => quote! { None },
+        };
+        let (min_t, max_t) = (to_bound(&min), to_bound(&max));
+        specs.push(quote! {
+            ::skill_sdk::params::ParamSpec {
+                name: #name.to_string(),
+                kind: <#ty as ::skill_sdk::params::ParamType>::KIND,
+                default: ::skill_sdk::params::ParamType::to_value(&(#default as #ty)),
+                min: #min_t,
+                max: #max_t,
+                doc: #doc.to_string(),
+            }
+        });
+        defaults.push(quote! { #fid: (#default as #ty) });
+        gets.push(quote! { #name => Some(::skill_sdk::params::ParamType::to_value(&self.#fid)), });
+        sets.push(quote! {
+            #name => {
+                self.#fid = <#ty as ::skill_sdk::params::ParamType>::from_value(&value)
+                    .ok_or_else(|| ::skill_sdk::params::ParamError::WrongType {
+                        param: #name.to_string(),
+                        expected: <#ty as ::skill_sdk::params::ParamType>::KIND,
+                        got: value.clone(),
+                    })?;
+                Ok(())
+            }
+        });
+    }
+    Ok(quote! {
+        impl ::core::default::Default for #ident {
+            fn default() -> Self { Self { #(#defaults),* } }
+        }
+        impl ::skill_sdk::params::Params for #ident {
+            fn specs() -> ::std::vec::Vec<::skill_sdk::params::ParamSpec> { vec![#(#specs),*] }
+            fn get(&self, name: &str) -> ::core::option::Option<::skill_sdk::params::ParamValue> {
+                match name { #(#gets)* _ => None }
+            }
+            fn set_unchecked(
+                &mut self,
+                name: &str,
+                value: ::skill_sdk::params::ParamValue,
+            ) -> ::core::result::Result<(), ::skill_sdk::params::ParamError> {
+                match name {
+                    #(#sets)*
+                    _ => Err(::skill_sdk::params::ParamError::Unknown { param: name.to_string() }),
+                }
+            }
+        }
+    })
+}
+
+/// A skill's inputs: a struct of `Input<'a, T>` fields; the field name is the topic.
+#[proc_macro_derive(Inputs)]
+pub fn derive_inputs(input: TokenStream) -> TokenStream {
+    let input = parse_macro_input!(input as DeriveInput);
+    match ports(&input, true) {
+        Ok(t) => t.into(),
+        Err(e) => e.to_compile_error().into(),
+    }
+}
+
+/// A skill's outputs: a struct of `Output<'a, T>` fields; the field name is the topic.
+#[proc_macro_derive(Outputs)]
+pub fn derive_outputs(input: TokenStream) -> TokenStream {
+    let input = parse_macro_input!(input as DeriveInput);
+    match ports(&input, false) {
+        Ok(t) => t.into(),
+        Err(e) => e.to_compile_error().into(),
+    }
+}
+
+fn ports(input: &DeriveInput, inputs: bool) -> syn::Result<proc_macro2::TokenStream> {
+    let ident = &input.ident;
+    let lifetimes: Vec<_> = input.generics.lifetimes().collect();
+    if lifetimes.len() != 1 || input.generics.params.len() != 1 {
+        return Err(syn::Error::new(
+            input.generics.span(),
+            "a port struct takes exactly one lifetime parameter, e.g. `struct In<'a>`",
+        ));
+    }
+    let lt = &lifetimes[0].lifetime;
+    let fields = named_fields(input)?;
+    let mut decls = Vec::new();
+    let mut builds = Vec::new();
+    let mut makes = Vec::new();
+    for (idx, f) in fields.iter().enumerate() {
+        let fid = f.ident.as_ref().ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
+        let name = fid.to_string();
+        let ty = &f.ty;
+        if inputs {
+            decls.push(quote! { <#ty as ::skill_sdk::ports::InputField<#lt>>::decl(#name) });
+            builds.push(quote! { #fid: <#ty as ::skill_sdk::ports::InputField<#lt>>::fetch(src, #idx)? });
+            makes.push(quote! { <#ty as ::skill_sdk::ports::InputField<#lt>>::make(maker, #idx)? });
+        } else {
+            decls.push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::decl(#name) });
+            builds.push(quote! {
+                #fid: <#ty as ::skill_sdk::ports::OutputField<#lt>>::bind(slots.next())
+            });
+            makes.push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::make(maker, #idx)? });
+        }
+    }
+    Ok(if inputs {
+        quote! {
+            impl<#lt> ::skill_sdk::ports::InputSet<#lt> for #ident<#lt> {
+                fn ports() -> ::std::vec::Vec<::skill_sdk::decl::PortDecl> { vec![#(#decls),*] }
+                fn fetch(src: &#lt dyn ::skill_sdk::ports::InputSource) -> ::core::option::Option<Self> {
+                    Some(Self { #(#builds),* })
+                }
+                fn make(maker: &::skill_sdk::ports::PortMaker<'_>)
+                    -> ::core::result::Result<::std::vec::Vec<::std::boxed::Box<dyn ::skill_sdk::ports::ErasedInput>>, ::skill_sdk::SdkError> {
+                    Ok(vec![#(#makes),*])
+                }
+            }
+        }
+    } else {
+        quote! {
+            impl<#lt> ::skill_sdk::ports::OutputSet<#lt> for #ident<#lt> {
+                fn ports() -> ::std::vec::Vec<::skill_sdk::decl::PortDecl> { vec![#(#decls),*] }
+                fn bind(slots: &#lt mut [::skill_sdk::ports::ErasedOutput]) -> Self {
+                    let mut slots = ::skill_sdk::ports::OutputSlots::new(slots);
+                    Self { #(#builds),* }
+                }
+                fn make(maker: &::skill_sdk::ports::PortMaker<'_>)
+                    -> ::core::result::Result<::std::vec::Vec<::skill_sdk::ports::ErasedOutput>, ::skill_sdk::SdkError> {
+                    Ok(vec![#(#makes),*])
+                }
+            }
+        }
+    })
+}

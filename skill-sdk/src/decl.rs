@@ -1,0 +1,71 @@
+//! What a skill tells the manager about itself when it registers.
+
+use crate::params::{ParamSpec, ParamValue};
+use crate::schema::MessageSchema;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// How a skill is scheduled (the paper's synchronous and asynchronous cskills).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Mode {
+    /// Runs once per cycle when all its inputs for that cycle exist; the cycle waits for it.
+    Sync,
+    /// Free-running on the latest inputs; the cycle never waits for it.
+    Async,
+}
+
+impl fmt::Display for Mode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Mode::Sync => "sync",
+            Mode::Async => "async",
+        })
+    }
+}
+
+/// One input or output port.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PortDecl {
+    /// The port's name in the skill's code (the struct field).
+    pub port: String,
+    /// The topic it is wired to: the port name unless remapped (`--remap port=topic`).
+    pub topic: String,
+    /// Layout and type name of the message.
+    pub schema: MessageSchema,
+}
+
+impl PortDecl {
+    /// A port of message type `T`, wired to the topic of the same name.
+    pub fn of<T: crate::Message>(port: &str) -> PortDecl {
+        PortDecl {
+            port: port.to_string(),
+            topic: port.to_string(),
+            schema: T::schema(),
+        }
+    }
+}
+
+/// A skill instance's whole declaration, sent to the manager at registration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SkillDecl {
+    /// Instance name, unique in the domain.
+    pub name: String,
+    /// What kind of skill this is (the Rust type or the program name).
+    pub kind: String,
+    /// Scheduling mode.
+    pub mode: Mode,
+    /// Priority for actuator arbitration (higher wins).
+    pub priority: i32,
+    /// Whether the instance starts active.
+    pub start_active: bool,
+    /// Process id of the skill process.
+    pub pid: u32,
+    /// Input ports in declaration order.
+    pub inputs: Vec<PortDecl>,
+    /// Output ports in declaration order.
+    pub outputs: Vec<PortDecl>,
+    /// Declared parameters.
+    pub params: Vec<ParamSpec>,
+    /// Their values at registration.
+    pub param_values: Vec<(String, ParamValue)>,
+}

@@ -1,0 +1,40 @@
+//! Every name skillfab gives to an iceoryx2 service or a shared-memory file: the one place
+//! where they are formatted. The scheme is documented in the README ("Naming scheme") so any
+//! iceoryx2 client can find a skill's outputs.
+//!
+//! All of them live inside the domain's iceoryx2 namespace (see [`crate::domain`]).
+
+/// Publish-subscribe service carrying the messages of `topic` (payload = the message type,
+/// user header = [`crate::header::SampleHeader`]); the event service of the same name is
+/// notified after every send.
+pub fn topic(topic: &str) -> String {
+    format!("skillfab/topic/{topic}")
+}
+
+/// Event service through which the manager wakes skill `name` (cycle start for skills with no
+/// same-cycle inputs, registration answers, shutdown).
+pub fn skill_trigger(name: &str) -> String {
+    format!("skillfab/skill/{name}/trigger")
+}
+
+/// Event service through which skills wake the manager (registration, cycle completion).
+pub fn manager_wake() -> String {
+    "skillfab/manager/wake".to_string()
+}
+
+/// POSIX shared-memory name (for `shm_open`) of the domain's cycle board.
+pub fn board(prefix: &str) -> String {
+    format!("/{prefix}board")
+}
+
+/// Checks a skill or topic name: 1 to 64 of `[A-Za-z0-9_-]`, `/` allowed inside a topic.
+pub fn check_name(what: &str, name: &str, allow_slash: bool) -> Result<(), crate::SdkError> {
+    let ok_char = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '-' || (allow_slash && c == '/');
+    if name.is_empty() || name.len() > 64 || !name.chars().all(ok_char) || name.starts_with('/') {
+        return Err(crate::SdkError::BadName {
+            what: what.to_string(),
+            name: name.to_string(),
+        });
+    }
+    Ok(())
+}

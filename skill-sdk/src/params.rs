@@ -1,0 +1,297 @@
+//! Typed, bounded skill parameters.
+//!
+//! A skill's parameters are a struct deriving [`Params`](crate::prelude::Params): each field
+//! has a default, optional bounds and a doc comment. The SDK validates every value, at start-up
+//! (`--param k=v`) and on every change at run time; unknown names are refused.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// The type of a parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub enum ParamKind {
+    Bool,
+    Int,
+    UInt,
+    Float,
+}
+
+impl fmt::Display for ParamKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            ParamKind::Bool => "bool",
+            ParamKind::Int => "integer",
+            ParamKind::UInt => "unsigned integer",
+            ParamKind::Float => "float",
+        })
+    }
+}
+
+/// A parameter value.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub enum ParamValue {
+    Bool(bool),
+    Int(i64),
+    UInt(u64),
+    Float(f64),
+}
+
+impl ParamValue {
+    /// Parses text as a value of `kind`.
+    pub fn parse(kind: ParamKind, text: &str) -> Option<ParamValue> {
+        let t = text.trim();
+        match kind {
+            ParamKind::Bool => match t {
+                "true" | "1" | "on" | "yes" => Some(ParamValue::Bool(true)),
+                "false" | "0" | "off" | "no" => Some(ParamValue::Bool(false)),
+                _ => None,
+            },
+            ParamKind::Int => t.parse().ok().map(ParamValue::Int),
+            ParamKind::UInt => t.parse().ok().map(ParamValue::UInt),
+            ParamKind::Float => t
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .map(ParamValue::Float),
+        }
+    }
+
+    /// The value as f64, for bound checks.
+    pub fn as_f64(&self) -> f64 {
+        match *self {
+            ParamValue::Bool(b) => f64::from(u8::from(b)),
+            ParamValue::Int(v) => v as f64,
+            ParamValue::UInt(v) => v as f64,
+            ParamValue::Float(v) => v,
+        }
+    }
+}
+
+impl fmt::Display for ParamValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ParamValue::Bool(v) => write!(f, "{v}"),
+            ParamValue::Int(v) => write!(f, "{v}"),
+            ParamValue::UInt(v) => write!(f, "{v}"),
+            ParamValue::Float(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+/// One declared parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParamSpec {
+    /// Field name.
+    pub name: String,
+    /// Value type.
+    pub kind: ParamKind,
+    /// Value when not set.
+    pub default: ParamValue,
+    /// Inclusive lower bound.
+    pub min: Option<ParamValue>,
+    /// Inclusive upper bound.
+    pub max: Option<ParamValue>,
+    /// The field's doc comment.
+    pub doc: String,
+}
+
+/// Why a parameter value was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ParamError {
+    /// No parameter of that name.
+    #[error("unknown parameter '{param}'")]
+    Unknown {
+        /// The name asked for.
+        param: String,
+    },
+    /// The value has the wrong type.
+    #[error("parameter '{param}' takes a {expected}, got '{got}'")]
+    WrongType {
+        /// Parameter name.
+        param: String,
+        /// Its type.
+        expected: ParamKind,
+        /// What was given.
+        got: ParamValue,
+    },
+    /// Text that does not parse as the parameter's type.
+    #[error("parameter '{param}' takes a {expected}, got '{text}'")]
+    Unparsable {
+        /// Parameter name.
+        param: String,
+        /// Its type.
+        expected: ParamKind,
+        /// The text given.
+        text: String,
+    },
+    /// Outside the declared bounds.
+    #[error("parameter '{param}' = {value} is out of range [{min}, {max}]")]
+    OutOfRange {
+        /// Parameter name.
+        param: String,
+        /// Value given.
+        value: ParamValue,
+        /// Lower bound (or "-inf").
+        min: String,
+        /// Upper bound (or "inf").
+        max: String,
+    },
+    /// `name=value` expected.
+    #[error("expected NAME=VALUE, got '{text}'")]
+    Malformed {
+        /// The text given.
+        text: String,
+    },
+}
+
+/// A value type a parameter field may have.
+pub trait ParamType: Sized {
+    /// Its kind.
+    const KIND: ParamKind;
+    /// To a value.
+    fn to_value(&self) -> ParamValue;
+    /// From a value of the right kind (integers convert if they fit).
+    fn from_value(v: &ParamValue) -> Option<Self>;
+}
+
+impl ParamType for bool {
+    const KIND: ParamKind = ParamKind::Bool;
+    fn to_value(&self) -> ParamValue {
+        ParamValue::Bool(*self)
+    }
+    fn from_value(v: &ParamValue) -> Option<Self> {
+        match *v {
+            ParamValue::Bool(b) => Some(b),
+            _ => None,
+        }
+    }
+}
+
+macro_rules! float_param {
+    ($($t:ty),*) => {$(
+        impl ParamType for $t {
+            const KIND: ParamKind = ParamKind::Float;
+            fn to_value(&self) -> ParamValue { ParamValue::Float(f64::from(*self)) }
+            fn from_value(v: &ParamValue) -> Option<Self> {
+                match *v {
+                    ParamValue::Float(f) => Some(f as $t),
+                    ParamValue::Int(i) => Some(i as $t),
+                    ParamValue::UInt(u) => Some(u as $t),
+                    ParamValue::Bool(_) => None,
+                }
+            }
+        }
+    )*};
+}
+float_param!(f32, f64);
+
+macro_rules! int_param {
+    ($kind:ident, $variant:ident, $wide:ty; $($t:ty),*) => {$(
+        impl ParamType for $t {
+            const KIND: ParamKind = ParamKind::$kind;
+            fn to_value(&self) -> ParamValue { ParamValue::$variant(<$wide>::from(*self)) }
+            fn from_value(v: &ParamValue) -> Option<Self> {
+                match *v {
+                    ParamValue::Int(i) => <$t>::try_from(i).ok(),
+                    ParamValue::UInt(u) => <$t>::try_from(u).ok(),
+                    _ => None,
+                }
+            }
+        }
+    )*};
+}
+int_param!(Int, Int, i64; i8, i16, i32, i64);
+int_param!(UInt, UInt, u64; u8, u16, u32, u64);
+
+/// A parameter struct. Derive it; do not implement it by hand.
+pub trait Params: Default + Clone + Send + 'static {
+    /// Every declared parameter.
+    fn specs() -> Vec<ParamSpec>;
+    /// The current value of `name`.
+    fn get(&self, name: &str) -> Option<ParamValue>;
+    /// Stores a value without bound checks (generated); use [`Params::set`].
+    fn set_unchecked(&mut self, name: &str, value: ParamValue) -> Result<(), ParamError>;
+
+    /// Sets `name` after checking its type and bounds. On error nothing changes.
+    fn set(&mut self, name: &str, value: ParamValue) -> Result<(), ParamError> {
+        let spec = Self::specs()
+            .into_iter()
+            .find(|s| s.name == name)
+            .ok_or_else(|| ParamError::Unknown {
+                param: name.to_string(),
+            })?;
+        check_bounds(&spec, value)?;
+        let mut next = self.clone();
+        next.set_unchecked(name, value)?;
+        *self = next;
+        Ok(())
+    }
+
+    /// Applies `name=value` text, parsed by the parameter's declared type.
+    fn assign(&mut self, assignment: &str) -> Result<(), ParamError> {
+        let (name, text) = assignment
+            .split_once('=')
+            .ok_or_else(|| ParamError::Malformed {
+                text: assignment.to_string(),
+            })?;
+        let name = name.trim();
+        let spec = Self::specs()
+            .into_iter()
+            .find(|s| s.name == name)
+            .ok_or_else(|| ParamError::Unknown {
+                param: name.to_string(),
+            })?;
+        let value = ParamValue::parse(spec.kind, text).ok_or_else(|| ParamError::Unparsable {
+            param: name.to_string(),
+            expected: spec.kind,
+            text: text.to_string(),
+        })?;
+        self.set(name, value)
+    }
+
+    /// Every parameter with its current value.
+    fn values(&self) -> Vec<(String, ParamValue)> {
+        Self::specs()
+            .into_iter()
+            .filter_map(|s| self.get(&s.name).map(|v| (s.name, v)))
+            .collect()
+    }
+}
+
+/// Checks `value` against the declared bounds of `spec`.
+pub fn check_bounds(spec: &ParamSpec, value: ParamValue) -> Result<(), ParamError> {
+    let v = value.as_f64();
+    let below = spec.min.is_some_and(|m| v < m.as_f64());
+    let above = spec.max.is_some_and(|m| v > m.as_f64());
+    if below || above {
+        let show = |b: Option<ParamValue>, inf: &str| b.map_or(inf.to_string(), |b| b.to_string());
+        return Err(ParamError::OutOfRange {
+            param: spec.name.clone(),
+            value,
+            min: show(spec.min, "-inf"),
+            max: show(spec.max, "inf"),
+        });
+    }
+    Ok(())
+}
+
+/// A skill without parameters.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NoParams;
+
+impl Params for NoParams {
+    fn specs() -> Vec<ParamSpec> {
+        Vec::new()
+    }
+    fn get(&self, _: &str) -> Option<ParamValue> {
+        None
+    }
+    fn set_unchecked(&mut self, name: &str, _: ParamValue) -> Result<(), ParamError> {
+        Err(ParamError::Unknown {
+            param: name.to_string(),
+        })
+    }
+}

@@ -1,0 +1,99 @@
+//! The skill trait: what a skill author implements.
+
+use crate::decl::Mode;
+use crate::params::Params;
+use crate::ports::{InputSet, OutputSet};
+use std::fmt;
+
+/// A skill: typed inputs, outputs and parameters, and a compute body.
+///
+/// ```
+/// use skill_sdk::prelude::*;
+/// use skill_sdk::msg::{Scaled, Tick};
+///
+/// #[derive(Params, Debug, Clone)]
+/// pub struct ScaleParams {
+///     /// Factor applied to the tick.
+///     #[param(default = 2.0, min = -1e6, max = 1e6)]
+///     pub gain: f64,
+/// }
+/// #[derive(Inputs)]
+/// pub struct In<'a> { pub tick: Input<'a, Tick> }
+/// #[derive(Outputs)]
+/// pub struct Out<'a> { pub scaled: Output<'a, Scaled> }
+///
+/// #[derive(Default)]
+/// pub struct Scale;
+/// impl Skill for Scale {
+///     type Params = ScaleParams;
+///     type Inputs<'a> = In<'a>;
+///     type Outputs<'a> = Out<'a>;
+///     fn compute(&mut self, ctx: &Ctx<ScaleParams>, i: In, o: &mut Out) -> SkillResult {
+///         o.scaled.set(Scaled { value: ctx.params.gain * i.tick.value as f64 });
+///         Ok(())
+///     }
+/// }
+/// ```
+pub trait Skill: Default + 'static {
+    /// Parameters (derive `Params`), or [`crate::params::NoParams`].
+    type Params: Params;
+    /// Inputs (derive `Inputs`), or `()`.
+    type Inputs<'a>: InputSet<'a>;
+    /// Outputs (derive `Outputs`), or `()`.
+    type Outputs<'a>: OutputSet<'a>;
+    /// Scheduling mode.
+    const MODE: Mode = Mode::Sync;
+    /// Default priority for actuator arbitration (higher wins); `--priority` overrides it.
+    const PRIORITY: i32 = 0;
+
+    /// One run: read the inputs, write the outputs. Written outputs are published only if
+    /// this returns `Ok`.
+    fn compute(
+        &mut self,
+        ctx: &Ctx<'_, Self::Params>,
+        input: Self::Inputs<'_>,
+        output: &mut Self::Outputs<'_>,
+    ) -> SkillResult;
+}
+
+/// What a run knows besides its inputs.
+#[derive(Debug)]
+pub struct Ctx<'a, P> {
+    /// Current parameter values.
+    pub params: &'a P,
+    /// The cycle this run belongs to.
+    pub cycle: u64,
+    /// The instance name.
+    pub name: &'a str,
+}
+
+/// The result of a run.
+pub type SkillResult = Result<(), SkillError>;
+
+/// Why a run failed: any error, boxed (like `anyhow::Error`).
+pub struct SkillError(Box<dyn std::error::Error + Send + Sync + 'static>);
+
+impl SkillError {
+    /// An error with just a message.
+    pub fn msg(text: impl Into<String>) -> SkillError {
+        SkillError(text.into().into())
+    }
+}
+
+impl<E: std::error::Error + Send + Sync + 'static> From<E> for SkillError {
+    fn from(e: E) -> Self {
+        SkillError(Box::new(e))
+    }
+}
+
+impl fmt::Debug for SkillError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Debug::fmt(&self.0, f)
+    }
+}
+
+impl fmt::Display for SkillError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(&self.0, f)
+    }
+}

@@ -1,0 +1,4 @@
+//! The `smooth` skill (see `skills::hello`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skills::hello::Smooth>()
+}

@@ -1,0 +1,151 @@
+//! The hello network: `ticker` → `scale` → `smooth` (see `skills/launch/hello.toml`).
+
+use skill_sdk::msg::{Scaled, Smoothed, Tick};
+use skill_sdk::prelude::*;
+
+/// Outputs of [`Ticker`].
+#[derive(Outputs)]
+pub struct TickOut<'a> {
+    /// The cycle number.
+    pub tick: Output<'a, Tick>,
+}
+
+/// Sync, no inputs: publishes the cycle number.
+#[derive(Default)]
+pub struct Ticker;
+
+impl Skill for Ticker {
+    type Params = NoParams;
+    type Inputs<'a> = ();
+    type Outputs<'a> = TickOut<'a>;
+    fn compute(&mut self, ctx: &Ctx<NoParams>, _: (), o: &mut TickOut) -> SkillResult {
+        o.tick.set(Tick { value: ctx.cycle });
+        Ok(())
+    }
+}
+
+/// Parameters of [`Scale`].
+#[derive(Params, Debug, Clone)]
+pub struct ScaleParams {
+    /// Factor applied to the tick.
+    #[param(default = 2.0, min = -1e6, max = 1e6)]
+    pub gain: f64,
+}
+/// Inputs of [`Scale`].
+#[derive(Inputs)]
+pub struct ScaleIn<'a> {
+    /// The tick of this cycle.
+    pub tick: Input<'a, Tick>,
+}
+/// Outputs of [`Scale`].
+#[derive(Outputs)]
+pub struct ScaleOut<'a> {
+    /// gain × tick.
+    pub scaled: Output<'a, Scaled>,
+}
+
+/// Sync: `scaled = gain × tick`.
+#[derive(Default)]
+pub struct Scale;
+
+impl Skill for Scale {
+    type Params = ScaleParams;
+    type Inputs<'a> = ScaleIn<'a>;
+    type Outputs<'a> = ScaleOut<'a>;
+    fn compute(&mut self, ctx: &Ctx<ScaleParams>, i: ScaleIn, o: &mut ScaleOut) -> SkillResult {
+        o.scaled.set(Scaled {
+            value: ctx.params.gain * i.tick.value as f64,
+        });
+        Ok(())
+    }
+}
+
+/// Parameters of [`Smooth`].
+#[derive(Params, Debug, Clone)]
+pub struct SmoothParams {
+    /// Weight of the newest sample in the moving average.
+    #[param(default = 0.1, min = 0.0, max = 1.0)]
+    pub alpha: f64,
+}
+/// Inputs of [`Smooth`].
+#[derive(Inputs)]
+pub struct SmoothIn<'a> {
+    /// The latest scaled value.
+    pub scaled: Input<'a, Scaled>,
+}
+/// Outputs of [`Smooth`].
+#[derive(Outputs)]
+pub struct SmoothOut<'a> {
+    /// The moving average.
+    pub smoothed: Output<'a, Smoothed>,
+}
+
+/// Async: exponential moving average of the latest `scaled`.
+#[derive(Default)]
+pub struct Smooth {
+    state: Option<Smoothed>,
+}
+
+impl Skill for Smooth {
+    type Params = SmoothParams;
+    type Inputs<'a> = SmoothIn<'a>;
+    type Outputs<'a> = SmoothOut<'a>;
+    const MODE: Mode = Mode::Async;
+    fn compute(&mut self, ctx: &Ctx<SmoothParams>, i: SmoothIn, o: &mut SmoothOut) -> SkillResult {
+        let a = ctx.params.alpha;
+        let next = match self.state {
+            None => Smoothed { value: i.scaled.value, samples: 1 },
+            Some(s) => Smoothed {
+                value: a * i.scaled.value + (1.0 - a) * s.value,
+                samples: s.samples + 1,
+            },
+        };
+        self.state = Some(next);
+        o.smoothed.set(next);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skill_sdk::harness::Harness;
+
+    #[test]
+    fn ticker_publishes_the_cycle() {
+        let mut h = Harness::<Ticker>::new();
+        for k in 1..=3 {
+            assert_eq!(h.step().unwrap().output::<Tick>("tick").unwrap().value, k);
+        }
+    }
+
+    #[test]
+    fn scale_multiplies_and_checks_its_gain() {
+        let mut h = Harness::<Scale>::new();
+        h.input("tick", Tick { value: 7 });
+        assert_eq!(h.step().unwrap().output::<Scaled>("scaled").unwrap().value, 14.0);
+        h.set_param("gain=-0.5").unwrap();
+        assert_eq!(h.step().unwrap().output::<Scaled>("scaled").unwrap().value, -3.5);
+        assert!(h.set_param("gain=abc").is_err());
+        assert!(h.set_param("gain=1e9").is_err());
+        assert!(h.set_param("nope=1").is_err());
+        assert_eq!(h.params().gain, -0.5, "a refused value changes nothing");
+    }
+
+    #[test]
+    fn scale_skips_without_its_input() {
+        let mut h = Harness::<Scale>::new();
+        assert!(h.step().unwrap().skipped);
+    }
+
+    #[test]
+    fn smooth_is_an_exponential_moving_average() {
+        let mut h = Harness::<Smooth>::new();
+        h.set_param("alpha=0.5").unwrap();
+        h.input("scaled", Scaled { value: 10.0 });
+        assert_eq!(h.step().unwrap().output::<Smoothed>("smoothed").unwrap().value, 10.0);
+        h.input("scaled", Scaled { value: 20.0 });
+        let s = *h.step().unwrap().output::<Smoothed>("smoothed").unwrap();
+        assert_eq!(s, Smoothed { value: 15.0, samples: 2 });
+    }
+}

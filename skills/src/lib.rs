@@ -1,0 +1,4 @@
+//! The standard skill library. Each skill is a type here (so unit tests drive it through the
+//! SDK's harness) and a binary in `src/bin/` whose `main` is one line.
+
+pub mod hello;

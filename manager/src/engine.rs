@@ -1,0 +1,593 @@
+//! The cycle engine (the paper's skill manager): registry, cycle plan, readiness, liveness.
+//!
+//! One loop on one thread, woken by its WaitSet: by skills (registration, leaving, the run
+//! that completes a cycle, a run that passed nothing on), by its own timers (period start,
+//! cycle deadline, liveness tick) and by SIGINT/SIGTERM.
+//!
+//! A cycle k: the manager marks the expected sync skills on the board, arms the completion
+//! counter with their number, publishes k and wakes only the sources (skills whose inputs are
+//! not produced in the same cycle). From there skills wake each other through their topics;
+//! each finished run stamps the board and takes one off the counter; the run that takes the
+//! last one off wakes the manager. A run that fails, is skipped or leaves an output unwritten
+//! wakes the manager too, which then takes its now-unrunnable consumers off the counter. A
+//! cycle whose deadline passes is counted as an overrun and closed; the next one starts on
+//! time. Cleanup between cycles is the re-arming of the counter.
+
+use crate::graph::{self, Plan, PlanNode};
+use crate::stats::{CycleStats, Report, SkillReport};
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use skill_sdk::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
+use skill_sdk::decl::SkillDecl;
+use skill_sdk::domain::Domain;
+use skill_sdk::header::now_ns;
+use skill_sdk::{SdkError, names, services};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// How often the manager checks that registered processes are alive.
+pub const LIVENESS_TICK: Duration = Duration::from_millis(50);
+/// Shortest cycle period in free-running mode while no skill is expected (avoids a busy loop).
+const IDLE_FREE_RUN: Duration = Duration::from_millis(1);
+
+/// How the manager paces cycles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// A new cycle every period (the deadline defaults to the period).
+    Period(Duration),
+    /// The next cycle starts as soon as the previous one finished.
+    FreeRun,
+}
+
+/// Manager settings.
+#[derive(Debug, Clone)]
+pub struct ManagerConfig {
+    /// The fabric's domain.
+    pub domain: Domain,
+    /// Cycle pacing.
+    pub pace: Pace,
+    /// Longest a cycle may take before it is closed as an overrun (default: the period, or
+    /// 1 s when free-running).
+    pub deadline: Option<Duration>,
+    /// Start with cycling stopped.
+    pub paused: bool,
+    /// Stop after this many cycles.
+    pub max_cycles: Option<u64>,
+    /// Do not start cycling until these skills have registered.
+    pub wait_for: Vec<String>,
+    /// How long to wait for them.
+    pub wait_timeout: Duration,
+}
+
+impl ManagerConfig {
+    /// Defaults: 100 Hz, running.
+    pub fn new(domain: Domain) -> Self {
+        ManagerConfig {
+            domain,
+            pace: Pace::Period(Duration::from_millis(10)),
+            deadline: None,
+            paused: false,
+            max_cycles: None,
+            wait_for: Vec::new(),
+            wait_timeout: Duration::from_secs(30),
+        }
+    }
+
+    fn deadline(&self) -> Duration {
+        self.deadline.unwrap_or(match self.pace {
+            Pace::Period(p) => p,
+            Pace::FreeRun => Duration::from_secs(1),
+        })
+    }
+}
+
+/// Why the manager stopped with an error.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ManagerError {
+    /// Board, node or service set-up failed.
+    #[error(transparent)]
+    Sdk(#[from] SdkError),
+    /// The WaitSet failed.
+    #[error("manager wait: {detail}")]
+    Wait {
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// Skills named in `wait_for` did not register in time.
+    #[error("skills did not register within {waited:?}: {}", missing.join(", "))]
+    MissingSkills {
+        /// Those still missing.
+        missing: Vec<String>,
+        /// How long the manager waited.
+        waited: Duration,
+    },
+}
+
+struct Entry {
+    decl: SkillDecl,
+    trigger: Notifier<ipc::Service>,
+    active: bool,
+}
+
+struct Running {
+    k: u64,
+    start_ns: u64,
+    deadline: Instant,
+    expected: Vec<usize>,
+    /// Slots whose completion the manager has looked at.
+    processed: [bool; MAX_SLOTS],
+    /// Slots taken off the counter because they cannot run this cycle.
+    cancelled: [bool; MAX_SLOTS],
+}
+
+/// The skill manager of one domain.
+pub struct Manager {
+    config: ManagerConfig,
+    board: Board,
+    node: Node<ipc::Service>,
+    skills: Vec<Option<Entry>>,
+    /// Slots in registration order (for reports).
+    order: Vec<usize>,
+    plan: Plan,
+    /// The plan must be recomputed before the next cycle.
+    dirty: bool,
+    cycle: u64,
+    running: Option<Running>,
+    next_start: Instant,
+    paused: bool,
+    started: bool,
+    created: Instant,
+    stats: CycleStats,
+    deaths: u64,
+    last_liveness: Instant,
+}
+
+impl Manager {
+    /// Creates the domain's board and the manager's iceoryx2 node.
+    pub fn new(config: ManagerConfig) -> Result<Manager, ManagerError> {
+        let node = services::node(&config.domain, "skillfab-manager")?;
+        let board = Board::create(&config.domain.prefix())?;
+        let now = Instant::now();
+        Ok(Manager {
+            paused: config.paused,
+            config,
+            board,
+            node,
+            skills: (0..MAX_SLOTS).map(|_| None).collect(),
+            order: Vec::new(),
+            plan: Plan::default(),
+            dirty: true,
+            cycle: 0,
+            running: None,
+            next_start: now,
+            started: false,
+            created: now,
+            stats: CycleStats::default(),
+            deaths: 0,
+            last_liveness: now,
+        })
+    }
+
+    /// Runs until SIGINT/SIGTERM, until `stop(cycles_done)` returns true, or until
+    /// `max_cycles` cycles are done; returns the report of the run.
+    pub fn run(&mut self, stop: &dyn Fn(u64) -> bool) -> Result<Report, ManagerError> {
+        let wait_err = |e: &dyn std::fmt::Debug| ManagerError::Wait {
+            detail: format!("{e:?}"),
+        };
+        let wake: Listener<ipc::Service> = services::listener(&self.node, &names::manager_wake())?;
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| wait_err(&e))?;
+        let _guard = waitset.attach_notification(&wake).map_err(|e| wait_err(&e))?;
+        tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
+        loop {
+            let timeout = self.timeout(Instant::now());
+            let result = waitset
+                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout)
+                .map_err(|e| wait_err(&e))?;
+            if matches!(
+                result,
+                WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest
+            ) || stop(self.cycle)
+            {
+                break;
+            }
+            let _ = wake.try_wait(|_| {});
+            self.service_registry();
+            if self.last_liveness.elapsed() >= LIVENESS_TICK {
+                self.check_liveness();
+            }
+            self.advance()?;
+            if self.running.is_none() && self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
+                break;
+            }
+        }
+        Ok(self.report())
+    }
+
+    /// Lets skills that are leaving go, checks liveness once more, and closes the board.
+    /// Call after the skill processes were asked to stop.
+    pub fn shutdown(mut self) {
+        self.service_registry();
+        self.check_liveness();
+        self.board.close();
+        let cleaned = self.node.try_cleanup_dead_nodes();
+        tracing::info!(cycles = self.cycle, dead_nodes_cleaned = cleaned.cleanups, "manager down");
+    }
+
+    /// The manager's iceoryx2 node (to list or clean up nodes of the domain).
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    /// Cycles completed so far.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    fn timeout(&self, now: Instant) -> Duration {
+        let until = |t: Instant| t.saturating_duration_since(now);
+        let t = match &self.running {
+            Some(r) => until(r.deadline),
+            None if self.paused || !self.started => LIVENESS_TICK,
+            None => match self.config.pace {
+                Pace::Period(_) => until(self.next_start),
+                Pace::FreeRun if self.plan.expected.is_empty() => IDLE_FREE_RUN,
+                Pace::FreeRun => Duration::ZERO,
+            },
+        };
+        t.min(LIVENESS_TICK)
+    }
+
+    /// Drives the cycle state machine as far as it can go now.
+    fn advance(&mut self) -> Result<(), ManagerError> {
+        loop {
+            if let Some(k) = self.running.as_ref().map(|r| r.k) {
+                self.resolve();
+                if self.board.remaining(k) == 0 {
+                    self.finish(false);
+                } else if self.running.as_ref().is_some_and(|r| Instant::now() >= r.deadline) {
+                    self.check_liveness();
+                    if self.board.remaining(k) == 0 {
+                        self.finish(false);
+                    } else {
+                        tracing::warn!(cycle = k, left = self.board.remaining(k), "cycle overrun");
+                        self.finish(true);
+                    }
+                } else {
+                    return Ok(());
+                }
+            }
+            if self.paused || self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
+                return Ok(());
+            }
+            if !self.started {
+                let missing: Vec<String> = self
+                    .config
+                    .wait_for
+                    .iter()
+                    .filter(|n| !self.skills.iter().flatten().any(|e| &e.decl.name == *n))
+                    .cloned()
+                    .collect();
+                if !missing.is_empty() {
+                    if self.created.elapsed() > self.config.wait_timeout {
+                        return Err(ManagerError::MissingSkills {
+                            missing,
+                            waited: self.config.wait_timeout,
+                        });
+                    }
+                    return Ok(());
+                }
+                self.started = true;
+                self.next_start = Instant::now();
+            }
+            let now = Instant::now();
+            match self.config.pace {
+                Pace::Period(p) => {
+                    if now < self.next_start {
+                        return Ok(());
+                    }
+                    self.next_start += p;
+                    if self.next_start < now {
+                        self.next_start = now;
+                    }
+                }
+                Pace::FreeRun => {
+                    if self.plan.expected.is_empty() && !self.dirty {
+                        if now < self.next_start {
+                            return Ok(());
+                        }
+                        self.next_start = now + IDLE_FREE_RUN;
+                    }
+                }
+            }
+            self.start_cycle();
+        }
+    }
+
+    fn replan(&mut self) {
+        let nodes: Vec<PlanNode<'_>> = self
+            .order
+            .iter()
+            .filter_map(|&s| {
+                self.skills[s].as_ref().map(|e| PlanNode {
+                    slot: s,
+                    decl: &e.decl,
+                    active: e.active,
+                })
+            })
+            .collect();
+        self.plan = graph::plan(&nodes);
+        for &(slot, mask) in &self.plan.fresh_masks {
+            self.board.slot(slot).fresh_mask.store(mask, Ordering::Release);
+        }
+        self.dirty = false;
+    }
+
+    fn start_cycle(&mut self) {
+        if self.dirty {
+            self.replan();
+        }
+        let k = self.cycle + 1;
+        for &s in &self.plan.expected {
+            self.board.slot(s).expected_cycle.store(k, Ordering::Release);
+        }
+        self.board.arm(k, self.plan.expected.len() as u32);
+        let start_ns = now_ns();
+        let h = self.board.header();
+        h.cycle_start_ns.store(start_ns, Ordering::Release);
+        h.cycle.store(k, Ordering::Release);
+        self.running = Some(Running {
+            k,
+            start_ns,
+            deadline: Instant::now() + self.config.deadline(),
+            expected: self.plan.expected.clone(),
+            processed: [false; MAX_SLOTS],
+            cancelled: [false; MAX_SLOTS],
+        });
+        for &s in &self.plan.sources {
+            if let Some(e) = &self.skills[s]
+                && let Err(err) = e.trigger.notify()
+            {
+                tracing::warn!(skill = %e.decl.name, error = ?err, "could not wake skill");
+            }
+        }
+    }
+
+    /// Looks at runs of the current cycle that finished without passing everything on, and
+    /// takes the consumers that can no longer run off the completion counter.
+    fn resolve(&mut self) {
+        let Some(mut run) = self.running.take() else {
+            return;
+        };
+        let mut cancel = Vec::new();
+        for &s in &run.expected {
+            let slot = self.board.slot(s);
+            if run.processed[s] || slot.done_cycle.load(Ordering::Acquire) != run.k {
+                continue;
+            }
+            run.processed[s] = true;
+            let status = RunStatus::from_u32(slot.status.load(Ordering::Acquire));
+            let mask = slot.published_mask.load(Ordering::Acquire);
+            if let Some(per_output) = self.plan.consumers.get(&s) {
+                for (o, consumers) in per_output.iter().enumerate() {
+                    if status != RunStatus::Ok || mask & (1 << o) == 0 {
+                        cancel.extend_from_slice(consumers);
+                    }
+                }
+            }
+        }
+        let n = self.cancel_all(&mut run, cancel);
+        if n > 0 {
+            self.board.complete(run.k, n);
+        }
+        self.running = Some(run);
+    }
+
+    /// Marks `start` and everything downstream of it as unable to run in this cycle; returns
+    /// how many expected runs that removed.
+    fn cancel_all(&self, run: &mut Running, mut todo: Vec<usize>) -> u32 {
+        let mut n = 0;
+        while let Some(s) = todo.pop() {
+            if run.cancelled[s]
+                || !run.expected.contains(&s)
+                || self.board.slot(s).done_cycle.load(Ordering::Acquire) == run.k
+            {
+                continue;
+            }
+            run.cancelled[s] = true;
+            n += 1;
+            if let Some(per_output) = self.plan.consumers.get(&s) {
+                todo.extend(per_output.iter().flatten());
+            }
+        }
+        n
+    }
+
+    fn finish(&mut self, overrun: bool) {
+        let Some(run) = self.running.take() else {
+            return;
+        };
+        let end = run
+            .expected
+            .iter()
+            .map(|&s| self.board.slot(s))
+            .filter(|slot| slot.done_cycle.load(Ordering::Acquire) == run.k)
+            .map(|slot| slot.last_end_ns.load(Ordering::Acquire))
+            .max();
+        let latency = if overrun {
+            now_ns().saturating_sub(run.start_ns)
+        } else {
+            end.map_or(0, |e| e.saturating_sub(run.start_ns))
+        };
+        self.stats.record(latency, overrun);
+        self.cycle = run.k;
+    }
+
+    fn service_registry(&mut self) {
+        for i in 0..MAX_SLOTS {
+            match self.board.slot(i).state() {
+                SlotState::Pending => self.admit(i),
+                SlotState::Leaving => self.drop_slot(i, "left"),
+                _ => {}
+            }
+        }
+    }
+
+    fn refuse(&self, i: usize, name: Option<&str>, reason: &str) {
+        tracing::warn!(skill = name.unwrap_or("?"), %reason, "registration refused");
+        let slot = self.board.slot(i);
+        slot.write_msg(reason);
+        slot.set_state(SlotState::Refused);
+        if let Some(n) = name
+            && let Ok(t) = services::notifier(&self.node, &names::skill_trigger(n))
+        {
+            let _ = t.notify();
+        }
+    }
+
+    fn admit(&mut self, i: usize) {
+        let slot = self.board.slot(i);
+        let decl: SkillDecl = match postcard::from_bytes(&slot.read_decl()) {
+            Ok(d) => d,
+            Err(e) => return self.refuse(i, None, &format!("malformed declaration: {e}")),
+        };
+        let checked = names::check_name("skill", &decl.name, false).and_then(|()| {
+            decl.inputs
+                .iter()
+                .chain(&decl.outputs)
+                .try_for_each(|p| names::check_name("topic", &p.topic, true))
+        });
+        if let Err(e) = checked {
+            return self.refuse(i, None, &e.to_string());
+        }
+        if decl.inputs.len() > 64 || decl.outputs.len() > 64 {
+            return self.refuse(i, Some(&decl.name), "at most 64 inputs and 64 outputs per skill");
+        }
+        // A previous instance of the same name that died is replaced, not a duplicate.
+        if let Some(j) = (0..MAX_SLOTS).find(|&j| {
+            j != i
+                && self.skills[j]
+                    .as_ref()
+                    .is_some_and(|e| e.decl.name == decl.name && !pid_alive(e.decl.pid))
+        }) {
+            self.drop_slot(j, "died");
+        }
+        let live = self.skills.iter().flatten().map(|e| &e.decl);
+        if let Err(e) = graph::check_join(live, &decl) {
+            return self.refuse(i, Some(&decl.name), &e.to_string());
+        }
+        let trigger = match services::notifier(&self.node, &names::skill_trigger(&decl.name)) {
+            Ok(t) => t,
+            Err(e) => return self.refuse(i, Some(&decl.name), &e.to_string()),
+        };
+        let slot = self.board.slot(i);
+        slot.reset_counters();
+        slot.generation.fetch_add(1, Ordering::Relaxed);
+        slot.active.store(u32::from(decl.start_active), Ordering::Release);
+        slot.set_state(SlotState::Accepted);
+        let _ = trigger.notify();
+        tracing::info!(
+            skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
+            active = decl.start_active, "skill registered"
+        );
+        self.skills[i] = Some(Entry {
+            active: decl.start_active,
+            decl,
+            trigger,
+        });
+        self.order.retain(|&s| s != i);
+        self.order.push(i);
+        self.dirty = true;
+    }
+
+    /// Removes slot `i`: its skill left or died. Its pending run in this cycle (and whatever
+    /// depended on it) is taken off the counter so the cycle does not wait for it.
+    fn drop_slot(&mut self, i: usize, why: &str) {
+        if let Some(mut run) = self.running.take() {
+            let n = self.cancel_all(&mut run, vec![i]);
+            if n > 0 {
+                self.board.complete(run.k, n);
+            }
+            self.running = Some(run);
+        }
+        let slot = self.board.slot(i);
+        if let Some(e) = self.skills[i].take() {
+            if why == "died" {
+                self.deaths += 1;
+                tracing::warn!(skill = %e.decl.name, pid = e.decl.pid, "skill died");
+            } else {
+                tracing::info!(skill = %e.decl.name, "skill left");
+            }
+            self.order.retain(|&s| s != i);
+            self.dirty = true;
+        }
+        slot.active.store(0, Ordering::Release);
+        slot.pid.store(0, Ordering::Release);
+        slot.set_state(SlotState::Free);
+    }
+
+    fn check_liveness(&mut self) {
+        self.last_liveness = Instant::now();
+        let mut died = false;
+        for i in 0..MAX_SLOTS {
+            let slot = self.board.slot(i);
+            let state = slot.state();
+            if state == SlotState::Free || state == SlotState::Refused {
+                continue;
+            }
+            let pid = slot.pid.load(Ordering::Acquire);
+            if pid != 0 && !pid_alive(pid) {
+                self.drop_slot(i, "died");
+                died = true;
+            }
+        }
+        if died {
+            // Frees the dead processes' ports so a restarted instance can take their place.
+            let _ = self.node.try_cleanup_dead_nodes();
+        }
+    }
+
+    /// Figures of the run so far.
+    pub fn report(&self) -> Report {
+        let skills = self
+            .order
+            .iter()
+            .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
+            .map(|(s, e)| {
+                let slot = self.board.slot(s);
+                let runs = slot.runs.load(Ordering::Acquire);
+                let total = slot.compute_ns_total.load(Ordering::Acquire);
+                SkillReport {
+                    name: e.decl.name.clone(),
+                    kind: e.decl.kind.clone(),
+                    mode: e.decl.mode.to_string(),
+                    active: e.active,
+                    priority: e.decl.priority,
+                    pid: e.decl.pid,
+                    runs,
+                    skips: slot.skips.load(Ordering::Acquire),
+                    failures: slot.failures.load(Ordering::Acquire),
+                    compute_us_mean: if runs == 0 { 0.0 } else { total as f64 / runs as f64 / 1000.0 },
+                    compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
+                    last_cycle: slot.done_cycle.load(Ordering::Acquire),
+                    last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
+                    last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
+                }
+            })
+            .collect();
+        Report {
+            cycles: self.stats.cycles,
+            overruns: self.stats.overruns,
+            latency_us: self.stats.latency_us(),
+            skills,
+            deaths: self.deaths,
+        }
+    }
+}
+

@@ -1,0 +1,386 @@
+//! The data-flow graph of registered skills: wiring checks at registration and the plan of
+//! each cycle (which sync skills are expected to run, which inputs must be same-cycle, whom
+//! the manager wakes at cycle start). Pure code, no I/O.
+
+use skill_sdk::decl::{Mode, PortDecl, SkillDecl};
+use std::collections::HashMap;
+
+/// Why a registration is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum WiringError {
+    /// Another live instance has the name.
+    #[error("a skill named '{name}' is already registered (pid {pid})")]
+    DuplicateName {
+        /// The name.
+        name: String,
+        /// The live instance's pid.
+        pid: u32,
+    },
+    /// Two producers for one topic.
+    #[error("topic '{topic}' is already produced by skill '{producer}'; '{skill}' cannot publish it too")]
+    TwoProducers {
+        /// The topic.
+        topic: String,
+        /// Its producer.
+        producer: String,
+        /// The newcomer.
+        skill: String,
+    },
+    /// The two ends of a topic disagree on its message type.
+    #[error(
+        "type mismatch on topic '{topic}': skill '{skill}' {side} '{port}' is '{ty}', \
+         but skill '{other}' {other_side} '{other_port}' is '{other_ty}'"
+    )]
+    TypeMismatch {
+        /// The topic.
+        topic: String,
+        /// The newcomer.
+        skill: String,
+        /// "input" or "output".
+        side: &'static str,
+        /// Its port.
+        port: String,
+        /// Its type (name, size, align).
+        ty: String,
+        /// The registered skill it clashes with.
+        other: String,
+        /// "input" or "output".
+        other_side: &'static str,
+        /// Its port.
+        other_port: String,
+        /// Its type.
+        other_ty: String,
+    },
+    /// Sync skills would wait on each other in a loop.
+    #[error("data-flow loop among sync skills: {path} (make one of them async to break it)")]
+    Loop {
+        /// The loop, `a -> b -> a`.
+        path: String,
+    },
+}
+
+fn type_desc(p: &PortDecl) -> String {
+    format!("{} ({} B, align {})", p.schema.type_name, p.schema.size, p.schema.align)
+}
+
+fn same_type(a: &PortDecl, b: &PortDecl) -> bool {
+    a.schema.type_name == b.schema.type_name
+        && a.schema.size == b.schema.size
+        && a.schema.align == b.schema.align
+}
+
+/// Checks that `new` can join `existing` (live, registered skills).
+pub fn check_join<'a>(
+    existing: impl Iterator<Item = &'a SkillDecl> + Clone,
+    new: &SkillDecl,
+) -> Result<(), WiringError> {
+    if let Some(d) = existing.clone().find(|d| d.name == new.name) {
+        return Err(WiringError::DuplicateName {
+            name: new.name.clone(),
+            pid: d.pid,
+        });
+    }
+    let mismatch = |topic: &str, side, port: &PortDecl, other: &SkillDecl, other_side, op: &PortDecl| {
+        WiringError::TypeMismatch {
+            topic: topic.to_string(),
+            skill: new.name.clone(),
+            side,
+            port: port.port.clone(),
+            ty: type_desc(port),
+            other: other.name.clone(),
+            other_side,
+            other_port: op.port.clone(),
+            other_ty: type_desc(op),
+        }
+    };
+    for out in &new.outputs {
+        for d in existing.clone() {
+            if let Some(o) = d.outputs.iter().find(|o| o.topic == out.topic) {
+                return Err(if same_type(o, out) {
+                    WiringError::TwoProducers {
+                        topic: out.topic.clone(),
+                        producer: d.name.clone(),
+                        skill: new.name.clone(),
+                    }
+                } else {
+                    mismatch(&out.topic, "output", out, d, "output", o)
+                });
+            }
+            if let Some(i) = d.inputs.iter().find(|i| i.topic == out.topic && !same_type(i, out)) {
+                return Err(mismatch(&out.topic, "output", out, d, "input", i));
+            }
+        }
+    }
+    for inp in &new.inputs {
+        for d in existing.clone() {
+            if let Some(o) = d.outputs.iter().find(|o| o.topic == inp.topic && !same_type(o, inp)) {
+                return Err(mismatch(&inp.topic, "input", inp, d, "output", o));
+            }
+            if let Some(i) = d.inputs.iter().find(|i| i.topic == inp.topic && !same_type(i, inp)) {
+                return Err(mismatch(&inp.topic, "input", inp, d, "input", i));
+            }
+        }
+    }
+    let mut all: Vec<&SkillDecl> = existing.collect();
+    all.push(new);
+    if let Some(path) = find_sync_loop(&all) {
+        return Err(WiringError::Loop { path });
+    }
+    Ok(())
+}
+
+/// A loop among sync skills (producer → consumer edges), as `a -> b -> a`.
+fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
+    let producer: HashMap<&str, usize> = skills
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.mode == Mode::Sync)
+        .flat_map(|(i, d)| d.outputs.iter().map(move |o| (o.topic.as_str(), i)))
+        .collect();
+    // 0 = unvisited, 1 = on the stack, 2 = done
+    let mut mark = vec![0u8; skills.len()];
+    let mut stack = Vec::new();
+    fn visit(
+        i: usize,
+        skills: &[&SkillDecl],
+        producer: &HashMap<&str, usize>,
+        mark: &mut [u8],
+        stack: &mut Vec<usize>,
+    ) -> Option<String> {
+        mark[i] = 1;
+        stack.push(i);
+        for inp in &skills[i].inputs {
+            let Some(&p) = producer.get(inp.topic.as_str()) else {
+                continue;
+            };
+            if mark[p] == 1 {
+                let from = stack.iter().position(|&s| s == p).unwrap_or(0);
+                let mut names: Vec<&str> = stack[from..].iter().map(|&s| skills[s].name.as_str()).collect();
+                names.reverse();
+                names.push(skills[p].name.as_str());
+                // Edges point producer -> consumer; the stack walked consumer -> producer.
+                return Some(names.join(" -> "));
+            }
+            if mark[p] == 0
+                && let Some(path) = visit(p, skills, producer, mark, stack)
+            {
+                return Some(path);
+            }
+        }
+        stack.pop();
+        mark[i] = 2;
+        None
+    }
+    for i in 0..skills.len() {
+        if skills[i].mode == Mode::Sync
+            && mark[i] == 0
+            && let Some(path) = visit(i, skills, &producer, &mut mark, &mut stack)
+        {
+            return Some(path);
+        }
+    }
+    None
+}
+
+/// A registered skill as the planner sees it.
+#[derive(Debug, Clone)]
+pub struct PlanNode<'a> {
+    /// Board slot.
+    pub slot: usize,
+    /// Declaration.
+    pub decl: &'a SkillDecl,
+    /// Whether it is active.
+    pub active: bool,
+}
+
+/// What the manager does each cycle until the graph changes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Plan {
+    /// Sync skills expected to run each cycle (slots).
+    pub expected: Vec<usize>,
+    /// Same-cycle input mask per slot (for every registered slot).
+    pub fresh_masks: Vec<(usize, u64)>,
+    /// Skills the manager wakes at cycle start: expected sync skills with no same-cycle
+    /// input, and active async skills with no inputs.
+    pub sources: Vec<usize>,
+    /// For each expected slot and each of its outputs, the expected slots that consume it
+    /// as a same-cycle input (to cancel them when the output is not produced).
+    pub consumers: HashMap<usize, Vec<Vec<usize>>>,
+}
+
+/// Plans a cycle: a sync skill is expected when it is active and every input has an active
+/// producer that is either async (latest value) or itself expected.
+pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
+    let producer: HashMap<&str, usize> = nodes
+        .iter()
+        .enumerate()
+        .flat_map(|(i, n)| n.decl.outputs.iter().map(move |o| (o.topic.as_str(), i)))
+        .collect();
+    // None = not decided, Some(b) = decided; `visiting` guards loops (refused at
+    // registration, but never trust that here).
+    let mut expected: Vec<Option<bool>> = vec![None; nodes.len()];
+    let mut visiting = vec![false; nodes.len()];
+    fn decide(
+        i: usize,
+        nodes: &[PlanNode<'_>],
+        producer: &HashMap<&str, usize>,
+        expected: &mut [Option<bool>],
+        visiting: &mut [bool],
+    ) -> bool {
+        if let Some(e) = expected[i] {
+            return e;
+        }
+        if visiting[i] {
+            return false;
+        }
+        visiting[i] = true;
+        let n = &nodes[i];
+        let mut ok = n.active && n.decl.mode == Mode::Sync;
+        if ok {
+            for inp in &n.decl.inputs {
+                let fine = producer.get(inp.topic.as_str()).is_some_and(|&p| {
+                    nodes[p].active
+                        && (nodes[p].decl.mode == Mode::Async
+                            || decide(p, nodes, producer, expected, visiting))
+                });
+                if !fine {
+                    ok = false;
+                    break;
+                }
+            }
+        }
+        visiting[i] = false;
+        expected[i] = Some(ok);
+        ok
+    }
+    for i in 0..nodes.len() {
+        decide(i, nodes, &producer, &mut expected, &mut visiting);
+    }
+    let mut plan = Plan::default();
+    for (i, n) in nodes.iter().enumerate() {
+        let mut mask = 0u64;
+        for (bit, inp) in n.decl.inputs.iter().enumerate() {
+            if let Some(&p) = producer.get(inp.topic.as_str())
+                && nodes[p].decl.mode == Mode::Sync
+            {
+                mask |= 1 << bit;
+            }
+        }
+        plan.fresh_masks.push((n.slot, mask));
+        let is_expected = expected[i] == Some(true);
+        if is_expected {
+            plan.expected.push(n.slot);
+            if mask == 0 {
+                plan.sources.push(n.slot);
+            }
+            let per_output = n
+                .decl
+                .outputs
+                .iter()
+                .map(|o| {
+                    nodes
+                        .iter()
+                        .enumerate()
+                        .filter(|(j, c)| {
+                            expected[*j] == Some(true) && c.decl.inputs.iter().any(|ci| ci.topic == o.topic)
+                        })
+                        .map(|(_, c)| c.slot)
+                        .collect()
+                })
+                .collect();
+            plan.consumers.insert(n.slot, per_output);
+        } else if n.active && n.decl.mode == Mode::Async && n.decl.inputs.is_empty() {
+            plan.sources.push(n.slot);
+        }
+    }
+    plan
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skill_sdk::msg::{Scaled, Tick};
+    use skill_sdk::params::ParamValue;
+
+    fn skill(name: &str, mode: Mode, inputs: Vec<PortDecl>, outputs: Vec<PortDecl>) -> SkillDecl {
+        SkillDecl {
+            name: name.into(),
+            kind: name.into(),
+            mode,
+            priority: 0,
+            start_active: true,
+            pid: 1,
+            inputs,
+            outputs,
+            params: vec![],
+            param_values: Vec::<(String, ParamValue)>::new(),
+        }
+    }
+    fn port<T: skill_sdk::Message>(topic: &str) -> PortDecl {
+        PortDecl::of::<T>(topic)
+    }
+
+    fn hello() -> Vec<SkillDecl> {
+        vec![
+            skill("ticker", Mode::Sync, vec![], vec![port::<Tick>("tick")]),
+            skill("scale", Mode::Sync, vec![port::<Tick>("tick")], vec![port::<Scaled>("scaled")]),
+            skill("smooth", Mode::Async, vec![port::<Scaled>("scaled")], vec![]),
+        ]
+    }
+
+    fn nodes(d: &[SkillDecl], active: &[bool]) -> Vec<PlanNode<'static>> {
+        let leaked: &'static [SkillDecl] = Box::leak(d.to_vec().into_boxed_slice());
+        leaked
+            .iter()
+            .enumerate()
+            .map(|(i, decl)| PlanNode { slot: i, decl, active: active[i] })
+            .collect()
+    }
+
+    #[test]
+    fn hello_plan() {
+        let p = plan(&nodes(&hello(), &[true, true, true]));
+        assert_eq!(p.expected, vec![0, 1]);
+        assert_eq!(p.sources, vec![0]);
+        assert_eq!(p.fresh_masks, vec![(0, 0), (1, 1), (2, 1)]);
+        assert_eq!(p.consumers[&0], vec![vec![1]]);
+        assert_eq!(p.consumers[&1], vec![Vec::<usize>::new()]);
+    }
+
+    #[test]
+    fn inactive_producer_makes_consumer_unexpected() {
+        let p = plan(&nodes(&hello(), &[false, true, true]));
+        assert!(p.expected.is_empty());
+        assert!(p.sources.is_empty());
+    }
+
+    #[test]
+    fn type_mismatch_names_both_sides() {
+        let h = hello();
+        let bad = skill("bad", Mode::Sync, vec![port::<Scaled>("tick")], vec![]);
+        let e = check_join(h.iter(), &bad).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains("'bad' input 'tick' is 'skillfab.Scaled"), "{text}");
+        assert!(text.contains("'ticker' output 'tick' is 'skillfab.Tick"), "{text}");
+    }
+
+    #[test]
+    fn second_producer_and_duplicate_name_are_refused() {
+        let h = hello();
+        let two = skill("ticker2", Mode::Sync, vec![], vec![port::<Tick>("tick")]);
+        assert!(matches!(check_join(h.iter(), &two), Err(WiringError::TwoProducers { .. })));
+        let dup = skill("scale", Mode::Sync, vec![], vec![]);
+        assert!(matches!(check_join(h.iter(), &dup), Err(WiringError::DuplicateName { .. })));
+    }
+
+    #[test]
+    fn sync_loops_are_refused_async_breaks_them() {
+        let a = skill("a", Mode::Sync, vec![port::<Tick>("y")], vec![port::<Tick>("x")]);
+        let b = skill("b", Mode::Sync, vec![port::<Tick>("x")], vec![port::<Tick>("y")]);
+        let e = check_join([a.clone()].iter(), &b).unwrap_err();
+        assert!(matches!(e, WiringError::Loop { .. }), "{e}");
+        let b_async = SkillDecl { mode: Mode::Async, ..b };
+        assert!(check_join([a].iter(), &b_async).is_ok());
+    }
+}

@@ -1,0 +1,297 @@
+//! Launch files: which processes `skillfab up` starts and supervises.
+//!
+//! ```toml
+//! [manager]
+//! period_ms = 10          # 0: free-running
+//! deadline_ms = 50        # default: the period
+//!
+//! [[process]]
+//! name = "scale"          # instance name (unique in the domain)
+//! bin = "scale"           # next to `skillfab`, on PATH, or a path relative to this file
+//! params = { gain = 2.0 } # --param gain=2
+//! active = true           # false: --inactive
+//! priority = 5            # --priority 5
+//! remap = { tick = "t2" } # --remap tick=t2
+//! args = []               # extra arguments
+//! restart = "on-failure"  # never | on-failure | always
+//! max_restarts = 5
+//! backoff_ms = 200
+//! registers = true        # false for processes that are not skills (e.g. a simulator)
+//! ```
+//! The raw file is parsed first (unknown keys are errors), then resolved into a validated
+//! [`Launch`] with program paths found and parameters rendered.
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// What is wrong with a launch file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum LaunchError {
+    /// The file could not be read.
+    #[error("cannot read launch file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML of the expected shape.
+    #[error("launch file {path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message (with line and column).
+        message: String,
+    },
+    /// A process entry is invalid.
+    #[error("launch file {path}: process '{name}': {message}")]
+    Process {
+        /// The file.
+        path: PathBuf,
+        /// The entry's name.
+        name: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLaunch {
+    #[serde(default)]
+    manager: RawManager,
+    #[serde(default)]
+    process: Vec<RawProcess>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawManager {
+    period_ms: Option<f64>,
+    deadline_ms: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProcess {
+    name: String,
+    bin: String,
+    #[serde(default)]
+    params: BTreeMap<String, toml::Value>,
+    active: Option<bool>,
+    priority: Option<i32>,
+    #[serde(default)]
+    remap: BTreeMap<String, String>,
+    #[serde(default)]
+    args: Vec<String>,
+    #[serde(default)]
+    restart: Restart,
+    max_restarts: Option<u32>,
+    backoff_ms: Option<u64>,
+    registers: Option<bool>,
+}
+
+/// When a process that exited is started again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Restart {
+    /// Never.
+    Never,
+    /// When it exited with an error or was killed by a signal.
+    #[default]
+    OnFailure,
+    /// Whenever it exits.
+    Always,
+}
+
+/// One process to start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessSpec {
+    /// Instance name.
+    pub name: String,
+    /// Resolved program path.
+    pub program: PathBuf,
+    /// Arguments after the program (domain excluded; added at spawn).
+    pub args: Vec<String>,
+    /// Restart policy.
+    pub restart: Restart,
+    /// Most restarts before giving up.
+    pub max_restarts: u32,
+    /// First restart delay (doubles each time, at most 5 s).
+    pub backoff: Duration,
+    /// Whether it registers with the manager as a skill.
+    pub registers: bool,
+}
+
+/// A validated launch file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Launch {
+    /// Cycle period (`Some(0)`: free-running) if the file sets it.
+    pub period: Option<Duration>,
+    /// Cycle deadline if the file sets it.
+    pub deadline: Option<Duration>,
+    /// Processes in file order.
+    pub processes: Vec<ProcessSpec>,
+}
+
+fn toml_value_text(v: &toml::Value) -> Option<String> {
+    match v {
+        toml::Value::String(s) => Some(s.clone()),
+        toml::Value::Integer(i) => Some(i.to_string()),
+        toml::Value::Float(f) => Some(f.to_string()),
+        toml::Value::Boolean(b) => Some(b.to_string()),
+        _ => None,
+    }
+}
+
+/// Finds a program: a path with `/` is relative to `base`; a bare name is looked up next to
+/// the running executable, then on `PATH`.
+pub fn find_program(bin: &str, base: &Path) -> Option<PathBuf> {
+    if bin.contains('/') {
+        let p = base.join(bin);
+        return p.is_file().then_some(p);
+    }
+    let beside = std::env::current_exe().ok().and_then(|e| e.parent().map(|d| d.join(bin)));
+    let on_path = std::env::var_os("PATH")
+        .map(|p| std::env::split_paths(&p).map(|d| d.join(bin)).collect::<Vec<_>>())
+        .unwrap_or_default();
+    beside.into_iter().chain(on_path).find(|p| p.is_file())
+}
+
+impl Launch {
+    /// Reads and validates a launch file.
+    pub fn load(path: &Path) -> Result<Launch, LaunchError> {
+        let text = std::fs::read_to_string(path).map_err(|source| LaunchError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        Launch::parse(&text, path, base)
+    }
+
+    /// Validates launch-file text; `base` is where relative program paths start.
+    pub fn parse(text: &str, path: &Path, base: &Path) -> Result<Launch, LaunchError> {
+        let raw: RawLaunch = toml::from_str(text).map_err(|e| LaunchError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let ms = |v: Option<f64>, what: &str| -> Result<Option<Duration>, LaunchError> {
+            match v {
+                None => Ok(None),
+                Some(v) if v.is_finite() && v >= 0.0 => Ok(Some(Duration::from_secs_f64(v / 1000.0))),
+                Some(v) => Err(LaunchError::Parse {
+                    path: path.to_path_buf(),
+                    message: format!("manager.{what} must be a non-negative number of ms, got {v}"),
+                }),
+            }
+        };
+        let mut processes = Vec::new();
+        for p in raw.process {
+            let bad = |message: String| LaunchError::Process {
+                path: path.to_path_buf(),
+                name: p.name.clone(),
+                message,
+            };
+            skill_sdk::names::check_name("process", &p.name, false).map_err(|e| bad(e.to_string()))?;
+            if processes.iter().any(|q: &ProcessSpec| q.name == p.name) {
+                return Err(bad("the name is used twice".into()));
+            }
+            let program = find_program(&p.bin, base).ok_or_else(|| {
+                bad(format!(
+                    "program '{}' not found (next to skillfab, on PATH, or relative to the launch file)",
+                    p.bin
+                ))
+            })?;
+            let mut args = vec!["--name".to_string(), p.name.clone()];
+            for (k, v) in &p.params {
+                let v = toml_value_text(v)
+                    .ok_or_else(|| bad(format!("param '{k}' must be a string, number or bool")))?;
+                args.push("--param".into());
+                args.push(format!("{k}={v}"));
+            }
+            if p.active == Some(false) {
+                args.push("--inactive".into());
+            }
+            if let Some(pr) = p.priority {
+                args.push("--priority".into());
+                args.push(pr.to_string());
+            }
+            for (port, topic) in &p.remap {
+                args.push("--remap".into());
+                args.push(format!("{port}={topic}"));
+            }
+            args.extend(p.args.iter().cloned());
+            processes.push(ProcessSpec {
+                name: p.name.clone(),
+                program,
+                args,
+                restart: p.restart,
+                max_restarts: p.max_restarts.unwrap_or(5),
+                backoff: Duration::from_millis(p.backoff_ms.unwrap_or(200)),
+                registers: p.registers.unwrap_or(true),
+            });
+        }
+        Ok(Launch {
+            period: ms(raw.manager.period_ms, "period_ms")?,
+            deadline: ms(raw.manager.deadline_ms, "deadline_ms")?,
+            processes,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Launch, LaunchError> {
+        Launch::parse(text, Path::new("t.toml"), Path::new("/"))
+    }
+
+    #[test]
+    fn a_full_entry_becomes_arguments() {
+        let l = parse(
+            r#"
+            [manager]
+            period_ms = 5
+            [[process]]
+            name = "s1"
+            bin = "/bin/sh"
+            params = { gain = 2.5, on = true }
+            active = false
+            priority = -3
+            remap = { tick = "t2" }
+            restart = "always"
+            "#,
+        )
+        .unwrap();
+        assert_eq!(l.period, Some(Duration::from_millis(5)));
+        let p = &l.processes[0];
+        assert_eq!(
+            p.args,
+            [
+                "--name", "s1", "--param", "gain=2.5", "--param", "on=true", "--inactive",
+                "--priority", "-3", "--remap", "tick=t2"
+            ]
+        );
+        assert_eq!(p.restart, Restart::Always);
+        assert_eq!(p.program, PathBuf::from("/bin/sh"));
+    }
+
+    #[test]
+    fn mistakes_are_named() {
+        let e = parse("[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\nrestrat = \"never\"\n").unwrap_err();
+        assert!(e.to_string().contains("restrat"), "{e}");
+        let e = parse("[[process]]\nname = \"a\"\nbin = \"no-such-program-xyz\"\n").unwrap_err();
+        assert!(e.to_string().contains("no-such-program-xyz"), "{e}");
+        let e = parse("[[process]]\nname = \"a b\"\nbin = \"/bin/sh\"\n").unwrap_err();
+        assert!(e.to_string().contains("a b"), "{e}");
+        let e = parse("[manager]\nperiod_ms = -1\n").unwrap_err();
+        assert!(e.to_string().contains("period_ms"), "{e}");
+        let e = parse("[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\n[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\n")
+            .unwrap_err();
+        assert!(e.to_string().contains("twice"), "{e}");
+    }
+}

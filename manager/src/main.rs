@@ -1,0 +1,151 @@
+//! `skillfab`: the one user-facing binary.
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use skill_sdk::domain::{DOMAIN_ENV, Domain};
+use skillfab::engine::{Manager, ManagerConfig, Pace};
+use skillfab::launch::Launch;
+use skillfab::stats::Report;
+use skillfab::up::{UpOptions, up};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+#[derive(Parser, Debug)]
+#[command(name = "skillfab", version, about = "A zero-copy shared-memory multi-process skill fabric")]
+struct Cli {
+    /// Fabric domain: processes of different domains never see each other.
+    #[arg(long, global = true, env = DOMAIN_ENV, default_value = "default")]
+    domain: String,
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Args, Debug, Clone)]
+struct PaceArgs {
+    /// Cycle period in milliseconds (default 10: 100 Hz).
+    #[arg(long, conflicts_with = "free_run")]
+    period_ms: Option<f64>,
+    /// Start the next cycle as soon as the previous one finished.
+    #[arg(long)]
+    free_run: bool,
+    /// Stop after N cycles.
+    #[arg(long, value_name = "N")]
+    cycles: Option<u64>,
+    /// Print the final report as one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+impl PaceArgs {
+    fn pace(&self) -> anyhow::Result<Option<Pace>> {
+        if self.free_run {
+            return Ok(Some(Pace::FreeRun));
+        }
+        match self.period_ms {
+            None => Ok(None),
+            Some(ms) if ms.is_finite() && ms > 0.0 => Ok(Some(Pace::Period(Duration::from_secs_f64(ms / 1000.0)))),
+            Some(0.0) => Ok(Some(Pace::FreeRun)),
+            Some(ms) => anyhow::bail!("--period-ms must be positive (0 or --free-run: free-running), got {ms}"),
+        }
+    }
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Run the skill manager of a domain.
+    Manager {
+        #[command(flatten)]
+        pace: PaceArgs,
+        /// Longest a cycle may take before it counts as an overrun (default: the period).
+        #[arg(long)]
+        deadline_ms: Option<f64>,
+        /// Start with cycling stopped.
+        #[arg(long)]
+        paused: bool,
+        /// Do not start cycling until these skills registered (comma-separated).
+        #[arg(long, value_delimiter = ',')]
+        wait_for: Vec<String>,
+    },
+    /// Start a manager and the processes of a launch file; supervise them.
+    Up {
+        /// The launch file (TOML).
+        launch: PathBuf,
+        #[command(flatten)]
+        pace: PaceArgs,
+        /// Seconds to wait for every skill to register before the first cycle.
+        #[arg(long, default_value_t = 30.0)]
+        wait_timeout_s: f64,
+    },
+}
+
+fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string(r)?);
+        return Ok(());
+    }
+    println!(
+        "{} cycles, {} overruns, latency p50 {:.1} µs  p99 {:.1} µs  max {:.1} µs",
+        r.cycles, r.overruns, r.latency_us.p50, r.latency_us.p99, r.latency_us.max
+    );
+    println!("{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12}", "skill", "kind", "mode", "runs", "skips", "fails", "compute µs");
+    for s in &r.skills {
+        println!(
+            "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12.1}",
+            s.name, s.kind, s.mode, s.runs, s.skips, s.failures, s.compute_us_mean
+        );
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let domain = Domain::new(&cli.domain)?;
+    match cli.command {
+        Cmd::Manager {
+            pace,
+            deadline_ms,
+            paused,
+            wait_for,
+        } => {
+            let mut config = ManagerConfig::new(domain.clone());
+            if let Some(p) = pace.pace()? {
+                config.pace = p;
+            }
+            config.deadline = deadline_ms.map(|ms| Duration::from_secs_f64(ms.max(0.0) / 1000.0));
+            config.paused = paused;
+            config.max_cycles = pace.cycles;
+            config.wait_for = wait_for;
+            let mut manager = Manager::new(config).context("starting the manager")?;
+            let report = manager.run(&|_| false);
+            manager.shutdown();
+            print_report(&report?, pace.json)
+        }
+        Cmd::Up {
+            launch,
+            pace,
+            wait_timeout_s,
+        } => {
+            let launch = Launch::load(&launch)?;
+            let report = up(UpOptions {
+                launch,
+                domain,
+                cycles: pace.cycles,
+                pace: pace.pace()?,
+                wait_timeout: Duration::from_secs_f64(wait_timeout_s.max(0.0)),
+            })?;
+            print_report(&report, pace.json)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    skill_sdk::runtime::init_tracing();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("skillfab: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

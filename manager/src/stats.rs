@@ -1,0 +1,129 @@
+//! Cycle statistics: count, overruns, latency percentiles, per-skill figures.
+
+use serde::Serialize;
+use std::collections::VecDeque;
+
+/// How many recent cycle latencies percentiles are computed over.
+const WINDOW: usize = 100_000;
+
+/// Cycle latency record.
+#[derive(Debug, Default)]
+pub struct CycleStats {
+    /// Cycles completed.
+    pub cycles: u64,
+    /// Cycles whose deadline passed before every expected run finished.
+    pub overruns: u64,
+    latencies_ns: VecDeque<u64>,
+    max_ns: u64,
+}
+
+/// Percentiles in microseconds.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct Percentiles {
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest seen.
+    pub max: f64,
+}
+
+impl CycleStats {
+    /// Records a finished cycle.
+    pub fn record(&mut self, latency_ns: u64, overrun: bool) {
+        self.cycles += 1;
+        if overrun {
+            self.overruns += 1;
+        }
+        if self.latencies_ns.len() == WINDOW {
+            self.latencies_ns.pop_front();
+        }
+        self.latencies_ns.push_back(latency_ns);
+        self.max_ns = self.max_ns.max(latency_ns);
+    }
+
+    /// Latency percentiles over the recent window (max over all cycles).
+    pub fn latency_us(&self) -> Percentiles {
+        let mut v: Vec<u64> = self.latencies_ns.iter().copied().collect();
+        if v.is_empty() {
+            return Percentiles::default();
+        }
+        v.sort_unstable();
+        let at = |q: f64| {
+            let i = ((v.len() as f64 - 1.0) * q).round() as usize;
+            v[i.min(v.len() - 1)] as f64 / 1000.0
+        };
+        Percentiles {
+            p50: at(0.50),
+            p99: at(0.99),
+            max: self.max_ns as f64 / 1000.0,
+        }
+    }
+}
+
+/// One skill's figures in a report.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SkillReport {
+    /// Instance name.
+    pub name: String,
+    /// Skill kind (program).
+    pub kind: String,
+    /// `sync` or `async`.
+    pub mode: String,
+    /// Whether it is active.
+    pub active: bool,
+    /// Arbitration priority.
+    pub priority: i32,
+    /// Process id.
+    pub pid: u32,
+    /// Completed runs.
+    pub runs: u64,
+    /// Cycles it could not run in (an input missing).
+    pub skips: u64,
+    /// Failed runs (error or panic).
+    pub failures: u64,
+    /// Mean compute time of a run (µs).
+    pub compute_us_mean: f64,
+    /// Compute time of the last run (µs).
+    pub compute_us_last: f64,
+    /// Cycle of the last run.
+    pub last_cycle: u64,
+    /// Monotonic clock (ns) at the start of the last run.
+    pub last_start_ns: u64,
+    /// Monotonic clock (ns) at the end of the last run.
+    pub last_end_ns: u64,
+}
+
+/// What `skillfab up --json` prints.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Report {
+    /// Cycles completed.
+    pub cycles: u64,
+    /// Cycles that overran their deadline.
+    pub overruns: u64,
+    /// Cycle latency: start to last expected run done.
+    pub latency_us: Percentiles,
+    /// Per skill, in registration order.
+    pub skills: Vec<SkillReport>,
+    /// Skills that died while the fabric ran.
+    pub deaths: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles() {
+        let mut s = CycleStats::default();
+        for i in 1..=100 {
+            s.record(i * 1000, i == 100);
+        }
+        let p = s.latency_us();
+        assert_eq!(s.cycles, 100);
+        assert_eq!(s.overruns, 1);
+        assert_eq!(p.p50, 51.0);
+        assert_eq!(p.p99, 99.0);
+        assert_eq!(p.max, 100.0);
+    }
+}

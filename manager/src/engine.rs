@@ -111,6 +111,8 @@ struct Entry {
     decl: SkillDecl,
     trigger: Notifier<ipc::Service>,
     active: bool,
+    /// Its ports are open: cycles may count on it.
+    ready: bool,
 }
 
 struct Running {
@@ -271,7 +273,7 @@ impl Manager {
                     .config
                     .wait_for
                     .iter()
-                    .filter(|n| !self.skills.iter().flatten().any(|e| &e.decl.name == *n))
+                    .filter(|n| !self.skills.iter().flatten().any(|e| e.ready && &e.decl.name == *n))
                     .cloned()
                     .collect();
                 if !missing.is_empty() {
@@ -315,7 +317,7 @@ impl Manager {
             .order
             .iter()
             .filter_map(|&s| {
-                self.skills[s].as_ref().map(|e| PlanNode {
+                self.skills[s].as_ref().filter(|e| e.ready).map(|e| PlanNode {
                     slot: s,
                     decl: &e.decl,
                     active: e.active,
@@ -433,6 +435,13 @@ impl Manager {
         for i in 0..MAX_SLOTS {
             match self.board.slot(i).state() {
                 SlotState::Pending => self.admit(i),
+                SlotState::Ready => {
+                    if let Some(e) = self.skills[i].as_mut().filter(|e| !e.ready) {
+                        e.ready = true;
+                        self.dirty = true;
+                        tracing::info!(skill = %e.decl.name, "skill ready");
+                    }
+                }
                 SlotState::Leaving => self.drop_slot(i, "left"),
                 _ => {}
             }
@@ -497,6 +506,7 @@ impl Manager {
             active = decl.start_active, "skill registered"
         );
         self.skills[i] = Some(Entry {
+            ready: false,
             active: decl.start_active,
             decl,
             trigger,

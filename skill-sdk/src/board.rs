@@ -37,12 +37,15 @@ pub enum SlotState {
     Claimed = 1,
     /// Declaration written; the manager has not answered yet.
     Pending = 2,
-    /// Registered and taking part in cycles.
+    /// Registered; the skill is opening its data ports.
     Accepted = 3,
     /// Refused; the reason is in the message area.
     Refused = 4,
     /// The skill is leaving cleanly.
     Leaving = 5,
+    /// Ports open: taking part in cycles. Only now can a cycle count on it, since a
+    /// subscriber that connects after a sample was sent would miss that sample.
+    Ready = 6,
 }
 
 impl SlotState {
@@ -53,6 +56,7 @@ impl SlotState {
             3 => SlotState::Accepted,
             4 => SlotState::Refused,
             5 => SlotState::Leaving,
+            6 => SlotState::Ready,
             _ => SlotState::Free,
         }
     }

@@ -5,7 +5,7 @@
 //! 2. wait for the domain's manager (launch order does not matter);
 //! 3. register: claim a board slot, write the declaration, wake the manager, wait for its
 //!    answer (a refusal, e.g. a type mismatch, ends the process with that error);
-//! 4. open the data ports and serve cycles: a sync skill runs when the manager expects it in
+//! 4. open the data ports, tell the manager it is ready, and serve cycles: a sync skill runs when the manager expects it in
 //!    cycle k and every same-cycle input carries cycle k; an async skill runs whenever an
 //!    input changed (or once per cycle without inputs). Outputs are sent, then the topic's
 //!    listeners are woken directly; the run is stamped on the board; the manager is woken
@@ -182,6 +182,10 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
         let Some((inputs, outputs)) = ports.as_mut() else {
             continue;
         };
+        if !board.slot(idx).transition(SlotState::Accepted, SlotState::Ready) {
+            continue;
+        }
+        let _ = wake.notify();
         state.last_cycle = 0;
         match serve(&board, idx, &trigger, &listeners, &wake, inputs, outputs, &mut state)? {
             End::Terminated => {
@@ -362,7 +366,7 @@ fn serve<S: Skill>(
         }
         if ticked
             && (!board.manager_alive()
-                || slot.state() != SlotState::Accepted
+                || slot.state() != SlotState::Ready
                 || slot.pid.load(Ordering::Acquire) != me)
         {
             return Ok(End::ManagerGone);

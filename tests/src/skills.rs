@@ -1,0 +1,179 @@
+//! Skills made for tests.
+
+use skill_sdk::header::now_ns;
+use skill_sdk::msg::{Scalar, Scaled, Tick};
+use skill_sdk::prelude::*;
+
+/// Parameters of [`Work`] and [`WorkAsync`].
+#[derive(Params, Debug, Clone)]
+pub struct WorkParams {
+    /// How long a run sleeps (ms): a body that takes time.
+    #[param(default = 0.0, min = 0.0, max = 10000.0)]
+    pub sleep_ms: f64,
+    /// out.value = factor × input.
+    #[param(default = 1.0)]
+    pub factor: f64,
+    /// Fail (return an error) in every cycle divisible by this; 0: never.
+    #[param(default = 0, min = 0)]
+    pub fail_every: u64,
+    /// Panic in every cycle divisible by this; 0: never.
+    #[param(default = 0, min = 0)]
+    pub panic_every: u64,
+}
+
+/// Input of the work skills.
+#[derive(Inputs)]
+pub struct WorkIn<'a> {
+    /// Any tick.
+    pub tick: Input<'a, Tick>,
+}
+
+/// Output of the work skills.
+#[derive(Outputs)]
+pub struct WorkOut<'a> {
+    /// factor × tick, with the run's start and end instants.
+    pub out: Output<'a, Scalar>,
+}
+
+fn work(ctx: &Ctx<WorkParams>, i: &WorkIn, o: &mut WorkOut) -> SkillResult {
+    let p = ctx.params;
+    let start_ns = now_ns();
+    if p.sleep_ms > 0.0 {
+        std::thread::sleep(std::time::Duration::from_secs_f64(p.sleep_ms / 1000.0));
+    }
+    if p.fail_every > 0 && ctx.cycle % p.fail_every == 0 {
+        return Err(SkillError::msg(format!("failing on purpose in cycle {}", ctx.cycle)));
+    }
+    if p.panic_every > 0 && ctx.cycle % p.panic_every == 0 {
+        panic!("panicking on purpose in cycle {}", ctx.cycle);
+    }
+    o.out.set(Scalar {
+        value: p.factor * i.tick.value as f64,
+        start_ns,
+        end_ns: now_ns(),
+    });
+    Ok(())
+}
+
+/// Sync: takes `sleep_ms`, outputs factor × tick; fails or panics on demand.
+#[derive(Default)]
+pub struct Work;
+
+impl Skill for Work {
+    type Params = WorkParams;
+    type Inputs<'a> = WorkIn<'a>;
+    type Outputs<'a> = WorkOut<'a>;
+    fn compute(&mut self, ctx: &Ctx<WorkParams>, i: WorkIn, o: &mut WorkOut) -> SkillResult {
+        work(ctx, &i, o)
+    }
+}
+
+/// Async twin of [`Work`].
+#[derive(Default)]
+pub struct WorkAsync;
+
+impl Skill for WorkAsync {
+    type Params = WorkParams;
+    type Inputs<'a> = WorkIn<'a>;
+    type Outputs<'a> = WorkOut<'a>;
+    const MODE: Mode = Mode::Async;
+    fn compute(&mut self, ctx: &Ctx<WorkParams>, i: WorkIn, o: &mut WorkOut) -> SkillResult {
+        work(ctx, &i, o)
+    }
+}
+
+/// Parameters of [`Check`].
+#[derive(Params, Debug, Clone)]
+pub struct CheckParams {
+    /// The gain `scale` is expected to apply.
+    #[param(default = 2.0)]
+    pub gain: f64,
+}
+
+/// Inputs of [`Check`].
+#[derive(Inputs)]
+pub struct CheckIn<'a> {
+    /// The tick of this cycle.
+    pub tick: Input<'a, Tick>,
+    /// scale's output in this cycle.
+    pub scaled: Input<'a, Scaled>,
+}
+
+/// Sync: fails the run unless `tick == cycle` and `scaled == gain × tick`, both from this
+/// cycle. A chain ticker → scale → check that finishes N cycles with N runs and no failure
+/// produced exactly the expected values in every cycle.
+#[derive(Default)]
+pub struct Check;
+
+impl Skill for Check {
+    type Params = CheckParams;
+    type Inputs<'a> = CheckIn<'a>;
+    type Outputs<'a> = ();
+    fn compute(&mut self, ctx: &Ctx<CheckParams>, i: CheckIn, _: &mut ()) -> SkillResult {
+        let expected = ctx.params.gain * ctx.cycle as f64;
+        if i.tick.value != ctx.cycle || i.tick.cycle() != ctx.cycle || i.scaled.cycle() != ctx.cycle {
+            return Err(SkillError::msg(format!(
+                "cycle {}: tick {} (from cycle {}), scaled from cycle {}",
+                ctx.cycle,
+                i.tick.value,
+                i.tick.cycle(),
+                i.scaled.cycle()
+            )));
+        }
+        if i.scaled.value != expected {
+            return Err(SkillError::msg(format!(
+                "cycle {}: scaled {} != {expected}",
+                ctx.cycle, i.scaled.value
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Input of [`Sink`].
+#[derive(Inputs)]
+pub struct SinkIn<'a> {
+    /// Any scalar.
+    pub input: Input<'a, Scalar>,
+}
+
+/// Sync: consumes a scalar of this cycle, fails if it is from another cycle.
+#[derive(Default)]
+pub struct Sink;
+
+impl Skill for Sink {
+    type Params = NoParams;
+    type Inputs<'a> = SinkIn<'a>;
+    type Outputs<'a> = ();
+    fn compute(&mut self, ctx: &Ctx<NoParams>, i: SinkIn, _: &mut ()) -> SkillResult {
+        if i.input.cycle() != ctx.cycle {
+            return Err(SkillError::msg("stale input"));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skill_sdk::harness::Harness;
+
+    #[test]
+    fn work_scales_and_fails_on_demand() {
+        let mut h = Harness::<Work>::new();
+        h.set_param("factor=3").unwrap().set_param("fail_every=2").unwrap();
+        h.input("tick", Tick { value: 4 });
+        assert_eq!(h.step().unwrap().output::<Scalar>("out").unwrap().value, 12.0);
+        h.input("tick", Tick { value: 5 });
+        assert!(h.step().is_err(), "cycle 2 fails");
+    }
+
+    #[test]
+    fn check_accepts_only_exact_values() {
+        let mut h = Harness::<Check>::new();
+        h.input("tick", Tick { value: 1 }).input("scaled", Scaled { value: 2.0 });
+        assert!(h.step().is_ok());
+        h.input("tick", Tick { value: 2 }).input("scaled", Scaled { value: 4.5 });
+        assert!(h.step().is_err());
+    }
+}

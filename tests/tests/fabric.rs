@@ -1,0 +1,221 @@
+//! The core fabric, end to end: real processes, real iceoryx2 shared memory.
+
+use nix::sys::signal::Signal;
+use skillfab_tests::{TestDomain, cycle, registered, skill};
+
+// Counting tests give cycles a deadline far above any run, so a loaded machine cannot turn a
+// slow cycle into an overrun (what an overrun does is tested on its own).
+const HELLO_CHECK: &str = r#"
+[manager]
+period_ms = 2
+deadline_ms = 2000
+[[process]]
+name = "ticker"
+bin = "{bin:ticker}"
+[[process]]
+name = "scale"
+bin = "{bin:scale}"
+params = { gain = 3.0 }
+[[process]]
+name = "check"
+bin = "{bin:check}"
+params = { gain = 3.0 }
+[[process]]
+name = "smooth"
+bin = "{bin:smooth}"
+"#;
+
+#[test]
+fn a_sync_chain_gives_exactly_the_expected_values() {
+    let t = TestDomain::new("chain");
+    let r = t.up_json(HELLO_CHECK, &["--cycles", "150"]);
+    assert_eq!(r["cycles"], 150, "{r}");
+    for name in ["ticker", "scale", "check"] {
+        let s = skill(&r, name);
+        assert_eq!(s["runs"], 150, "{name}: {s}");
+        assert_eq!(s["failures"], 0, "{name} saw a wrong value: {s}");
+        assert_eq!(s["skips"], 0, "{name}: {s}");
+        assert_eq!(s["last_cycle"], 150, "{name}: {s}");
+    }
+    assert_eq!(skill(&r, "smooth")["mode"], "async");
+    assert_eq!(r["overruns"], 0, "{r}");
+}
+
+#[test]
+fn independent_sync_skills_run_in_parallel() {
+    let t = TestDomain::new("parallel");
+    let launch = r#"
+[manager]
+period_ms = 200
+[[process]]
+name = "ticker"
+bin = "{bin:ticker}"
+[[process]]
+name = "a"
+bin = "{bin:work}"
+params = { sleep_ms = 25.0 }
+remap = { out = "a" }
+[[process]]
+name = "b"
+bin = "{bin:work}"
+params = { sleep_ms = 25.0 }
+remap = { out = "b" }
+"#;
+    let r = t.up_json(launch, &["--cycles", "3"]);
+    let (a, b) = (skill(&r, "a"), skill(&r, "b"));
+    assert_eq!(a["last_cycle"], 3);
+    assert_eq!(b["last_cycle"], 3);
+    let span = |s: &serde_json::Value| (s["last_start_ns"].as_u64().unwrap(), s["last_end_ns"].as_u64().unwrap());
+    let ((a0, a1), (b0, b1)) = (span(a), span(b));
+    assert!(a0 < b1 && b0 < a1, "runs of cycle 3 did not overlap: a {a0}..{a1}, b {b0}..{b1}");
+}
+
+#[test]
+fn a_slow_async_skill_does_not_slow_the_cycle() {
+    let t = TestDomain::new("slowasync");
+    let launch = r#"
+[[process]]
+name = "ticker"
+bin = "{bin:ticker}"
+[[process]]
+name = "slow"
+bin = "{bin:work-async}"
+params = { sleep_ms = 300.0 }
+"#;
+    let r = t.up_json(launch, &["--cycles", "200", "--free-run"]);
+    // Free-running: the deadline is 1 s, far above a tick's run even on a loaded machine.
+    assert_eq!(r["cycles"], 200);
+    assert_eq!(r["overruns"], 0, "{r}");
+    assert_eq!(skill(&r, "ticker")["runs"], 200);
+    let slow_runs = skill(&r, "slow")["runs"].as_u64().unwrap();
+    // Had the cycle waited for it, it would have run once per cycle.
+    assert!(slow_runs < 20, "the async skill ran {slow_runs} times in 200 cycles");
+}
+
+#[test]
+fn failed_runs_cancel_their_consumers_without_stalling_the_cycle() {
+    let t = TestDomain::new("failing");
+    let launch = r#"
+[manager]
+period_ms = 2
+deadline_ms = 2000
+[[process]]
+name = "ticker"
+bin = "{bin:ticker}"
+[[process]]
+name = "work"
+bin = "{bin:work}"
+params = { fail_every = 3, panic_every = 5 }
+remap = { out = "mid" }
+[[process]]
+name = "sink"
+bin = "{bin:sink}"
+remap = { input = "mid" }
+"#;
+    let r = t.up_json(launch, &["--cycles", "30"]);
+    assert_eq!(r["cycles"], 30);
+    assert_eq!(r["overruns"], 0, "a failed producer must not make the cycle wait: {r}");
+    // Cycles divisible by 3 (10) or 5 (6), both (2): 14 failures, 16 good runs.
+    let work = skill(&r, "work");
+    assert_eq!(work["failures"], 14, "{work}");
+    assert_eq!(work["runs"], 16, "{work}");
+    let sink = skill(&r, "sink");
+    assert_eq!(sink["runs"], 16, "{sink}");
+    assert_eq!(sink["failures"], 0, "{sink}");
+}
+
+#[test]
+fn a_killed_skill_is_dropped_and_rejoins_when_restarted() {
+    let mut t = TestDomain::new("kill");
+    t.spawn("skillfab", &["manager", "--period-ms", "2"]);
+    let board = t.board();
+    t.spawn("ticker", &[]);
+    let scale = t.spawn("scale", &[]);
+    t.wait_until("scale to run", || registered(&board, "scale").is_some_and(|s| s.runs > 20));
+
+    t.signal(scale, Signal::SIGKILL);
+    t.wait_exit(scale);
+    t.wait_until("the manager to drop scale", || registered(&board, "scale").is_none());
+    let ticks = registered(&board, "ticker").unwrap().runs;
+    let at = cycle(&board);
+    t.wait_until("cycles to go on without scale", || {
+        cycle(&board) > at + 50 && registered(&board, "ticker").unwrap().runs > ticks + 50
+    });
+
+    let again = t.spawn("scale", &[]);
+    t.wait_until("scale to rejoin and run", || {
+        registered(&board, "scale").is_some_and(|s| s.runs > 20 && s.decl.pid == t.pid(again))
+    });
+}
+
+#[test]
+fn a_type_mismatch_is_refused_naming_both_sides() {
+    let mut t = TestDomain::new("mismatch");
+    t.spawn("skillfab", &["manager", "--period-ms", "5"]);
+    let board = t.board();
+    t.spawn("ticker", &[]);
+    t.wait_until("ticker", || registered(&board, "ticker").is_some());
+    // smooth reads `scaled` (skillfab.Scaled); wire it to `tick` (skillfab.Tick).
+    let out = t.run("smooth", &["--name", "wrong", "--remap", "scaled=tick"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("type mismatch on topic 'tick'"), "{err}");
+    assert!(err.contains("'wrong' input 'scaled' is 'skillfab.Scaled"), "{err}");
+    assert!(err.contains("'ticker' output 'tick' is 'skillfab.Tick"), "{err}");
+    assert!(registered(&board, "wrong").is_none());
+    let c = cycle(&board);
+    t.wait_until("cycles to go on", || cycle(&board) > c + 10);
+}
+
+#[test]
+fn skills_started_before_the_manager_join() {
+    let mut t = TestDomain::new("early");
+    t.spawn("ticker", &[]);
+    t.spawn("scale", &["--param", "gain=0.5"]);
+    let out = t.run(
+        "skillfab",
+        &[
+            "manager", "--period-ms", "2", "--deadline-ms", "2000", "--cycles", "40", "--wait-for",
+            "ticker,scale", "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(skill(&r, "ticker")["runs"], 40, "{r}");
+    assert_eq!(skill(&r, "scale")["runs"], 40, "{r}");
+}
+
+#[test]
+fn a_clean_shutdown_leaves_no_files_and_no_processes() {
+    let mut t = TestDomain::new("shutdown");
+    let launch = t.launch_file(
+        "[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n",
+    );
+    let up = t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("the network to run", || registered(&board, "smooth").is_some_and(|s| s.runs > 5));
+    let pids: Vec<u32> = ["ticker", "scale", "smooth"]
+        .iter()
+        .map(|n| registered(&board, n).unwrap().decl.pid)
+        .collect();
+    assert!(!t.domain.shm_files().is_empty(), "the running fabric has shared memory");
+    drop(board);
+
+    t.signal(up, Signal::SIGTERM);
+    assert!(t.wait_exit(up).success());
+    for pid in pids {
+        assert!(!skill_sdk::board::pid_alive(pid), "skill process {pid} outlived skillfab up");
+    }
+    assert_eq!(t.domain.shm_files(), Vec::<std::path::PathBuf>::new(), "files left in /dev/shm");
+    assert!(!t.domain.root_path().exists(), "iceoryx2 root {} left", t.domain.root_path().display());
+}
+
+#[test]
+fn a_bad_launch_file_is_a_clear_error() {
+    let t = TestDomain::new("badlaunch");
+    let path = t.launch_file("[[process]]\nname = \"x\"\nbin = \"{bin:ticker}\"\nrestart = \"sometimes\"\n");
+    let out = t.run("skillfab", &["up", path.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("launch file") && err.contains("sometimes"), "{err}");
+}

@@ -15,7 +15,7 @@
 
 use crate::graph::{self, Plan, PlanNode};
 use crate::stats::{CycleStats, Report, SkillReport};
-use iceoryx2::node::Node;
+use iceoryx2::node::{Node, NodeView};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
@@ -185,7 +185,9 @@ impl Manager {
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<ipc::Service>()
             .map_err(|e| wait_err(&e))?;
-        let _guard = waitset.attach_notification(&wake).map_err(|e| wait_err(&e))?;
+        let _guard = waitset
+            .attach_notification(&wake)
+            .map_err(|e| wait_err(&e))?;
         tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
         loop {
             let timeout = self.timeout(Instant::now());
@@ -212,19 +214,45 @@ impl Manager {
         Ok(self.report())
     }
 
-    /// Lets skills that are leaving go, checks liveness once more, and closes the board.
-    /// Call after the skill processes were asked to stop.
-    pub fn shutdown(mut self) {
+    /// Lets skills that are leaving go, checks liveness once more, closes the board, and
+    /// when no other process of the domain is alive, removes the domain's files (shared
+    /// memory and iceoryx2 root). Returns whether it removed them.
+    pub fn shutdown(mut self) -> bool {
         self.service_registry();
         self.check_liveness();
         self.board.close();
         let cleaned = self.node.try_cleanup_dead_nodes();
-        tracing::info!(cycles = self.cycle, dead_nodes_cleaned = cleaned.cleanups, "manager down");
+        let others_alive = self.others_alive();
+        let (domain, cycles) = (self.config.domain.clone(), self.cycle);
+        drop(self);
+        if !others_alive {
+            domain.remove_all_files();
+        }
+        tracing::info!(
+            cycles,
+            dead_nodes_cleaned = cleaned.cleanups,
+            files_removed = !others_alive,
+            "manager down"
+        );
+        !others_alive
     }
 
-    /// The manager's iceoryx2 node (to list or clean up nodes of the domain).
-    pub fn node(&self) -> &Node<ipc::Service> {
-        &self.node
+    /// Whether an iceoryx2 node of the domain other than the manager's is alive.
+    fn others_alive(&self) -> bool {
+        let Ok(config) = self.config.domain.iceoryx_config() else {
+            return true;
+        };
+        let own = *self.node.id();
+        let mut alive = false;
+        let listed = Node::<ipc::Service>::list(&config, |state| {
+            if let NodeState::Alive(v) = &state
+                && *v.id() != own
+            {
+                alive = true;
+            }
+            CallbackProgression::Continue
+        });
+        alive || listed.is_err()
     }
 
     /// Cycles completed so far.
@@ -253,7 +281,11 @@ impl Manager {
                 self.resolve();
                 if self.board.remaining(k) == 0 {
                     self.finish(false);
-                } else if self.running.as_ref().is_some_and(|r| Instant::now() >= r.deadline) {
+                } else if self
+                    .running
+                    .as_ref()
+                    .is_some_and(|r| Instant::now() >= r.deadline)
+                {
                     self.check_liveness();
                     if self.board.remaining(k) == 0 {
                         self.finish(false);
@@ -273,7 +305,13 @@ impl Manager {
                     .config
                     .wait_for
                     .iter()
-                    .filter(|n| !self.skills.iter().flatten().any(|e| e.ready && &e.decl.name == *n))
+                    .filter(|n| {
+                        !self
+                            .skills
+                            .iter()
+                            .flatten()
+                            .any(|e| e.ready && &e.decl.name == *n)
+                    })
                     .cloned()
                     .collect();
                 if !missing.is_empty() {
@@ -317,16 +355,22 @@ impl Manager {
             .order
             .iter()
             .filter_map(|&s| {
-                self.skills[s].as_ref().filter(|e| e.ready).map(|e| PlanNode {
-                    slot: s,
-                    decl: &e.decl,
-                    active: e.active,
-                })
+                self.skills[s]
+                    .as_ref()
+                    .filter(|e| e.ready)
+                    .map(|e| PlanNode {
+                        slot: s,
+                        decl: &e.decl,
+                        active: e.active,
+                    })
             })
             .collect();
         self.plan = graph::plan(&nodes);
         for &(slot, mask) in &self.plan.fresh_masks {
-            self.board.slot(slot).fresh_mask.store(mask, Ordering::Release);
+            self.board
+                .slot(slot)
+                .fresh_mask
+                .store(mask, Ordering::Release);
         }
         self.dirty = false;
     }
@@ -337,7 +381,10 @@ impl Manager {
         }
         let k = self.cycle + 1;
         for &s in &self.plan.expected {
-            self.board.slot(s).expected_cycle.store(k, Ordering::Release);
+            self.board
+                .slot(s)
+                .expected_cycle
+                .store(k, Ordering::Release);
         }
         self.board.arm(k, self.plan.expected.len() as u32);
         let start_ns = now_ns();
@@ -476,7 +523,11 @@ impl Manager {
             return self.refuse(i, None, &e.to_string());
         }
         if decl.inputs.len() > 64 || decl.outputs.len() > 64 {
-            return self.refuse(i, Some(&decl.name), "at most 64 inputs and 64 outputs per skill");
+            return self.refuse(
+                i,
+                Some(&decl.name),
+                "at most 64 inputs and 64 outputs per skill",
+            );
         }
         // A previous instance of the same name that died is replaced, not a duplicate.
         if let Some(j) = (0..MAX_SLOTS).find(|&j| {
@@ -498,7 +549,8 @@ impl Manager {
         let slot = self.board.slot(i);
         slot.reset_counters();
         slot.generation.fetch_add(1, Ordering::Relaxed);
-        slot.active.store(u32::from(decl.start_active), Ordering::Release);
+        slot.active
+            .store(u32::from(decl.start_active), Ordering::Release);
         slot.set_state(SlotState::Accepted);
         let _ = trigger.notify();
         tracing::info!(
@@ -583,7 +635,11 @@ impl Manager {
                     runs,
                     skips: slot.skips.load(Ordering::Acquire),
                     failures: slot.failures.load(Ordering::Acquire),
-                    compute_us_mean: if runs == 0 { 0.0 } else { total as f64 / runs as f64 / 1000.0 },
+                    compute_us_mean: if runs == 0 {
+                        0.0
+                    } else {
+                        total as f64 / runs as f64 / 1000.0
+                    },
                     compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
                     last_cycle: slot.done_cycle.load(Ordering::Acquire),
                     last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
@@ -600,4 +656,3 @@ impl Manager {
         }
     }
 }
-

@@ -18,7 +18,9 @@ pub enum WiringError {
         pid: u32,
     },
     /// Two producers for one topic.
-    #[error("topic '{topic}' is already produced by skill '{producer}'; '{skill}' cannot publish it too")]
+    #[error(
+        "topic '{topic}' is already produced by skill '{producer}'; '{skill}' cannot publish it too"
+    )]
     TwoProducers {
         /// The topic.
         topic: String,
@@ -61,7 +63,10 @@ pub enum WiringError {
 }
 
 fn type_desc(p: &PortDecl) -> String {
-    format!("{} ({} B, align {})", p.schema.type_name, p.schema.size, p.schema.align)
+    format!(
+        "{} ({} B, align {})",
+        p.schema.type_name, p.schema.size, p.schema.align
+    )
 }
 
 fn same_type(a: &PortDecl, b: &PortDecl) -> bool {
@@ -74,30 +79,31 @@ fn same_type(a: &PortDecl, b: &PortDecl) -> bool {
 pub fn check_join<'a>(
     existing: impl Iterator<Item = &'a SkillDecl> + Clone,
     new: &SkillDecl,
-) -> Result<(), WiringError> {
+) -> Result<(), Box<WiringError>> {
     if let Some(d) = existing.clone().find(|d| d.name == new.name) {
-        return Err(WiringError::DuplicateName {
+        return Err(Box::new(WiringError::DuplicateName {
             name: new.name.clone(),
             pid: d.pid,
-        });
+        }));
     }
-    let mismatch = |topic: &str, side, port: &PortDecl, other: &SkillDecl, other_side, op: &PortDecl| {
-        WiringError::TypeMismatch {
-            topic: topic.to_string(),
-            skill: new.name.clone(),
-            side,
-            port: port.port.clone(),
-            ty: type_desc(port),
-            other: other.name.clone(),
-            other_side,
-            other_port: op.port.clone(),
-            other_ty: type_desc(op),
-        }
-    };
+    let mismatch =
+        |topic: &str, side, port: &PortDecl, other: &SkillDecl, other_side, op: &PortDecl| {
+            WiringError::TypeMismatch {
+                topic: topic.to_string(),
+                skill: new.name.clone(),
+                side,
+                port: port.port.clone(),
+                ty: type_desc(port),
+                other: other.name.clone(),
+                other_side,
+                other_port: op.port.clone(),
+                other_ty: type_desc(op),
+            }
+        };
     for out in &new.outputs {
         for d in existing.clone() {
             if let Some(o) = d.outputs.iter().find(|o| o.topic == out.topic) {
-                return Err(if same_type(o, out) {
+                return Err(Box::new(if same_type(o, out) {
                     WiringError::TwoProducers {
                         topic: out.topic.clone(),
                         producer: d.name.clone(),
@@ -105,27 +111,39 @@ pub fn check_join<'a>(
                     }
                 } else {
                     mismatch(&out.topic, "output", out, d, "output", o)
-                });
+                }));
             }
-            if let Some(i) = d.inputs.iter().find(|i| i.topic == out.topic && !same_type(i, out)) {
-                return Err(mismatch(&out.topic, "output", out, d, "input", i));
+            if let Some(i) = d
+                .inputs
+                .iter()
+                .find(|i| i.topic == out.topic && !same_type(i, out))
+            {
+                return Err(Box::new(mismatch(&out.topic, "output", out, d, "input", i)));
             }
         }
     }
     for inp in &new.inputs {
         for d in existing.clone() {
-            if let Some(o) = d.outputs.iter().find(|o| o.topic == inp.topic && !same_type(o, inp)) {
-                return Err(mismatch(&inp.topic, "input", inp, d, "output", o));
+            if let Some(o) = d
+                .outputs
+                .iter()
+                .find(|o| o.topic == inp.topic && !same_type(o, inp))
+            {
+                return Err(Box::new(mismatch(&inp.topic, "input", inp, d, "output", o)));
             }
-            if let Some(i) = d.inputs.iter().find(|i| i.topic == inp.topic && !same_type(i, inp)) {
-                return Err(mismatch(&inp.topic, "input", inp, d, "input", i));
+            if let Some(i) = d
+                .inputs
+                .iter()
+                .find(|i| i.topic == inp.topic && !same_type(i, inp))
+            {
+                return Err(Box::new(mismatch(&inp.topic, "input", inp, d, "input", i)));
             }
         }
     }
     let mut all: Vec<&SkillDecl> = existing.collect();
     all.push(new);
     if let Some(path) = find_sync_loop(&all) {
-        return Err(WiringError::Loop { path });
+        return Err(Box::new(WiringError::Loop { path }));
     }
     Ok(())
 }
@@ -156,7 +174,10 @@ fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
             };
             if mark[p] == 1 {
                 let from = stack.iter().position(|&s| s == p).unwrap_or(0);
-                let mut names: Vec<&str> = stack[from..].iter().map(|&s| skills[s].name.as_str()).collect();
+                let mut names: Vec<&str> = stack[from..]
+                    .iter()
+                    .map(|&s| skills[s].name.as_str())
+                    .collect();
                 names.reverse();
                 names.push(skills[p].name.as_str());
                 // Edges point producer -> consumer; the stack walked consumer -> producer.
@@ -283,7 +304,8 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
                         .iter()
                         .enumerate()
                         .filter(|(j, c)| {
-                            expected[*j] == Some(true) && c.decl.inputs.iter().any(|ci| ci.topic == o.topic)
+                            expected[*j] == Some(true)
+                                && c.decl.inputs.iter().any(|ci| ci.topic == o.topic)
                         })
                         .map(|(_, c)| c.slot)
                         .collect()
@@ -324,8 +346,18 @@ mod tests {
     fn hello() -> Vec<SkillDecl> {
         vec![
             skill("ticker", Mode::Sync, vec![], vec![port::<Tick>("tick")]),
-            skill("scale", Mode::Sync, vec![port::<Tick>("tick")], vec![port::<Scaled>("scaled")]),
-            skill("smooth", Mode::Async, vec![port::<Scaled>("scaled")], vec![]),
+            skill(
+                "scale",
+                Mode::Sync,
+                vec![port::<Tick>("tick")],
+                vec![port::<Scaled>("scaled")],
+            ),
+            skill(
+                "smooth",
+                Mode::Async,
+                vec![port::<Scaled>("scaled")],
+                vec![],
+            ),
         ]
     }
 
@@ -334,7 +366,11 @@ mod tests {
         leaked
             .iter()
             .enumerate()
-            .map(|(i, decl)| PlanNode { slot: i, decl, active: active[i] })
+            .map(|(i, decl)| PlanNode {
+                slot: i,
+                decl,
+                active: active[i],
+            })
             .collect()
     }
 
@@ -361,26 +397,47 @@ mod tests {
         let bad = skill("bad", Mode::Sync, vec![port::<Scaled>("tick")], vec![]);
         let e = check_join(h.iter(), &bad).unwrap_err();
         let text = e.to_string();
-        assert!(text.contains("'bad' input 'tick' is 'skillfab.Scaled"), "{text}");
-        assert!(text.contains("'ticker' output 'tick' is 'skillfab.Tick"), "{text}");
+        assert!(
+            text.contains("'bad' input 'tick' is 'skillfab.Scaled"),
+            "{text}"
+        );
+        assert!(
+            text.contains("'ticker' output 'tick' is 'skillfab.Tick"),
+            "{text}"
+        );
     }
 
     #[test]
     fn second_producer_and_duplicate_name_are_refused() {
         let h = hello();
         let two = skill("ticker2", Mode::Sync, vec![], vec![port::<Tick>("tick")]);
-        assert!(matches!(check_join(h.iter(), &two), Err(WiringError::TwoProducers { .. })));
+        let e = check_join(h.iter(), &two).unwrap_err();
+        assert!(matches!(*e, WiringError::TwoProducers { .. }), "{e}");
         let dup = skill("scale", Mode::Sync, vec![], vec![]);
-        assert!(matches!(check_join(h.iter(), &dup), Err(WiringError::DuplicateName { .. })));
+        let e = check_join(h.iter(), &dup).unwrap_err();
+        assert!(matches!(*e, WiringError::DuplicateName { .. }), "{e}");
     }
 
     #[test]
     fn sync_loops_are_refused_async_breaks_them() {
-        let a = skill("a", Mode::Sync, vec![port::<Tick>("y")], vec![port::<Tick>("x")]);
-        let b = skill("b", Mode::Sync, vec![port::<Tick>("x")], vec![port::<Tick>("y")]);
+        let a = skill(
+            "a",
+            Mode::Sync,
+            vec![port::<Tick>("y")],
+            vec![port::<Tick>("x")],
+        );
+        let b = skill(
+            "b",
+            Mode::Sync,
+            vec![port::<Tick>("x")],
+            vec![port::<Tick>("y")],
+        );
         let e = check_join([a.clone()].iter(), &b).unwrap_err();
-        assert!(matches!(e, WiringError::Loop { .. }), "{e}");
-        let b_async = SkillDecl { mode: Mode::Async, ..b };
+        assert!(matches!(*e, WiringError::Loop { .. }), "{e}");
+        let b_async = SkillDecl {
+            mode: Mode::Async,
+            ..b
+        };
         assert!(check_join([a].iter(), &b_async).is_ok());
     }
 }

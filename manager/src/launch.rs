@@ -154,9 +154,15 @@ pub fn find_program(bin: &str, base: &Path) -> Option<PathBuf> {
         let p = base.join(bin);
         return p.is_file().then_some(p);
     }
-    let beside = std::env::current_exe().ok().and_then(|e| e.parent().map(|d| d.join(bin)));
+    let beside = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(|d| d.join(bin)));
     let on_path = std::env::var_os("PATH")
-        .map(|p| std::env::split_paths(&p).map(|d| d.join(bin)).collect::<Vec<_>>())
+        .map(|p| {
+            std::env::split_paths(&p)
+                .map(|d| d.join(bin))
+                .collect::<Vec<_>>()
+        })
         .unwrap_or_default();
     beside.into_iter().chain(on_path).find(|p| p.is_file())
 }
@@ -181,7 +187,9 @@ impl Launch {
         let ms = |v: Option<f64>, what: &str| -> Result<Option<Duration>, LaunchError> {
             match v {
                 None => Ok(None),
-                Some(v) if v.is_finite() && v >= 0.0 => Ok(Some(Duration::from_secs_f64(v / 1000.0))),
+                Some(v) if v.is_finite() && v >= 0.0 => {
+                    Ok(Some(Duration::from_secs_f64(v / 1000.0)))
+                }
                 Some(v) => Err(LaunchError::Parse {
                     path: path.to_path_buf(),
                     message: format!("manager.{what} must be a non-negative number of ms, got {v}"),
@@ -195,7 +203,8 @@ impl Launch {
                 name: p.name.clone(),
                 message,
             };
-            skill_sdk::names::check_name("process", &p.name, false).map_err(|e| bad(e.to_string()))?;
+            skill_sdk::names::check_name("process", &p.name, false)
+                .map_err(|e| bad(e.to_string()))?;
             if processes.iter().any(|q: &ProcessSpec| q.name == p.name) {
                 return Err(bad("the name is used twice".into()));
             }
@@ -272,8 +281,17 @@ mod tests {
         assert_eq!(
             p.args,
             [
-                "--name", "s1", "--param", "gain=2.5", "--param", "on=true", "--inactive",
-                "--priority", "-3", "--remap", "tick=t2"
+                "--name",
+                "s1",
+                "--param",
+                "gain=2.5",
+                "--param",
+                "on=true",
+                "--inactive",
+                "--priority",
+                "-3",
+                "--remap",
+                "tick=t2"
             ]
         );
         assert_eq!(p.restart, Restart::Always);
@@ -282,7 +300,8 @@ mod tests {
 
     #[test]
     fn mistakes_are_named() {
-        let e = parse("[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\nrestrat = \"never\"\n").unwrap_err();
+        let e = parse("[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\nrestrat = \"never\"\n")
+            .unwrap_err();
         assert!(e.to_string().contains("restrat"), "{e}");
         let e = parse("[[process]]\nname = \"a\"\nbin = \"no-such-program-xyz\"\n").unwrap_err();
         assert!(e.to_string().contains("no-such-program-xyz"), "{e}");

@@ -12,7 +12,11 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 #[derive(Parser, Debug)]
-#[command(name = "skillfab", version, about = "A zero-copy shared-memory multi-process skill fabric")]
+#[command(
+    name = "skillfab",
+    version,
+    about = "A zero-copy shared-memory multi-process skill fabric"
+)]
 struct Cli {
     /// Fabric domain: processes of different domains never see each other.
     #[arg(long, global = true, env = DOMAIN_ENV, default_value = "default")]
@@ -44,9 +48,13 @@ impl PaceArgs {
         }
         match self.period_ms {
             None => Ok(None),
-            Some(ms) if ms.is_finite() && ms > 0.0 => Ok(Some(Pace::Period(Duration::from_secs_f64(ms / 1000.0)))),
+            Some(ms) if ms.is_finite() && ms > 0.0 => {
+                Ok(Some(Pace::Period(Duration::from_secs_f64(ms / 1000.0))))
+            }
             Some(0.0) => Ok(Some(Pace::FreeRun)),
-            Some(ms) => anyhow::bail!("--period-ms must be positive (0 or --free-run: free-running), got {ms}"),
+            Some(ms) => anyhow::bail!(
+                "--period-ms must be positive (0 or --free-run: free-running), got {ms}"
+            ),
         }
     }
 }
@@ -88,7 +96,10 @@ fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {
         "{} cycles, {} overruns, latency p50 {:.1} µs  p99 {:.1} µs  max {:.1} µs",
         r.cycles, r.overruns, r.latency_us.p50, r.latency_us.p99, r.latency_us.max
     );
-    println!("{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12}", "skill", "kind", "mode", "runs", "skips", "fails", "compute µs");
+    println!(
+        "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12}",
+        "skill", "kind", "mode", "runs", "skips", "fails", "compute µs"
+    );
     for s in &r.skills {
         println!(
             "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12.1}",

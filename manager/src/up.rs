@@ -4,7 +4,7 @@
 //! then stops them in order) and get SIGTERM if `up` itself dies (`PR_SET_PDEATHSIG`). A
 //! child that exits is restarted by its policy with a doubling back-off. On shutdown every
 //! child gets SIGTERM, then SIGKILL after a grace period; finally, when no process of the
-//! domain is left, its shared-memory files are removed.
+//! domain is left, the manager removes its shared-memory files.
 
 use crate::engine::{Manager, ManagerConfig, Pace};
 use crate::launch::{Launch, ProcessSpec, Restart};
@@ -13,7 +13,6 @@ use anyhow::{Context, bail};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use skill_sdk::domain::{DOMAIN_ENV, Domain};
-use iceoryx2::node::NodeView;
 use std::os::fd::AsFd;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
@@ -126,7 +125,12 @@ impl Supervisor {
     pub fn given_up(&self) -> Vec<String> {
         self.children
             .lock()
-            .map(|l| l.iter().filter(|p| p.gave_up && p.spec.registers).map(|p| p.spec.name.clone()).collect())
+            .map(|l| {
+                l.iter()
+                    .filter(|p| p.gave_up && p.spec.registers)
+                    .map(|p| p.spec.name.clone())
+                    .collect()
+            })
             .unwrap_or_default()
     }
 
@@ -161,7 +165,8 @@ fn watch(p: &mut Supervised, domain: &Domain) {
                     Restart::Always => true,
                 };
                 if again && p.restarts < p.spec.max_restarts {
-                    let backoff = (p.spec.backoff * 2u32.saturating_pow(p.restarts)).min(Duration::from_secs(5));
+                    let backoff = (p.spec.backoff * 2u32.saturating_pow(p.restarts))
+                        .min(Duration::from_secs(5));
                     tracing::warn!(process = %p.spec.name, %status, ?backoff, "process exited; restarting");
                     p.restart_at = Some(Instant::now() + backoff);
                     p.restarts += 1;
@@ -206,11 +211,15 @@ fn terminate_all(list: &mut [Supervised]) {
     }
     let deadline = Instant::now() + GRACE;
     for p in list.iter_mut() {
-        let Some(child) = p.child.as_mut() else { continue };
+        let Some(child) = p.child.as_mut() else {
+            continue;
+        };
         loop {
             match child.try_wait() {
                 Ok(Some(_)) | Err(_) => break,
-                Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(5)),
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(5))
+                }
                 Ok(None) => {
                     tracing::warn!(process = %p.spec.name, "no exit after SIGTERM; killing");
                     if let Some(g) = group(child) {
@@ -229,30 +238,15 @@ fn terminate_all(list: &mut [Supervised]) {
     }
 }
 
-/// Whether any iceoryx2 node of the domain is still alive (then its files must stay).
-pub fn domain_has_live_nodes(manager: &Manager, domain: &Domain) -> bool {
-    let _ = manager.node().try_cleanup_dead_nodes();
-    let Ok(config) = domain.iceoryx_config() else {
-        return true;
-    };
-    let own = *manager.node().id();
-    let mut alive = false;
-    let _ = iceoryx2::node::Node::<iceoryx2::prelude::ipc::Service>::list(&config, |state| {
-        if let iceoryx2::prelude::NodeState::Alive(v) = &state
-            && *v.id() != own
-        {
-            alive = true;
-        }
-        iceoryx2::prelude::CallbackProgression::Continue
-    });
-    alive
-}
-
 /// Runs `skillfab up` until Ctrl-C/SIGTERM or `cycles`; returns the report.
 pub fn up(opts: UpOptions) -> anyhow::Result<Report> {
     let mut config = ManagerConfig::new(opts.domain.clone());
     if let Some(p) = opts.launch.period {
-        config.pace = if p.is_zero() { Pace::FreeRun } else { Pace::Period(p) };
+        config.pace = if p.is_zero() {
+            Pace::FreeRun
+        } else {
+            Pace::Period(p)
+        };
     }
     if let Some(p) = opts.pace {
         config.pace = p;
@@ -272,17 +266,16 @@ pub fn up(opts: UpOptions) -> anyhow::Result<Report> {
     let result = manager.run(&|cycles| cycles == 0 && !supervisor.given_up().is_empty());
     let given_up = supervisor.given_up();
     supervisor.stop();
-    let live = domain_has_live_nodes(&manager, &opts.domain);
     let cycles = manager.cycle();
-    manager.shutdown();
-    if !live {
-        opts.domain.remove_all_files();
-    } else {
+    if !manager.shutdown() {
         tracing::info!(domain = %opts.domain, "other processes still use the domain; its files stay");
     }
     let report = result.context("running the manager")?;
     if cycles == 0 && !given_up.is_empty() {
-        bail!("processes exited before the fabric started: {}", given_up.join(", "));
+        bail!(
+            "processes exited before the fabric started: {}",
+            given_up.join(", ")
+        );
     }
     Ok(report)
 }

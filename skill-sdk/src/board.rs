@@ -278,9 +278,10 @@ impl Board {
 
     /// Arms the completion counter for `cycle` with `count` expected runs.
     pub fn arm(&self, cycle: u64, count: u32) {
-        self.header()
-            .remaining
-            .store(((cycle as u32 as u64) << 32) | u64::from(count), Ordering::Release);
+        self.header().remaining.store(
+            ((cycle as u32 as u64) << 32) | u64::from(count),
+            Ordering::Release,
+        );
     }
 
     /// Takes `n` expected runs of `cycle` off the counter; true if that finished the cycle.
@@ -304,7 +305,11 @@ impl Board {
     /// Expected runs left in `cycle` (0 if another cycle is armed).
     pub fn remaining(&self, cycle: u64) -> u32 {
         let cur = self.header().remaining.load(Ordering::Acquire);
-        if (cur >> 32) as u32 == cycle as u32 { cur as u32 } else { 0 }
+        if (cur >> 32) as u32 == cycle as u32 {
+            cur as u32
+        } else {
+            0
+        }
     }
 }
 
@@ -348,7 +353,9 @@ impl Slot {
         }
         // SAFETY: in state `Claimed` only the claiming skill touches the area; the later
         // release store of `Pending` publishes it.
-        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), self.decl.get().cast::<u8>(), bytes.len()) };
+        unsafe {
+            std::ptr::copy_nonoverlapping(bytes.as_ptr(), self.decl.get().cast::<u8>(), bytes.len())
+        };
         self.decl_len.store(bytes.len() as u32, Ordering::Relaxed);
         Ok(())
     }
@@ -407,7 +414,9 @@ pub fn pid_alive(pid: u32) -> bool {
     let Ok(p) = i32::try_from(pid) else {
         return false;
     };
-    if nix::sys::signal::kill(nix::unistd::Pid::from_raw(p), None).is_err_and(|e| e == nix::Error::ESRCH) {
+    if nix::sys::signal::kill(nix::unistd::Pid::from_raw(p), None)
+        .is_err_and(|e| e == nix::Error::ESRCH)
+    {
         return false;
     }
     // A killed child stays a zombie until its parent reaps it: that is dead too.
@@ -435,7 +444,10 @@ mod tests {
         assert!(b.complete(7, 1));
         assert!(!b.complete(7, 1), "already finished");
         b.arm(8, 3);
-        assert!(b.complete(8, 5), "cancelling more than is left finishes the cycle");
+        assert!(
+            b.complete(8, 5),
+            "cancelling more than is left finishes the cycle"
+        );
         let other = Board::open(&prefix).unwrap();
         assert!(other.manager_alive());
         drop(other);
@@ -447,7 +459,10 @@ mod tests {
     fn a_second_live_manager_is_refused() {
         let prefix = format!("sf_unit-board2-{}_", std::process::id());
         let b = Board::create(&prefix).unwrap();
-        assert!(matches!(Board::create(&prefix), Err(SdkError::ManagerRunning { .. })));
+        assert!(matches!(
+            Board::create(&prefix),
+            Err(SdkError::ManagerRunning { .. })
+        ));
         drop(b);
     }
 

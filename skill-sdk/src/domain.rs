@@ -25,7 +25,9 @@ impl Domain {
         let ok = !name.is_empty()
             && name.len() <= 40
             && !name.starts_with('.')
-            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.');
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.');
         if !ok {
             return Err(SdkError::BadDomain {
                 name: name.to_string(),

@@ -29,7 +29,8 @@ pub fn board(prefix: &str) -> String {
 
 /// Checks a skill or topic name: 1 to 64 of `[A-Za-z0-9_-]`, `/` allowed inside a topic.
 pub fn check_name(what: &str, name: &str, allow_slash: bool) -> Result<(), crate::SdkError> {
-    let ok_char = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '-' || (allow_slash && c == '/');
+    let ok_char =
+        |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '-' || (allow_slash && c == '/');
     if name.is_empty() || name.len() > 64 || !name.chars().all(ok_char) || name.starts_with('/') {
         return Err(crate::SdkError::BadName {
             what: what.to_string(),

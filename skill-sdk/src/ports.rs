@@ -100,10 +100,7 @@ pub struct PortMaker<'n> {
 
 impl PortMaker<'_> {
     fn topic(&self, idx: usize) -> Result<String, crate::SdkError> {
-        self.topics
-            .get(idx)
-            .cloned()
-            .ok_or(crate::SdkError::NoNode)
+        self.topics.get(idx).cloned().ok_or(crate::SdkError::NoNode)
     }
 }
 
@@ -345,10 +342,12 @@ pub struct OutputSlots<'a> {
 impl<'a> OutputSlots<'a> {
     /// Iterates over `slots`.
     pub fn new(slots: &'a mut [ErasedOutput]) -> Self {
-        OutputSlots { it: slots.iter_mut() }
+        OutputSlots {
+            it: slots.iter_mut(),
+        }
     }
     /// The next cell.
-    pub fn next(&mut self) -> &'a mut ErasedOutput {
+    pub fn take_next(&mut self) -> &'a mut ErasedOutput {
         // The runtime and the harness build exactly one cell per declared output, in order,
         // from the same `OutputSet::ports()` the generated `bind` walks.
         #[allow(clippy::expect_used)]

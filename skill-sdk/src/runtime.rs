@@ -12,16 +12,18 @@
 //!    only by the run that completes the cycle, or by a run that passed nothing on;
 //! 5. on SIGINT/SIGTERM leave the slot cleanly; if the manager goes away, go back to 2.
 
+use crate::SdkError;
 use crate::board::{Board, MAX_SLOTS, RunStatus, SlotState};
 use crate::decl::{Mode, SkillDecl};
 use crate::domain::{DOMAIN_ENV, Domain};
 use crate::header::{SampleHeader, now_ns};
 use crate::names;
 use crate::params::Params;
-use crate::ports::{ErasedInput, ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker};
+use crate::ports::{
+    ErasedInput, ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker,
+};
 use crate::services;
 use crate::skill::{Ctx, Skill};
-use crate::SdkError;
 use clap::Parser;
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
@@ -108,15 +110,23 @@ pub fn declare<S: Skill>(args: &SkillArgs, kind: &str) -> Result<(SkillDecl, S::
     let mut inputs = <S::Inputs<'static> as InputSet<'static>>::ports();
     let mut outputs = <S::Outputs<'static> as OutputSet<'static>>::ports();
     for r in &args.remaps {
-        let (port, topic) = r.split_once('=').ok_or_else(|| SdkError::UnknownPort { port: r.clone() })?;
+        let (port, topic) = r
+            .split_once('=')
+            .ok_or_else(|| SdkError::UnknownPort { port: r.clone() })?;
         names::check_name("topic", topic, true)?;
         let mut found = false;
-        for p in inputs.iter_mut().chain(outputs.iter_mut()).filter(|p| p.port == port) {
+        for p in inputs
+            .iter_mut()
+            .chain(outputs.iter_mut())
+            .filter(|p| p.port == port)
+        {
             p.topic = topic.to_string();
             found = true;
         }
         if !found {
-            return Err(SdkError::UnknownPort { port: port.to_string() });
+            return Err(SdkError::UnknownPort {
+                port: port.to_string(),
+            });
         }
     }
     let decl = SkillDecl {
@@ -145,7 +155,7 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
     let wake = services::notifier(&node, &names::manager_wake())?;
     let encoded = postcard::to_allocvec(&decl)?;
 
-    let mut ports: Option<(Vec<Box<dyn ErasedInput>>, Vec<ErasedOutput>)> = None;
+    let mut ports: Option<Ports> = None;
     let listeners = decl
         .inputs
         .iter()
@@ -182,12 +192,22 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
         let Some((inputs, outputs)) = ports.as_mut() else {
             continue;
         };
-        if !board.slot(idx).transition(SlotState::Accepted, SlotState::Ready) {
+        if !board
+            .slot(idx)
+            .transition(SlotState::Accepted, SlotState::Ready)
+        {
             continue;
         }
         let _ = wake.notify();
         state.last_cycle = 0;
-        match serve(&board, idx, &trigger, &listeners, &wake, inputs, outputs, &mut state)? {
+        let link = Link {
+            board: &board,
+            idx,
+            trigger: &trigger,
+            listeners: &listeners,
+            wake: &wake,
+        };
+        match serve(&link, inputs, outputs, &mut state)? {
             End::Terminated => {
                 let slot = board.slot(idx);
                 if slot.pid.load(Ordering::Acquire) == std::process::id() {
@@ -202,6 +222,18 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
             }
         }
     }
+}
+
+/// A skill's runtime input and output ports, opened once and kept across managers.
+type Ports = (Vec<Box<dyn ErasedInput>>, Vec<ErasedOutput>);
+
+/// What a registered skill uses to talk to its manager.
+struct Link<'a> {
+    board: &'a Board,
+    idx: usize,
+    trigger: &'a Listener<ipc::Service>,
+    listeners: &'a [Listener<ipc::Service>],
+    wake: &'a Notifier<ipc::Service>,
 }
 
 struct State<S: Skill> {
@@ -253,7 +285,11 @@ fn register(
     wake: &Notifier<ipc::Service>,
 ) -> Result<Registration, SdkError> {
     let idx = (0..MAX_SLOTS)
-        .find(|&i| board.slot(i).transition(SlotState::Free, SlotState::Claimed))
+        .find(|&i| {
+            board
+                .slot(i)
+                .transition(SlotState::Free, SlotState::Claimed)
+        })
         .ok_or(SdkError::BoardFull { max: MAX_SLOTS })?;
     let slot = board.slot(idx);
     slot.pid.store(std::process::id(), Ordering::Release);
@@ -308,15 +344,18 @@ impl InputSource for RuntimeInputs<'_> {
 }
 
 fn serve<S: Skill>(
-    board: &Board,
-    idx: usize,
-    trigger: &Listener<ipc::Service>,
-    listeners: &[Listener<ipc::Service>],
-    wake: &Notifier<ipc::Service>,
+    link: &Link<'_>,
     inputs: &mut [Box<dyn ErasedInput>],
     outputs: &mut [ErasedOutput],
     state: &mut State<S>,
 ) -> Result<End, SdkError> {
+    let Link {
+        board,
+        idx,
+        trigger,
+        listeners,
+        ..
+    } = *link;
     let transport = |what: &str, e: &dyn std::fmt::Debug| SdkError::Transport {
         what: what.to_string(),
         detail: format!("{e:?}"),
@@ -371,20 +410,19 @@ fn serve<S: Skill>(
         {
             return Ok(End::ManagerGone);
         }
-        step(board, idx, wake, inputs, outputs, state);
+        step(link, inputs, outputs, state);
     }
 }
 
 /// Runs the skill if it is due; see the module docs for when that is.
 fn step<S: Skill>(
-    board: &Board,
-    idx: usize,
-    wake: &Notifier<ipc::Service>,
+    link: &Link<'_>,
     inputs: &mut [Box<dyn ErasedInput>],
     outputs: &mut [ErasedOutput],
     state: &mut State<S>,
 ) {
-    let slot = board.slot(idx);
+    let (board, wake) = (link.board, link.wake);
+    let slot = board.slot(link.idx);
     if slot.active.load(Ordering::Acquire) == 0 {
         return;
     }
@@ -461,14 +499,19 @@ fn step<S: Skill>(
         _ => &slot.failures,
     };
     counter.fetch_add(1, Ordering::Relaxed);
-    slot.compute_ns_total.fetch_add(end - start, Ordering::Relaxed);
+    slot.compute_ns_total
+        .fetch_add(end - start, Ordering::Relaxed);
     slot.last_compute_ns.store(end - start, Ordering::Relaxed);
     slot.published_mask.store(mask, Ordering::Relaxed);
     slot.status.store(status as u32, Ordering::Relaxed);
     slot.last_end_ns.store(now_ns(), Ordering::Relaxed);
     slot.done_cycle.store(k, Ordering::Release);
     if S::MODE == Mode::Sync {
-        let all = if outputs.len() >= 64 { u64::MAX } else { (1u64 << outputs.len()) - 1 };
+        let all = if outputs.len() >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << outputs.len()) - 1
+        };
         let finished = board.complete(k, 1);
         if finished || status != RunStatus::Ok || mask != all {
             let _ = wake.notify();

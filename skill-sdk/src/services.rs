@@ -42,8 +42,10 @@ fn service_name(name: &str) -> Result<ServiceName, SdkError> {
 fn pubsub<T: Message>(
     node: &Node<ipc::Service>,
     topic: &str,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, SampleHeader>, SdkError>
-{
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, SampleHeader>,
+    SdkError,
+> {
     let name = crate::names::topic(topic);
     node.service_builder(&service_name(&name)?)
         .publish_subscribe::<T>()
@@ -116,8 +118,7 @@ pub fn notifier(node: &Node<ipc::Service>, name: &str) -> Result<Notifier<ipc::S
 /// A node of `domain` named `name`, with iceoryx2's SIGINT/SIGTERM handling.
 pub fn node(domain: &crate::domain::Domain, name: &str) -> Result<Node<ipc::Service>, SdkError> {
     let config = domain.iceoryx_config()?;
-    let node_name =
-        NodeName::new(name).map_err(|e| transport(format!("node name '{name}'"), e))?;
+    let node_name = NodeName::new(name).map_err(|e| transport(format!("node name '{name}'"), e))?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&config)

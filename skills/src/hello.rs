@@ -94,7 +94,10 @@ impl Skill for Smooth {
     fn compute(&mut self, ctx: &Ctx<SmoothParams>, i: SmoothIn, o: &mut SmoothOut) -> SkillResult {
         let a = ctx.params.alpha;
         let next = match self.state {
-            None => Smoothed { value: i.scaled.value, samples: 1 },
+            None => Smoothed {
+                value: i.scaled.value,
+                samples: 1,
+            },
             Some(s) => Smoothed {
                 value: a * i.scaled.value + (1.0 - a) * s.value,
                 samples: s.samples + 1,
@@ -123,9 +126,15 @@ mod tests {
     fn scale_multiplies_and_checks_its_gain() {
         let mut h = Harness::<Scale>::new();
         h.input("tick", Tick { value: 7 });
-        assert_eq!(h.step().unwrap().output::<Scaled>("scaled").unwrap().value, 14.0);
+        assert_eq!(
+            h.step().unwrap().output::<Scaled>("scaled").unwrap().value,
+            14.0
+        );
         h.set_param("gain=-0.5").unwrap();
-        assert_eq!(h.step().unwrap().output::<Scaled>("scaled").unwrap().value, -3.5);
+        assert_eq!(
+            h.step().unwrap().output::<Scaled>("scaled").unwrap().value,
+            -3.5
+        );
         assert!(h.set_param("gain=abc").is_err());
         assert!(h.set_param("gain=1e9").is_err());
         assert!(h.set_param("nope=1").is_err());
@@ -143,9 +152,22 @@ mod tests {
         let mut h = Harness::<Smooth>::new();
         h.set_param("alpha=0.5").unwrap();
         h.input("scaled", Scaled { value: 10.0 });
-        assert_eq!(h.step().unwrap().output::<Smoothed>("smoothed").unwrap().value, 10.0);
+        assert_eq!(
+            h.step()
+                .unwrap()
+                .output::<Smoothed>("smoothed")
+                .unwrap()
+                .value,
+            10.0
+        );
         h.input("scaled", Scaled { value: 20.0 });
         let s = *h.step().unwrap().output::<Smoothed>("smoothed").unwrap();
-        assert_eq!(s, Smoothed { value: 15.0, samples: 2 });
+        assert_eq!(
+            s,
+            Smoothed {
+                value: 15.0,
+                samples: 2
+            }
+        );
     }
 }

@@ -8,6 +8,9 @@
 //! Binaries of the other packages (`skillfab`, `ticker`, ...) are found next to this
 //! package's own (`target/<profile>/`); the README's test command builds them first.
 
+// Test support: a failed set-up step should stop the test right there, with its message.
+#![allow(clippy::expect_used, clippy::unwrap_used)]
+
 pub mod skills;
 
 use skill_sdk::board::{Board, MAX_SLOTS, SlotState};
@@ -25,7 +28,10 @@ pub const WAIT: Duration = Duration::from_secs(30);
 pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
     // target/<profile>/deps/<test> -> target/<profile>/
-    let dir = exe.parent().and_then(|d| d.parent()).expect("target directory");
+    let dir = exe
+        .parent()
+        .and_then(|d| d.parent())
+        .expect("target directory");
     let path = dir.join(name);
     assert!(
         path.is_file(),
@@ -49,7 +55,11 @@ impl TestDomain {
     pub fn new(tag: &str) -> TestDomain {
         static N: AtomicU32 = AtomicU32::new(0);
         let n = N.fetch_add(1, Ordering::Relaxed);
-        let mut tag: String = tag.chars().filter(|c| c.is_ascii_alphanumeric()).take(16).collect();
+        let mut tag: String = tag
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric())
+            .take(16)
+            .collect();
         if tag.is_empty() {
             tag.push('t');
         }
@@ -80,9 +90,14 @@ impl TestDomain {
     pub fn spawn(&mut self, program: &str, args: &[&str]) -> usize {
         use std::os::unix::process::CommandExt;
         let mut c = self.command(program);
-        let log = self.dir.join(format!("{}-{program}.log", self.children.len()));
+        let log = self
+            .dir
+            .join(format!("{}-{program}.log", self.children.len()));
         let log = std::fs::File::create(&log).expect("child log file");
-        c.args(args).process_group(0).stdout(Stdio::null()).stderr(log);
+        c.args(args)
+            .process_group(0)
+            .stdout(Stdio::null())
+            .stderr(log);
         let child = c.spawn().unwrap_or_else(|e| panic!("spawn {program}: {e}"));
         self.children.push(child);
         self.children.len() - 1
@@ -113,7 +128,10 @@ impl TestDomain {
 
     /// Runs `program` to completion in this domain.
     pub fn run(&self, program: &str, args: &[&str]) -> Output {
-        self.command(program).args(args).output().unwrap_or_else(|e| panic!("run {program}: {e}"))
+        self.command(program)
+            .args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("run {program}: {e}"))
     }
 
     /// Writes a launch file into the scratch directory; `{bin:x}` expands to program x's path.
@@ -138,15 +156,21 @@ impl TestDomain {
         );
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "skillfab up failed: {stderr}");
-        serde_json::from_slice(&out.stdout)
-            .unwrap_or_else(|e| panic!("report is not JSON ({e}): {}", String::from_utf8_lossy(&out.stdout)))
+        serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+            panic!(
+                "report is not JSON ({e}): {}",
+                String::from_utf8_lossy(&out.stdout)
+            )
+        })
     }
 
     /// The domain's board, once the manager has created it.
     pub fn board(&self) -> Board {
         let mut board = None;
         self.wait_until("the manager's board", || {
-            board = Board::open(&self.domain.prefix()).ok().filter(Board::manager_alive);
+            board = Board::open(&self.domain.prefix())
+                .ok()
+                .filter(Board::manager_alive);
             board.is_some()
         });
         board.expect("board")
@@ -167,7 +191,10 @@ impl Drop for TestDomain {
         if std::thread::panicking() {
             // Show what the children said: the test failed.
             if let Ok(dir) = std::fs::read_dir(&self.dir) {
-                for e in dir.flatten().filter(|e| e.path().extension().is_some_and(|x| x == "log")) {
+                for e in dir
+                    .flatten()
+                    .filter(|e| e.path().extension().is_some_and(|x| x == "log"))
+                {
                     let text = std::fs::read_to_string(e.path()).unwrap_or_default();
                     eprintln!("----- {} -----\n{text}", e.path().display());
                 }

@@ -41,10 +41,13 @@ fn work(ctx: &Ctx<WorkParams>, i: &WorkIn, o: &mut WorkOut) -> SkillResult {
     if p.sleep_ms > 0.0 {
         std::thread::sleep(std::time::Duration::from_secs_f64(p.sleep_ms / 1000.0));
     }
-    if p.fail_every > 0 && ctx.cycle % p.fail_every == 0 {
-        return Err(SkillError::msg(format!("failing on purpose in cycle {}", ctx.cycle)));
+    if p.fail_every > 0 && ctx.cycle.is_multiple_of(p.fail_every) {
+        return Err(SkillError::msg(format!(
+            "failing on purpose in cycle {}",
+            ctx.cycle
+        )));
     }
-    if p.panic_every > 0 && ctx.cycle % p.panic_every == 0 {
+    if p.panic_every > 0 && ctx.cycle.is_multiple_of(p.panic_every) {
         panic!("panicking on purpose in cycle {}", ctx.cycle);
     }
     o.out.set(Scalar {
@@ -111,7 +114,8 @@ impl Skill for Check {
     type Outputs<'a> = ();
     fn compute(&mut self, ctx: &Ctx<CheckParams>, i: CheckIn, _: &mut ()) -> SkillResult {
         let expected = ctx.params.gain * ctx.cycle as f64;
-        if i.tick.value != ctx.cycle || i.tick.cycle() != ctx.cycle || i.scaled.cycle() != ctx.cycle {
+        if i.tick.value != ctx.cycle || i.tick.cycle() != ctx.cycle || i.scaled.cycle() != ctx.cycle
+        {
             return Err(SkillError::msg(format!(
                 "cycle {}: tick {} (from cycle {}), scaled from cycle {}",
                 ctx.cycle,
@@ -161,9 +165,15 @@ mod tests {
     #[test]
     fn work_scales_and_fails_on_demand() {
         let mut h = Harness::<Work>::new();
-        h.set_param("factor=3").unwrap().set_param("fail_every=2").unwrap();
+        h.set_param("factor=3")
+            .unwrap()
+            .set_param("fail_every=2")
+            .unwrap();
         h.input("tick", Tick { value: 4 });
-        assert_eq!(h.step().unwrap().output::<Scalar>("out").unwrap().value, 12.0);
+        assert_eq!(
+            h.step().unwrap().output::<Scalar>("out").unwrap().value,
+            12.0
+        );
         h.input("tick", Tick { value: 5 });
         assert!(h.step().is_err(), "cycle 2 fails");
     }
@@ -171,9 +181,11 @@ mod tests {
     #[test]
     fn check_accepts_only_exact_values() {
         let mut h = Harness::<Check>::new();
-        h.input("tick", Tick { value: 1 }).input("scaled", Scaled { value: 2.0 });
+        h.input("tick", Tick { value: 1 })
+            .input("scaled", Scaled { value: 2.0 });
         assert!(h.step().is_ok());
-        h.input("tick", Tick { value: 2 }).input("scaled", Scaled { value: 4.5 });
+        h.input("tick", Tick { value: 2 })
+            .input("scaled", Scaled { value: 4.5 });
         assert!(h.step().is_err());
     }
 }

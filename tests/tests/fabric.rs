@@ -65,9 +65,17 @@ remap = { out = "b" }
     let (a, b) = (skill(&r, "a"), skill(&r, "b"));
     assert_eq!(a["last_cycle"], 3);
     assert_eq!(b["last_cycle"], 3);
-    let span = |s: &serde_json::Value| (s["last_start_ns"].as_u64().unwrap(), s["last_end_ns"].as_u64().unwrap());
+    let span = |s: &serde_json::Value| {
+        (
+            s["last_start_ns"].as_u64().unwrap(),
+            s["last_end_ns"].as_u64().unwrap(),
+        )
+    };
     let ((a0, a1), (b0, b1)) = (span(a), span(b));
-    assert!(a0 < b1 && b0 < a1, "runs of cycle 3 did not overlap: a {a0}..{a1}, b {b0}..{b1}");
+    assert!(
+        a0 < b1 && b0 < a1,
+        "runs of cycle 3 did not overlap: a {a0}..{a1}, b {b0}..{b1}"
+    );
 }
 
 #[test]
@@ -89,7 +97,10 @@ params = { sleep_ms = 300.0 }
     assert_eq!(skill(&r, "ticker")["runs"], 200);
     let slow_runs = skill(&r, "slow")["runs"].as_u64().unwrap();
     // Had the cycle waited for it, it would have run once per cycle.
-    assert!(slow_runs < 20, "the async skill ran {slow_runs} times in 200 cycles");
+    assert!(
+        slow_runs < 20,
+        "the async skill ran {slow_runs} times in 200 cycles"
+    );
 }
 
 #[test]
@@ -114,7 +125,10 @@ remap = { input = "mid" }
 "#;
     let r = t.up_json(launch, &["--cycles", "30"]);
     assert_eq!(r["cycles"], 30);
-    assert_eq!(r["overruns"], 0, "a failed producer must not make the cycle wait: {r}");
+    assert_eq!(
+        r["overruns"], 0,
+        "a failed producer must not make the cycle wait: {r}"
+    );
     // Cycles divisible by 3 (10) or 5 (6), both (2): 14 failures, 16 good runs.
     let work = skill(&r, "work");
     assert_eq!(work["failures"], 14, "{work}");
@@ -130,12 +144,25 @@ fn a_killed_skill_is_dropped_and_rejoins_when_restarted() {
     t.spawn("skillfab", &["manager", "--period-ms", "2"]);
     let board = t.board();
     t.spawn("ticker", &[]);
+    t.wait_until("ticker to run", || {
+        registered(&board, "ticker").is_some_and(|s| s.runs > 5)
+    });
+    let files_without_scale = sorted(t.domain.shm_files());
     let scale = t.spawn("scale", &[]);
-    t.wait_until("scale to run", || registered(&board, "scale").is_some_and(|s| s.runs > 20));
+    t.wait_until("scale to run", || {
+        registered(&board, "scale").is_some_and(|s| s.runs > 20)
+    });
+    assert_ne!(sorted(t.domain.shm_files()), files_without_scale);
 
     t.signal(scale, Signal::SIGKILL);
     t.wait_exit(scale);
-    t.wait_until("the manager to drop scale", || registered(&board, "scale").is_none());
+    t.wait_until("the manager to drop scale", || {
+        registered(&board, "scale").is_none()
+    });
+    // The manager's dead-node cleanup leaves no shared memory of the killed process.
+    t.wait_until("the killed skill's shared memory to go", || {
+        sorted(t.domain.shm_files()) == files_without_scale
+    });
     let ticks = registered(&board, "ticker").unwrap().runs;
     let at = cycle(&board);
     t.wait_until("cycles to go on without scale", || {
@@ -146,6 +173,11 @@ fn a_killed_skill_is_dropped_and_rejoins_when_restarted() {
     t.wait_until("scale to rejoin and run", || {
         registered(&board, "scale").is_some_and(|s| s.runs > 20 && s.decl.pid == t.pid(again))
     });
+}
+
+fn sorted(mut v: Vec<std::path::PathBuf>) -> Vec<std::path::PathBuf> {
+    v.sort();
+    v
 }
 
 #[test]
@@ -160,8 +192,14 @@ fn a_type_mismatch_is_refused_naming_both_sides() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("type mismatch on topic 'tick'"), "{err}");
-    assert!(err.contains("'wrong' input 'scaled' is 'skillfab.Scaled"), "{err}");
-    assert!(err.contains("'ticker' output 'tick' is 'skillfab.Tick"), "{err}");
+    assert!(
+        err.contains("'wrong' input 'scaled' is 'skillfab.Scaled"),
+        "{err}"
+    );
+    assert!(
+        err.contains("'ticker' output 'tick' is 'skillfab.Tick"),
+        "{err}"
+    );
     assert!(registered(&board, "wrong").is_none());
     let c = cycle(&board);
     t.wait_until("cycles to go on", || cycle(&board) > c + 10);
@@ -175,11 +213,23 @@ fn skills_started_before_the_manager_join() {
     let out = t.run(
         "skillfab",
         &[
-            "manager", "--period-ms", "2", "--deadline-ms", "2000", "--cycles", "40", "--wait-for",
-            "ticker,scale", "--json",
+            "manager",
+            "--period-ms",
+            "2",
+            "--deadline-ms",
+            "2000",
+            "--cycles",
+            "40",
+            "--wait-for",
+            "ticker,scale",
+            "--json",
         ],
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(skill(&r, "ticker")["runs"], 40, "{r}");
     assert_eq!(skill(&r, "scale")["runs"], 40, "{r}");
@@ -193,29 +243,68 @@ fn a_clean_shutdown_leaves_no_files_and_no_processes() {
     );
     let up = t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
     let board = t.board();
-    t.wait_until("the network to run", || registered(&board, "smooth").is_some_and(|s| s.runs > 5));
+    t.wait_until("the network to run", || {
+        registered(&board, "smooth").is_some_and(|s| s.runs > 5)
+    });
     let pids: Vec<u32> = ["ticker", "scale", "smooth"]
         .iter()
         .map(|n| registered(&board, n).unwrap().decl.pid)
         .collect();
-    assert!(!t.domain.shm_files().is_empty(), "the running fabric has shared memory");
+    assert!(
+        !t.domain.shm_files().is_empty(),
+        "the running fabric has shared memory"
+    );
     drop(board);
 
     t.signal(up, Signal::SIGTERM);
     assert!(t.wait_exit(up).success());
     for pid in pids {
-        assert!(!skill_sdk::board::pid_alive(pid), "skill process {pid} outlived skillfab up");
+        assert!(
+            !skill_sdk::board::pid_alive(pid),
+            "skill process {pid} outlived skillfab up"
+        );
     }
-    assert_eq!(t.domain.shm_files(), Vec::<std::path::PathBuf>::new(), "files left in /dev/shm");
-    assert!(!t.domain.root_path().exists(), "iceoryx2 root {} left", t.domain.root_path().display());
+    assert_eq!(
+        t.domain.shm_files(),
+        Vec::<std::path::PathBuf>::new(),
+        "files left in /dev/shm"
+    );
+    assert!(
+        !t.domain.root_path().exists(),
+        "iceoryx2 root {} left",
+        t.domain.root_path().display()
+    );
 }
 
 #[test]
 fn a_bad_launch_file_is_a_clear_error() {
     let t = TestDomain::new("badlaunch");
-    let path = t.launch_file("[[process]]\nname = \"x\"\nbin = \"{bin:ticker}\"\nrestart = \"sometimes\"\n");
+    let path = t.launch_file(
+        "[[process]]\nname = \"x\"\nbin = \"{bin:ticker}\"\nrestart = \"sometimes\"\n",
+    );
     let out = t.run("skillfab", &["up", path.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("launch file") && err.contains("sometimes"), "{err}");
+    assert!(
+        err.contains("launch file") && err.contains("sometimes"),
+        "{err}"
+    );
+}
+
+#[test]
+fn skillfab_up_restarts_a_killed_skill_by_its_policy() {
+    let mut t = TestDomain::new("restart");
+    let launch = t.launch_file(
+        "[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\nrestart = \"on-failure\"\nbackoff_ms = 10\n",
+    );
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("scale to run", || {
+        registered(&board, "scale").is_some_and(|s| s.runs > 5)
+    });
+    let first = registered(&board, "scale").unwrap().decl.pid;
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(first as i32), Signal::SIGKILL).unwrap();
+    t.wait_until("a new scale process to run", || {
+        registered(&board, "scale").is_some_and(|s| s.decl.pid != first && s.runs > 5)
+    });
 }

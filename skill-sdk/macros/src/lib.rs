@@ -24,7 +24,10 @@ fn named_fields(input: &DeriveInput) -> syn::Result<Vec<&syn::Field>> {
                 "skill-sdk derives need a struct with named fields",
             )),
         },
-        _ => Err(syn::Error::new(input.span(), "skill-sdk derives only work on structs")),
+        _ => Err(syn::Error::new(
+            input.span(),
+            "skill-sdk derives only work on structs",
+        )),
     }
 }
 
@@ -55,7 +58,10 @@ pub fn derive_message(input: TokenStream) -> TokenStream {
 fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
     let ident = &input.ident;
     if !input.generics.params.is_empty() {
-        return Err(syn::Error::new(input.generics.span(), "a Message cannot be generic"));
+        return Err(syn::Error::new(
+            input.generics.span(),
+            "a Message cannot be generic",
+        ));
     }
     let has_repr_c = input.attrs.iter().any(|a| {
         a.path().is_ident("repr")
@@ -149,7 +155,10 @@ fn params(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
     let mut gets = Vec::new();
     let mut sets = Vec::new();
     for f in &fields {
-        let fid = f.ident.as_ref().ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
+        let fid = f
+            .ident
+            .as_ref()
+            .ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
         let name = fid.to_string();
         let ty = &f.ty;
         let doc = doc_of(&f.attrs);
@@ -172,7 +181,10 @@ fn params(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
             })?;
         }
         let default = default.ok_or_else(|| {
-            syn::Error::new(f.span(), format!("parameter `{name}` needs #[param(default = ...)]"))
+            syn::Error::new(
+                f.span(),
+                format!("parameter `{name}` needs #[param(default = ...)]"),
+            )
         })?;
         let to_bound = |e: &Option<Expr>| match e {
             Some(e) => quote! { Some(::skill_sdk::params::ParamType::to_value(&(#e as #ty))) },
@@ -261,19 +273,25 @@ fn ports(input: &DeriveInput, inputs: bool) -> syn::Result<proc_macro2::TokenStr
     let mut builds = Vec::new();
     let mut makes = Vec::new();
     for (idx, f) in fields.iter().enumerate() {
-        let fid = f.ident.as_ref().ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
+        let fid = f
+            .ident
+            .as_ref()
+            .ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
         let name = fid.to_string();
         let ty = &f.ty;
         if inputs {
             decls.push(quote! { <#ty as ::skill_sdk::ports::InputField<#lt>>::decl(#name) });
-            builds.push(quote! { #fid: <#ty as ::skill_sdk::ports::InputField<#lt>>::fetch(src, #idx)? });
+            builds.push(
+                quote! { #fid: <#ty as ::skill_sdk::ports::InputField<#lt>>::fetch(src, #idx)? },
+            );
             makes.push(quote! { <#ty as ::skill_sdk::ports::InputField<#lt>>::make(maker, #idx)? });
         } else {
             decls.push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::decl(#name) });
             builds.push(quote! {
-                #fid: <#ty as ::skill_sdk::ports::OutputField<#lt>>::bind(slots.next())
+                #fid: <#ty as ::skill_sdk::ports::OutputField<#lt>>::bind(slots.take_next())
             });
-            makes.push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::make(maker, #idx)? });
+            makes
+                .push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::make(maker, #idx)? });
         }
     }
     Ok(if inputs {

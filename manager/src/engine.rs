@@ -13,7 +13,9 @@
 //! cycle whose deadline passes is counted as an overrun and closed; the next one starts on
 //! time. Cleanup between cycles is the re-arming of the counter.
 
+use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
+use crate::monitors::Monitor;
 use crate::stats::{CycleStats, Report, SkillReport};
 use iceoryx2::node::{Node, NodeView};
 use iceoryx2::port::listener::Listener;
@@ -21,10 +23,14 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use skill_sdk::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
+use skill_sdk::control::EventKind;
 use skill_sdk::decl::SkillDecl;
 use skill_sdk::domain::Domain;
 use skill_sdk::header::now_ns;
+use skill_sdk::params::ParamValue;
+use skill_sdk::services::RawReader;
 use skill_sdk::{SdkError, names, services};
+use std::collections::{HashMap, HashSet};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -107,12 +113,14 @@ pub enum ManagerError {
     },
 }
 
-struct Entry {
-    decl: SkillDecl,
+pub(crate) struct Entry {
+    pub(crate) decl: SkillDecl,
     trigger: Notifier<ipc::Service>,
-    active: bool,
+    pub(crate) active: bool,
     /// Its ports are open: cycles may count on it.
-    ready: bool,
+    pub(crate) ready: bool,
+    /// Current parameter values (the skill applies them from the next cycle).
+    pub(crate) values: Vec<(String, ParamValue)>,
 }
 
 struct Running {
@@ -128,30 +136,48 @@ struct Running {
 
 /// The skill manager of one domain.
 pub struct Manager {
-    config: ManagerConfig,
-    board: Board,
-    node: Node<ipc::Service>,
-    skills: Vec<Option<Entry>>,
+    pub(crate) config: ManagerConfig,
+    pub(crate) board: Board,
+    pub(crate) node: Node<ipc::Service>,
+    pub(crate) skills: Vec<Option<Entry>>,
     /// Slots in registration order (for reports).
-    order: Vec<usize>,
+    pub(crate) order: Vec<usize>,
     plan: Plan,
     /// The plan must be recomputed before the next cycle.
-    dirty: bool,
-    cycle: u64,
+    pub(crate) dirty: bool,
+    /// Cycles completed.
+    pub(crate) cycle: u64,
     running: Option<Running>,
     next_start: Instant,
-    paused: bool,
+    pub(crate) paused: bool,
+    /// Pause once this many cycles are done (`step`).
+    pub(crate) stop_at: Option<u64>,
     started: bool,
     created: Instant,
-    stats: CycleStats,
-    deaths: u64,
+    pub(crate) stats: CycleStats,
+    pub(crate) deaths: u64,
     last_liveness: Instant,
+    /// Events to publish at the end of this loop iteration.
+    pub(crate) outbox: Vec<EventKind>,
+    /// Installed monitors.
+    pub(crate) monitors: Vec<Monitor>,
+    pub(crate) next_monitor: u64,
+    /// Untyped readers of topics that monitors and queries read.
+    pub(crate) readers: HashMap<String, RawReader>,
+    /// Names that have registered before (a new registration is then a restart).
+    seen: HashSet<String>,
+    /// Requests and events; taken out while the loop runs.
+    control: Option<ControlPlane>,
+    /// Events published so far.
+    pub(crate) events_published: u64,
 }
 
 impl Manager {
     /// Creates the domain's board and the manager's iceoryx2 node.
     pub fn new(config: ManagerConfig) -> Result<Manager, ManagerError> {
         let node = services::node(&config.domain, "skillfab-manager")?;
+        // The control server exists before the board announces the manager to clients.
+        let control = ControlPlane::new(&config.domain, &node)?;
         let board = Board::create(&config.domain.prefix())?;
         let now = Instant::now();
         Ok(Manager {
@@ -166,6 +192,14 @@ impl Manager {
             cycle: 0,
             running: None,
             next_start: now,
+            stop_at: None,
+            outbox: Vec::new(),
+            monitors: Vec::new(),
+            next_monitor: 1,
+            readers: HashMap::new(),
+            seen: HashSet::new(),
+            control: Some(control),
+            events_published: 0,
             started: false,
             created: now,
             stats: CycleStats::default(),
@@ -188,7 +222,25 @@ impl Manager {
         let _guard = waitset
             .attach_notification(&wake)
             .map_err(|e| wait_err(&e))?;
+        let mut control = self.control.take().ok_or_else(|| ManagerError::Wait {
+            detail: "the manager runs once".into(),
+        })?;
         tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
+        let result = self.serve_loop(&waitset, &wake, &mut control, stop);
+        self.control = Some(control);
+        result
+    }
+
+    fn serve_loop(
+        &mut self,
+        waitset: &WaitSet<ipc::Service>,
+        wake: &Listener<ipc::Service>,
+        control: &mut ControlPlane,
+        stop: &dyn Fn(u64) -> bool,
+    ) -> Result<Report, ManagerError> {
+        let wait_err = |e: &dyn std::fmt::Debug| ManagerError::Wait {
+            detail: format!("{e:?}"),
+        };
         loop {
             let timeout = self.timeout(Instant::now());
             let result = waitset
@@ -205,8 +257,11 @@ impl Manager {
             self.service_registry();
             if self.last_liveness.elapsed() >= LIVENESS_TICK {
                 self.check_liveness();
+                control.forget_dead_clients(self);
             }
+            control.serve(self);
             self.advance()?;
+            control.flush(self);
             if self.running.is_none() && self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
                 break;
             }
@@ -290,12 +345,18 @@ impl Manager {
                     if self.board.remaining(k) == 0 {
                         self.finish(false);
                     } else {
-                        tracing::warn!(cycle = k, left = self.board.remaining(k), "cycle overrun");
+                        let unfinished = self.board.remaining(k);
+                        tracing::warn!(cycle = k, unfinished, "cycle overrun");
+                        self.outbox.push(EventKind::CycleOverrun { unfinished });
                         self.finish(true);
                     }
                 } else {
                     return Ok(());
                 }
+            }
+            if self.stop_at.is_some_and(|t| self.cycle >= t) {
+                self.stop_at = None;
+                self.set_paused(true);
             }
             if self.paused || self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
                 return Ok(());
@@ -476,6 +537,52 @@ impl Manager {
         };
         self.stats.record(latency, overrun);
         self.cycle = run.k;
+        if !self.monitors.is_empty() {
+            self.evaluate_monitors();
+        }
+    }
+
+    /// Starts or stops cycling.
+    pub(crate) fn set_paused(&mut self, paused: bool) {
+        if self.paused != paused {
+            self.paused = paused;
+            self.outbox.push(EventKind::Cycling { running: !paused });
+            if !paused {
+                self.next_start = Instant::now();
+            }
+        }
+    }
+
+    /// Evaluates every monitor on the newest samples of the cycle that just finished.
+    fn evaluate_monitors(&mut self) {
+        let topics: HashSet<String> = self
+            .monitors
+            .iter()
+            .flat_map(|m| m.paths.iter().map(|p| p.topic.clone()))
+            .collect();
+        for t in &topics {
+            if let Some(r) = self.readers.get_mut(t)
+                && let Err(e) = r.poll()
+            {
+                tracing::warn!(topic = %t, error = %e, "monitor read failed");
+            }
+        }
+        let readers = &self.readers;
+        let read = |r: &crate::monitors::Resolved| {
+            let (bytes, _) = readers.get(&r.topic)?.latest()?;
+            r.field.read(bytes)
+        };
+        for m in &mut self.monitors {
+            if let Some(values) = m.step(&read) {
+                self.outbox.push(EventKind::MonitorFired {
+                    id: m.id,
+                    client: m.client.clone(),
+                    expr: m.text.clone(),
+                    values,
+                });
+            }
+        }
+        self.monitors.retain(|m| !m.spent());
     }
 
     fn service_registry(&mut self) {
@@ -487,6 +594,21 @@ impl Manager {
                         e.ready = true;
                         self.dirty = true;
                         tracing::info!(skill = %e.decl.name, "skill ready");
+                        // Read its outputs from now on, so queries and monitors find the
+                        // latest sample (a late subscriber would only get it at the next send).
+                        let outputs = e.decl.outputs.clone();
+                        for p in outputs {
+                            if !self.readers.contains_key(&p.topic) {
+                                match RawReader::open(&self.node, &p.topic, &p.schema) {
+                                    Ok(r) => {
+                                        self.readers.insert(p.topic.clone(), r);
+                                    }
+                                    Err(err) => {
+                                        tracing::warn!(topic = %p.topic, error = %err, "cannot read topic")
+                                    }
+                                }
+                            }
+                        }
                     }
                 }
                 SlotState::Leaving => self.drop_slot(i, "left"),
@@ -557,7 +679,15 @@ impl Manager {
             skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
             active = decl.start_active, "skill registered"
         );
+        let restarted = !self.seen.insert(decl.name.clone());
+        self.outbox.push(EventKind::SkillRegistered {
+            skill: decl.name.clone(),
+            pid: decl.pid,
+            restarted,
+        });
+        let values = decl.param_values.clone();
         self.skills[i] = Some(Entry {
+            values,
             ready: false,
             active: decl.start_active,
             decl,
@@ -583,8 +713,15 @@ impl Manager {
             if why == "died" {
                 self.deaths += 1;
                 tracing::warn!(skill = %e.decl.name, pid = e.decl.pid, "skill died");
+                self.outbox.push(EventKind::SkillDied {
+                    skill: e.decl.name.clone(),
+                    pid: e.decl.pid,
+                });
             } else {
                 tracing::info!(skill = %e.decl.name, "skill left");
+                self.outbox.push(EventKind::SkillLeft {
+                    skill: e.decl.name.clone(),
+                });
             }
             self.order.retain(|&s| s != i);
             self.dirty = true;

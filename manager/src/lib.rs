@@ -5,14 +5,18 @@
 //! ## Layout
 //! - [`engine`]: the cycle engine (registry, readiness, deadlines, liveness, stats).
 //! - [`graph`]: wiring checks and the per-cycle plan, pure.
+//! - [`control`]: the control plane (requests, events); [`monitors`]: conditions on live outputs.
 //! - [`stats`]: latency percentiles and the run report.
 //! - [`launch`]: launch files, parsed then validated.
 //! - [`up`]: `skillfab up`, a manager plus supervised processes.
 //!
 //! `src/main.rs` only parses arguments and calls into these.
 
+pub mod control;
+pub mod ctl;
 pub mod engine;
 pub mod graph;
 pub mod launch;
+pub mod monitors;
 pub mod stats;
 pub mod up;

@@ -85,6 +85,14 @@ enum Cmd {
         #[arg(long, default_value_t = 30.0)]
         wait_timeout_s: f64,
     },
+    /// Talk to a running manager: the sequencer's link, from the shell.
+    Ctl {
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        #[command(subcommand)]
+        cmd: skillfab::ctl::CtlCmd,
+    },
 }
 
 fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {
@@ -146,6 +154,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             })?;
             print_report(&report, pace.json)
         }
+        Cmd::Ctl { json, cmd } => skillfab::ctl::run(&domain, json, cmd),
     }
 }
 
@@ -155,7 +164,8 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("skillfab: error: {e:#}");
+            // One line: the refusal (and its cause chain) for scripts and people alike.
+            eprintln!("skillfab: error: {}", format!("{e:#}").replace('\n', " "));
             ExitCode::FAILURE
         }
     }

@@ -25,6 +25,8 @@ pub const MAX_SLOTS: usize = 64;
 pub const DECL_BYTES: usize = 16 * 1024;
 /// Room for the manager's answer text.
 pub const MSG_BYTES: usize = 1024;
+/// Room for a skill's encoded parameter values.
+pub const PARAM_BYTES: usize = 4096;
 const MAGIC: u64 = 0x5346_424f_4152_4401; // "SFBOARD" + layout version 1
 
 /// Life of a slot.
@@ -141,6 +143,10 @@ pub struct Slot {
     pub last_start_ns: AtomicU64,
     /// Monotonic clock (ns) when the last run finished and its outputs were sent.
     pub last_end_ns: AtomicU64,
+    /// Parameter snapshot generation (a seqlock: odd while the manager writes).
+    pub param_gen: AtomicU64,
+    param_len: AtomicU32,
+    params: [AtomicU64; PARAM_BYTES / 8],
     decl_len: AtomicU32,
     msg_len: AtomicU32,
     decl: UnsafeCell<[u8; DECL_BYTES]>,
@@ -385,6 +391,51 @@ impl Slot {
         String::from_utf8_lossy(&bytes).into_owned()
     }
 
+    /// Publishes a new parameter snapshot (the manager). Readers that overlap the write see
+    /// an odd or changed generation and retry.
+    pub fn write_params(&self, bytes: &[u8]) -> Result<(), SdkError> {
+        if bytes.len() > PARAM_BYTES {
+            return Err(SdkError::DeclTooLarge {
+                len: bytes.len(),
+                max: PARAM_BYTES,
+            });
+        }
+        self.param_gen.fetch_add(1, Ordering::AcqRel);
+        for (i, chunk) in bytes.chunks(8).enumerate() {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.params[i].store(u64::from_ne_bytes(w), Ordering::Relaxed);
+        }
+        self.param_len.store(bytes.len() as u32, Ordering::Relaxed);
+        self.param_gen.fetch_add(1, Ordering::Release);
+        Ok(())
+    }
+
+    /// The parameter snapshot if its generation differs from `seen` (the skill).
+    pub fn read_params(&self, seen: u64) -> Option<(u64, Vec<u8>)> {
+        for _ in 0..1000 {
+            let g1 = self.param_gen.load(Ordering::Acquire);
+            if g1 == seen {
+                return None;
+            }
+            if g1 % 2 == 1 {
+                std::hint::spin_loop();
+                continue;
+            }
+            let len = (self.param_len.load(Ordering::Relaxed) as usize).min(PARAM_BYTES);
+            let mut out = Vec::with_capacity(len + 8);
+            for w in &self.params[..len.div_ceil(8)] {
+                out.extend_from_slice(&w.load(Ordering::Relaxed).to_ne_bytes());
+            }
+            out.truncate(len);
+            std::sync::atomic::fence(Ordering::Acquire);
+            if self.param_gen.load(Ordering::Relaxed) == g1 {
+                return Some((g1, out));
+            }
+        }
+        None
+    }
+
     /// Resets the run counters (the manager, when it accepts a new instance).
     pub fn reset_counters(&self) {
         for a in [
@@ -399,6 +450,7 @@ impl Slot {
             &self.last_end_ns,
             &self.fresh_mask,
             &self.expected_cycle,
+            &self.param_gen,
         ] {
             a.store(0, Ordering::Relaxed);
         }
@@ -453,6 +505,19 @@ mod tests {
         drop(other);
         drop(b);
         assert!(Board::open(&prefix).is_err(), "the owner unlinks the board");
+    }
+
+    #[test]
+    fn parameter_snapshots_pass_through_the_seqlock() {
+        let prefix = format!("sf_unit-board3-{}_", std::process::id());
+        let b = Board::create(&prefix).unwrap();
+        let s = b.slot(3);
+        assert_eq!(s.read_params(0), None, "nothing written yet");
+        s.write_params(b"gain=3 and some more bytes").unwrap();
+        let (g, bytes) = s.read_params(0).unwrap();
+        assert_eq!(bytes, b"gain=3 and some more bytes");
+        assert_eq!(s.read_params(g), None, "nothing new");
+        assert!(s.write_params(&[0; PARAM_BYTES + 1]).is_err());
     }
 
     #[test]

@@ -7,6 +7,7 @@ use std::fmt;
 
 /// How a skill is scheduled (the paper's synchronous and asynchronous cskills).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// Runs once per cycle when all its inputs for that cycle exist; the cycle waits for it.
     Sync,

@@ -36,8 +36,11 @@
 extern crate self as skill_sdk;
 
 pub mod board;
+pub mod client;
+pub mod control;
 pub mod decl;
 pub mod domain;
+pub mod expr;
 pub mod harness;
 pub mod header;
 pub mod msg;
@@ -48,6 +51,7 @@ pub mod runtime;
 pub mod schema;
 pub mod services;
 pub mod skill;
+pub mod value;
 
 pub use runtime::main;
 

@@ -22,6 +22,21 @@ pub fn manager_wake() -> String {
     "skillfab/manager/wake".to_string()
 }
 
+/// Request-response service of the control plane.
+pub fn control() -> String {
+    "skillfab/control".to_string()
+}
+
+/// Event service through which the manager wakes control client `id` when its answer is in.
+pub fn client(id: &str) -> String {
+    format!("skillfab/client/{id}")
+}
+
+/// Publish-subscribe (and paired event) service of the events stream.
+pub fn events() -> String {
+    "skillfab/events".to_string()
+}
+
 /// POSIX shared-memory name (for `shm_open`) of the domain's cycle board.
 pub fn board(prefix: &str) -> String {
     format!("/{prefix}board")

@@ -153,7 +153,6 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
     let node = services::node(&domain, &decl.name)?;
     let trigger = services::listener(&node, &names::skill_trigger(&decl.name))?;
     let wake = services::notifier(&node, &names::manager_wake())?;
-    let encoded = postcard::to_allocvec(&decl)?;
 
     let mut ports: Option<Ports> = None;
     let listeners = decl
@@ -164,13 +163,18 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
     let mut state = State::<S> {
         skill: S::default(),
         params,
+        param_gen: 0,
         last_cycle: 0,
         name: decl.name.clone(),
     };
+    let mut decl = decl;
     loop {
         let Some(board) = wait_for_board(&node, &domain)? else {
             return Ok(());
         };
+        // A new manager learns the values the previous one set.
+        decl.param_values = state.params.values();
+        let encoded = postcard::to_allocvec(&decl)?;
         let idx = match register(&node, &board, &decl, &encoded, &trigger, &wake)? {
             Registration::Accepted(idx) => idx,
             Registration::ManagerGone => continue,
@@ -200,6 +204,7 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
         }
         let _ = wake.notify();
         state.last_cycle = 0;
+        state.param_gen = 0;
         let link = Link {
             board: &board,
             idx,
@@ -239,6 +244,8 @@ struct Link<'a> {
 struct State<S: Skill> {
     skill: S,
     params: S::Params,
+    /// Generation of the last parameter snapshot applied.
+    param_gen: u64,
     /// Last cycle this skill ran (or skipped) for.
     last_cycle: u64,
     name: String,
@@ -414,6 +421,23 @@ fn serve<S: Skill>(
     }
 }
 
+/// Applies a parameter snapshot from the manager (which already checked every value).
+fn apply_params<P: Params>(params: &mut P, bytes: &[u8]) {
+    match postcard::from_bytes::<Vec<(String, crate::params::ParamValue)>>(bytes) {
+        Ok(values) => {
+            for (name, value) in values {
+                if params.get(&name) != Some(value) {
+                    match params.set(&name, value) {
+                        Ok(()) => tracing::info!(param = %name, %value, "parameter set"),
+                        Err(e) => tracing::warn!(error = %e, "parameter refused"),
+                    }
+                }
+            }
+        }
+        Err(e) => tracing::warn!(error = %e, "unreadable parameter snapshot"),
+    }
+}
+
 /// Runs the skill if it is due; see the module docs for when that is.
 fn step<S: Skill>(
     link: &Link<'_>,
@@ -423,6 +447,10 @@ fn step<S: Skill>(
 ) {
     let (board, wake) = (link.board, link.wake);
     let slot = board.slot(link.idx);
+    if let Some((generation, bytes)) = slot.read_params(state.param_gen) {
+        state.param_gen = generation;
+        apply_params(&mut state.params, &bytes);
+    }
     if slot.active.load(Ordering::Acquire) == 0 {
         return;
     }

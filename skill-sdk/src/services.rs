@@ -14,6 +14,8 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::marker::CustomPayloadMarker;
+use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
 
 /// Publishers per topic: one producer, plus room for a restarted one during cleanup.
 pub const TOPIC_MAX_PUBLISHERS: usize = 4;
@@ -26,7 +28,7 @@ pub const SUBSCRIBER_BUFFER: usize = 2;
 /// Samples a subscriber may hold while it receives the next one.
 pub const SUBSCRIBER_BORROWED: usize = 2;
 /// Notifiers and listeners per event service.
-pub const EVENT_MAX_PORTS: usize = 16;
+pub const EVENT_MAX_PORTS: usize = 32;
 
 fn transport(what: String, e: impl std::fmt::Debug) -> SdkError {
     SdkError::Transport {
@@ -107,6 +109,23 @@ pub fn listener(node: &Node<ipc::Service>, name: &str) -> Result<Listener<ipc::S
         .map_err(|e| transport(format!("listener on '{name}'"), e))
 }
 
+/// A notifier on an event service that must already exist (never creates it).
+pub fn notifier_existing(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> Result<Notifier<ipc::Service>, SdkError> {
+    node.service_builder(&service_name(name)?)
+        .event()
+        .max_notifiers(EVENT_MAX_PORTS)
+        .max_listeners(EVENT_MAX_PORTS)
+        .max_nodes(MAX_NODES)
+        .open()
+        .map_err(|e| transport(format!("open event '{name}'"), e))?
+        .notifier_builder()
+        .create()
+        .map_err(|e| transport(format!("notifier on '{name}'"), e))
+}
+
 /// A notifier on event service `name`.
 pub fn notifier(node: &Node<ipc::Service>, name: &str) -> Result<Notifier<ipc::Service>, SdkError> {
     event(node, name)?
@@ -125,4 +144,133 @@ pub fn node(domain: &crate::domain::Domain, name: &str) -> Result<Node<ipc::Serv
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
         .map_err(|e| transport(format!("create node '{name}' in domain '{domain}'"), e))
+}
+
+/// Reads a topic without knowing its Rust type: the bytes of the newest sample, laid out as
+/// its [`MessageSchema`](crate::schema::MessageSchema) says. Used by the manager (queries,
+/// monitors) and by tools; it relies on iceoryx2's type-details override, the mechanism
+/// iceoryx2's own language bindings and gateways use (pinned iceoryx2 version).
+pub struct RawReader {
+    subscriber: Subscriber<ipc::Service, [CustomPayloadMarker], SampleHeader>,
+    latest: Option<iceoryx2::sample::Sample<ipc::Service, [CustomPayloadMarker], SampleHeader>>,
+    size: usize,
+}
+
+impl RawReader {
+    /// A reader of `topic`, whose messages have `schema`.
+    pub fn open(
+        node: &Node<ipc::Service>,
+        topic: &str,
+        schema: &crate::schema::MessageSchema,
+    ) -> Result<RawReader, SdkError> {
+        let name = crate::names::topic(topic);
+        let details = TypeDetail::__internal_new_from_parts(
+            TypeVariant::FixedSize,
+            &schema.type_name,
+            schema.size as usize,
+            schema.align as usize,
+        )
+        .map_err(|e| transport(format!("type name '{}'", schema.type_name), e))?;
+        // SAFETY: the details are those of the producer's type (same schema), so the segment
+        // holds `size` bytes of that layout per sample; we only ever read them as bytes.
+        let factory = unsafe {
+            node.service_builder(&service_name(&name)?)
+                .publish_subscribe::<[CustomPayloadMarker]>()
+                .user_header::<SampleHeader>()
+                .__internal_set_payload_type_details(&details)
+        }
+        .max_publishers(TOPIC_MAX_PUBLISHERS)
+        .max_subscribers(TOPIC_MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .history_size(1)
+        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .subscriber_max_borrowed_samples(SUBSCRIBER_BORROWED)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| {
+            transport(
+                format!("open topic '{topic}' ({}) untyped", schema.type_name),
+                e,
+            )
+        })?;
+        let subscriber = factory
+            .subscriber_builder()
+            .buffer_size(SUBSCRIBER_BUFFER)
+            .history_request(1)
+            .create()
+            .map_err(|e| transport(format!("untyped subscriber on '{topic}'"), e))?;
+        Ok(RawReader {
+            subscriber,
+            latest: None,
+            size: schema.size as usize,
+        })
+    }
+
+    /// Takes every sample that arrived, keeping the newest.
+    pub fn poll(&mut self) -> Result<(), SdkError> {
+        loop {
+            match self.subscriber.receive() {
+                Ok(Some(s)) => self.latest = Some(s),
+                Ok(None) => return Ok(()),
+                Err(e) => return Err(transport("untyped receive".into(), e)),
+            }
+        }
+    }
+
+    /// The newest sample's bytes and header.
+    pub fn latest(&self) -> Option<(&[u8], SampleHeader)> {
+        let s = self.latest.as_ref()?;
+        let ptr = s.payload().as_ptr().cast::<u8>();
+        // SAFETY: the sample's payload is one value of the declared type, `size` bytes long,
+        // and stays mapped while the sample is held.
+        let bytes = unsafe { std::slice::from_raw_parts(ptr, self.size) };
+        Some((bytes, *s.user_header()))
+    }
+}
+
+/// Port factory of the control plane's request-response service.
+pub type ControlFactory = iceoryx2::service::port_factory::request_response::PortFactory<
+    ipc::Service,
+    [u8],
+    (),
+    [u8],
+    (),
+>;
+/// Port factory of the events stream.
+pub type EventsFactory =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [u8], ()>;
+
+/// Request-response service of the control plane (byte slices).
+pub fn control_service(node: &Node<ipc::Service>) -> Result<ControlFactory, SdkError> {
+    let name = crate::names::control();
+    node.service_builder(&service_name(&name)?)
+        .request_response::<[u8], [u8]>()
+        .max_clients(CONTROL_MAX_CLIENTS)
+        .max_servers(2)
+        .max_nodes(MAX_NODES)
+        .max_active_requests_per_client(4)
+        .max_response_buffer_size(4)
+        .open_or_create()
+        .map_err(|e| transport(format!("open '{name}'"), e))
+}
+
+/// Clients of the control plane at once (sequencers, CLI calls, consoles).
+pub const CONTROL_MAX_CLIENTS: usize = 24;
+/// Events a subscriber may queue: generous, for bursts (a subscriber counts gaps by `seq`).
+pub const EVENT_BUFFER: usize = 4096;
+
+/// Publish-subscribe service of the events stream (byte slices).
+pub fn events_service(node: &Node<ipc::Service>) -> Result<EventsFactory, SdkError> {
+    let name = crate::names::events();
+    node.service_builder(&service_name(&name)?)
+        .publish_subscribe::<[u8]>()
+        .max_publishers(2)
+        .max_subscribers(CONTROL_MAX_CLIENTS)
+        .max_nodes(MAX_NODES)
+        .history_size(0)
+        .subscriber_max_buffer_size(EVENT_BUFFER)
+        .subscriber_max_borrowed_samples(2)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| transport(format!("open '{name}'"), e))
 }

@@ -1,0 +1,378 @@
+//! `skillfab ctl`: a thin command line over the control client.
+//!
+//! Human output by default, `--json` for scripts; every refused request prints one line on
+//! stderr and exits non-zero.
+
+use anyhow::{Context, bail};
+use clap::Subcommand;
+use serde_json::{Value as Json, json};
+use skill_sdk::client::Client;
+use skill_sdk::control::{Event, EventKind, MonitorMode, SkillInfo};
+use skill_sdk::domain::Domain;
+use skill_sdk::params::ParamValue;
+use skill_sdk::value::Value;
+use std::time::Duration;
+
+/// `skillfab ctl` commands.
+#[derive(Subcommand, Debug, Clone)]
+pub enum CtlCmd {
+    /// List skills: mode, state, priority, runs, compute time, parameters.
+    Ls,
+    /// Activate skills (all or none).
+    Activate {
+        /// Skill names.
+        #[arg(required = true)]
+        skills: Vec<String>,
+    },
+    /// Deactivate skills (all or none).
+    Deactivate {
+        /// Skill names.
+        #[arg(required = true)]
+        skills: Vec<String>,
+    },
+    /// Set a parameter: SKILL.PARAM=VALUE (applied from the next cycle).
+    Set {
+        /// SKILL.PARAM=VALUE
+        assignment: String,
+    },
+    /// Print a parameter: SKILL.PARAM.
+    Get {
+        /// SKILL.PARAM
+        name: String,
+    },
+    /// Print a value: SKILL.OUTPUT[.FIELD][INDEX].
+    Query {
+        /// The path.
+        path: String,
+    },
+    /// Install a monitor and print one JSON line per firing.
+    Monitor {
+        /// The condition, e.g. 'ticker.tick.value > 50'.
+        expr: String,
+        /// Fire the first time only, then exit.
+        #[arg(long, conflicts_with_all = ["edge", "every"])]
+        once: bool,
+        /// Fire each time the condition becomes true (the default).
+        #[arg(long, conflicts_with = "every")]
+        edge: bool,
+        /// Fire every cycle the condition holds.
+        #[arg(long)]
+        every: bool,
+        /// Cycles the condition must hold first.
+        #[arg(long, default_value_t = 0)]
+        hold: u32,
+    },
+    /// List monitors.
+    Monitors,
+    /// Remove a monitor.
+    Unmonitor {
+        /// Its id.
+        id: u64,
+    },
+    /// Stream every event as JSON lines.
+    Events,
+    /// Cycle and skill statistics.
+    Stats,
+    /// Start cycling.
+    Run,
+    /// Stop cycling.
+    Stop,
+    /// Run N cycles (default 1), then stop; returns when they are done.
+    Step {
+        /// Number of cycles.
+        #[arg(default_value_t = 1)]
+        n: u64,
+    },
+    /// Change a skill's arbitration priority.
+    Priority {
+        /// Skill name.
+        skill: String,
+        /// New priority (higher wins).
+        #[arg(allow_negative_numbers = true)]
+        priority: i32,
+    },
+}
+
+fn param_json(v: &ParamValue) -> Json {
+    match *v {
+        ParamValue::Bool(b) => json!(b),
+        ParamValue::Int(i) => json!(i),
+        ParamValue::UInt(u) => json!(u),
+        ParamValue::Float(f) => json!(f),
+    }
+}
+
+/// A decoded value as JSON.
+pub fn value_json(v: &Value) -> Json {
+    serde_json::from_str(&v.to_string()).unwrap_or(Json::Null)
+}
+
+fn skill_json(s: &SkillInfo) -> Json {
+    let params: Vec<Json> = s
+        .params
+        .iter()
+        .map(|p| {
+            let value = s
+                .values
+                .iter()
+                .find(|(n, _)| *n == p.name)
+                .map(|(_, v)| param_json(v));
+            json!({"name": p.name, "type": p.kind.to_string(), "value": value,
+                   "default": param_json(&p.default), "min": p.min.as_ref().map(param_json),
+                   "max": p.max.as_ref().map(param_json), "doc": p.doc})
+        })
+        .collect();
+    let ports = |p: &[(String, String, String)]| -> Vec<Json> {
+        p.iter()
+            .map(|(port, topic, ty)| json!({"port": port, "topic": topic, "type": ty}))
+            .collect()
+    };
+    json!({"name": s.name, "kind": s.kind, "mode": s.mode.to_string(), "state": s.state,
+           "priority": s.priority, "pid": s.pid, "params": params, "inputs": ports(&s.inputs),
+           "outputs": ports(&s.outputs), "runs": s.runs, "skips": s.skips, "failures": s.failures,
+           "last_cycle": s.last_cycle, "compute_us_last": s.compute_us_last,
+           "compute_us_mean": s.compute_us_mean})
+}
+
+/// An event as one JSON object: `{"seq", "cycle", "time_ns", "event": "<kind>", ...fields}`.
+pub fn event_json(e: &Event) -> Json {
+    let mut obj = json!({"seq": e.seq, "cycle": e.cycle, "time_ns": e.time_ns});
+    let (name, fields) = match &e.kind {
+        EventKind::MonitorFired {
+            id,
+            client,
+            expr,
+            values,
+        } => {
+            let vals: serde_json::Map<String, Json> = values
+                .iter()
+                .map(|(p, v)| (p.clone(), value_json(v)))
+                .collect();
+            (
+                "monitor_fired",
+                json!({"monitor": id, "client": client, "expr": expr, "values": vals}),
+            )
+        }
+        EventKind::SkillRegistered {
+            skill,
+            pid,
+            restarted,
+        } => (
+            "skill_registered",
+            json!({"skill": skill, "pid": pid, "restarted": restarted}),
+        ),
+        EventKind::SkillActivated { skill } => ("skill_activated", json!({"skill": skill})),
+        EventKind::SkillDeactivated { skill } => ("skill_deactivated", json!({"skill": skill})),
+        EventKind::SkillDied { skill, pid } => ("skill_died", json!({"skill": skill, "pid": pid})),
+        EventKind::SkillLeft { skill } => ("skill_left", json!({"skill": skill})),
+        EventKind::ParamChanged {
+            skill,
+            param,
+            old,
+            new,
+            by,
+        } => (
+            "param_changed",
+            json!({"skill": skill, "param": param, "old": param_json(old), "new": param_json(new), "by": by}),
+        ),
+        EventKind::PriorityChanged {
+            skill,
+            old,
+            new,
+            by,
+        } => (
+            "priority_changed",
+            json!({"skill": skill, "old": old, "new": new, "by": by}),
+        ),
+        EventKind::CycleOverrun { unfinished } => {
+            ("cycle_overrun", json!({"unfinished": unfinished}))
+        }
+        EventKind::Cycling { running } => ("cycling", json!({"running": running})),
+    };
+    obj["event"] = json!(name);
+    if let (Some(o), Json::Object(f)) = (obj.as_object_mut(), fields) {
+        o.extend(f);
+    }
+    obj
+}
+
+fn split_dot(s: &str) -> anyhow::Result<(&str, &str)> {
+    s.split_once('.')
+        .filter(|(a, b)| !a.is_empty() && !b.is_empty())
+        .with_context(|| format!("expected SKILL.PARAM, got '{s}'"))
+}
+
+/// Runs one `ctl` command.
+pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
+    let mut c = Client::connect(domain)?;
+    let print = |human: String, j: Json| {
+        if json_out {
+            println!("{j}");
+        } else if !human.is_empty() {
+            println!("{human}");
+        }
+    };
+    match cmd {
+        CtlCmd::Ls => {
+            let skills = c.list()?;
+            let mut human = format!(
+                "{:<16} {:<12} {:<6} {:<9} {:>4} {:>8} {:>10}  params",
+                "skill", "kind", "mode", "state", "prio", "runs", "compute µs"
+            );
+            for s in &skills {
+                let params: Vec<String> =
+                    s.values.iter().map(|(n, v)| format!("{n}={v}")).collect();
+                human.push_str(&format!(
+                    "\n{:<16} {:<12} {:<6} {:<9} {:>4} {:>8} {:>10.1}  {}",
+                    s.name,
+                    s.kind,
+                    s.mode,
+                    s.state,
+                    s.priority,
+                    s.runs,
+                    s.compute_us_mean,
+                    params.join(" ")
+                ));
+            }
+            print(human, Json::Array(skills.iter().map(skill_json).collect()));
+        }
+        CtlCmd::Activate { skills } => {
+            let names: Vec<&str> = skills.iter().map(String::as_str).collect();
+            c.activate(&names)?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Deactivate { skills } => {
+            let names: Vec<&str> = skills.iter().map(String::as_str).collect();
+            c.deactivate(&names)?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Set { assignment } => {
+            let (name, value) = assignment
+                .split_once('=')
+                .with_context(|| format!("expected SKILL.PARAM=VALUE, got '{assignment}'"))?;
+            let (skill, param) = split_dot(name)?;
+            c.set_param(skill, param, value)?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Get { name } => {
+            let (skill, param) = split_dot(&name)?;
+            let v = c.get_param(skill, param)?;
+            print(v.to_string(), param_json(&v));
+        }
+        CtlCmd::Query { path } => {
+            let (v, cycle) = c.query(&path)?;
+            print(
+                v.to_string(),
+                json!({"path": path, "cycle": cycle, "value": value_json(&v)}),
+            );
+        }
+        CtlCmd::Monitor {
+            expr,
+            once,
+            edge: _,
+            every,
+            hold,
+        } => {
+            let mode = if once {
+                MonitorMode::Once
+            } else if every {
+                MonitorMode::Every
+            } else {
+                MonitorMode::Edge
+            };
+            c.subscribe()?;
+            let id = c.add_monitor(&expr, mode, hold)?;
+            eprintln!("monitor {id} installed");
+            loop {
+                let Some(ev) = c.next_event(Duration::from_secs(1))? else {
+                    continue;
+                };
+                if let EventKind::MonitorFired { id: fired, .. } = &ev.kind
+                    && *fired == id
+                {
+                    println!("{}", event_json(&ev));
+                    if once {
+                        return Ok(());
+                    }
+                }
+            }
+        }
+        CtlCmd::Monitors => {
+            let ms = c.monitors()?;
+            let human = ms
+                .iter()
+                .map(|m| {
+                    format!(
+                        "{:>4} {:?} hold {} fired {} by {}: {}",
+                        m.id, m.mode, m.hold, m.fired, m.client, m.expr
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            let j = ms
+                .iter()
+                .map(|m| json!({"id": m.id, "expr": m.expr, "mode": format!("{:?}", m.mode).to_lowercase(),
+                                "hold": m.hold, "client": m.client, "fired": m.fired}))
+                .collect();
+            print(human, Json::Array(j));
+        }
+        CtlCmd::Unmonitor { id } => {
+            c.remove_monitor(id)?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Events => loop {
+            c.subscribe()?;
+            if let Some(ev) = c.next_event(Duration::from_secs(1))? {
+                println!("{}", event_json(&ev));
+            }
+        },
+        CtlCmd::Stats => {
+            let s = c.stats()?;
+            let mut human = format!(
+                "cycles {} ({}), overruns {}, latency p50 {:.1} µs p99 {:.1} µs max {:.1} µs, deaths {}, events {}",
+                s.cycles,
+                if s.running { "running" } else { "stopped" },
+                s.overruns,
+                s.latency_us.0,
+                s.latency_us.1,
+                s.latency_us.2,
+                s.deaths,
+                s.events
+            );
+            for (name, runs, skips, fails, us) in &s.skills {
+                human.push_str(&format!("\n  {name:<16} runs {runs:>8} skips {skips:>6} failures {fails:>6} compute {us:.1} µs"));
+            }
+            let skills: Vec<Json> = s
+                .skills
+                .iter()
+                .map(|(n, r, sk, f, us)| json!({"name": n, "runs": r, "skips": sk, "failures": f, "compute_us_mean": us}))
+                .collect();
+            print(
+                human,
+                json!({"cycles": s.cycles, "running": s.running, "overruns": s.overruns,
+                       "latency_us": {"p50": s.latency_us.0, "p99": s.latency_us.1, "max": s.latency_us.2},
+                       "deaths": s.deaths, "events": s.events, "skills": skills}),
+            );
+        }
+        CtlCmd::Run => {
+            c.run()?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Stop => {
+            c.stop()?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Step { n } => {
+            if n == 0 {
+                bail!("step needs N >= 1");
+            }
+            let cycle = c.step(n)?;
+            print(format!("cycle {cycle}"), json!({"cycle": cycle}));
+        }
+        CtlCmd::Priority { skill, priority } => {
+            c.set_priority(&skill, priority)?;
+            print(String::new(), json!({"ok": true}));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,472 @@
+//! The control plane's protocol: what a sequencer asks the manager and what it gets back, and
+//! the events the manager pushes. Encoded with postcard, one entry point each way, with a
+//! version check (a client of another protocol version gets a precise error, not garbage).
+//!
+//! Transport (see [`crate::names`]): requests and responses travel over the iceoryx2
+//! request-response service `skillfab/control` as byte slices; a client wakes the manager
+//! through `skillfab/manager/wake` and is woken through `skillfab/client/<id>`. Events are
+//! published on `skillfab/events` (byte slices, paired event service of the same name).
+
+use crate::decl::Mode;
+use crate::expr::ExprError;
+use crate::params::{ParamError, ParamSpec, ParamValue};
+use crate::schema::MessageSchema;
+use crate::value::Value;
+use serde::{Deserialize, Serialize};
+
+/// Version of this protocol; bumped on any incompatible change.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// A request as sent: version, who asks, what.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RequestEnvelope {
+    /// [`PROTOCOL_VERSION`] of the client.
+    pub version: u16,
+    /// The client's id (`<pid>-<n>`); monitors belong to it.
+    pub client: String,
+    /// The request.
+    pub request: Request,
+}
+
+/// A parameter value as the client gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ParamArg {
+    /// Text, parsed by the parameter's declared type (`ctl set s.p=3`).
+    Text(String),
+    /// A typed value.
+    Value(ParamValue),
+}
+
+/// When a monitor fires.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MonitorMode {
+    /// The first cycle the condition holds; then the monitor is removed.
+    Once,
+    /// Each cycle the condition becomes true (rising edge).
+    Edge,
+    /// Every cycle the condition holds.
+    Every,
+}
+
+/// What a client can ask.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Request {
+    /// Every registered skill.
+    List,
+    /// Activate skills (all or none).
+    Activate(Vec<String>),
+    /// Deactivate skills (all or none).
+    Deactivate(Vec<String>),
+    /// Set a parameter; applied from the next cycle.
+    SetParam {
+        /// Skill instance.
+        skill: String,
+        /// Parameter name.
+        param: String,
+        /// New value.
+        value: ParamArg,
+    },
+    /// Read a parameter.
+    GetParam {
+        /// Skill instance.
+        skill: String,
+        /// Parameter name.
+        param: String,
+    },
+    /// Read a value: `skill.output[.field][index]`.
+    Query(String),
+    /// Install a monitor.
+    AddMonitor {
+        /// The condition.
+        expr: String,
+        /// When it fires.
+        mode: MonitorMode,
+        /// Cycles the condition must hold before it counts as true (0 or 1: at once).
+        hold: u32,
+    },
+    /// Remove a monitor.
+    RemoveMonitor(u64),
+    /// Every monitor.
+    ListMonitors,
+    /// Start cycling.
+    Run,
+    /// Stop cycling (the current cycle finishes).
+    Stop,
+    /// Run N cycles, then stop; answered when they are done.
+    Step(u64),
+    /// Cycle and skill statistics.
+    Stats,
+    /// Change a skill's arbitration priority.
+    SetPriority {
+        /// Skill instance.
+        skill: String,
+        /// New priority (higher wins).
+        priority: i32,
+    },
+}
+
+/// A skill as listed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SkillInfo {
+    /// Instance name.
+    pub name: String,
+    /// Kind (program).
+    pub kind: String,
+    /// Scheduling mode.
+    pub mode: Mode,
+    /// `active`, `inactive` or `starting` (registered, ports not open yet).
+    pub state: String,
+    /// Arbitration priority.
+    pub priority: i32,
+    /// Process id.
+    pub pid: u32,
+    /// Declared parameters.
+    pub params: Vec<ParamSpec>,
+    /// Their current values.
+    pub values: Vec<(String, ParamValue)>,
+    /// Input ports: (port, topic, type name).
+    pub inputs: Vec<(String, String, String)>,
+    /// Output ports: (port, topic, type name).
+    pub outputs: Vec<(String, String, String)>,
+    /// Completed runs.
+    pub runs: u64,
+    /// Skipped cycles.
+    pub skips: u64,
+    /// Failed runs.
+    pub failures: u64,
+    /// Cycle of the last run (0: none).
+    pub last_cycle: u64,
+    /// Compute time of the last run (µs).
+    pub compute_us_last: f64,
+    /// Mean compute time (µs).
+    pub compute_us_mean: f64,
+}
+
+/// An installed monitor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MonitorInfo {
+    /// Its id.
+    pub id: u64,
+    /// The condition.
+    pub expr: String,
+    /// Mode.
+    pub mode: MonitorMode,
+    /// Hold cycles.
+    pub hold: u32,
+    /// The client that owns it.
+    pub client: String,
+    /// Times it fired.
+    pub fired: u64,
+}
+
+/// Cycle statistics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stats {
+    /// Cycles completed.
+    pub cycles: u64,
+    /// Whether the manager is cycling.
+    pub running: bool,
+    /// Overruns.
+    pub overruns: u64,
+    /// Latency percentiles (µs): p50, p99, max.
+    pub latency_us: (f64, f64, f64),
+    /// Per skill: (name, runs, skips, failures, mean compute µs).
+    pub skills: Vec<(String, u64, u64, u64, f64)>,
+    /// Skills that died.
+    pub deaths: u64,
+    /// Events published so far.
+    pub events: u64,
+}
+
+/// What the manager answers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Reply {
+    /// The request was carried out.
+    Done,
+    /// Skills.
+    Skills(Vec<SkillInfo>),
+    /// A parameter's value.
+    Param(ParamValue),
+    /// A queried value and the cycle it was produced in.
+    Value {
+        /// The value.
+        value: Value,
+        /// Its cycle.
+        cycle: u64,
+    },
+    /// The new monitor's id.
+    MonitorAdded(u64),
+    /// Monitors.
+    Monitors(Vec<MonitorInfo>),
+    /// Statistics.
+    Stats(Stats),
+    /// Stepping finished at this cycle.
+    Stepped(u64),
+}
+
+/// Why a request was refused. Every variant names what was wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum ControlError {
+    /// No such skill.
+    #[error("unknown skill '{0}'")]
+    UnknownSkill(String),
+    /// A parameter was refused.
+    #[error("{skill}: {error}")]
+    Param {
+        /// Skill instance.
+        skill: String,
+        /// Why.
+        error: ParamErrorText,
+    },
+    /// A value path that does not resolve.
+    #[error("bad path '{path}': {reason}")]
+    BadPath {
+        /// As given.
+        path: String,
+        /// Why.
+        reason: String,
+    },
+    /// Nothing has been published at that path yet.
+    #[error("no value yet at '{0}'")]
+    NoValue(String),
+    /// A monitor expression that does not parse or type-check.
+    #[error("bad expression '{expr}' {error}")]
+    BadExpression {
+        /// As given.
+        expr: String,
+        /// Where and why.
+        error: ExprError,
+    },
+    /// No monitor with that id.
+    #[error("unknown monitor {0}")]
+    UnknownMonitor(u64),
+    /// The client speaks another protocol version.
+    #[error("protocol version mismatch: client {client}, manager {manager}")]
+    Version {
+        /// Client's version.
+        client: u16,
+        /// Manager's version.
+        manager: u16,
+    },
+    /// The request bytes do not decode.
+    #[error("malformed request: {0}")]
+    Malformed(String),
+    /// Something the request needs is not possible now.
+    #[error("{0}")]
+    Refused(String),
+}
+
+/// A parameter error as text that survives encoding.
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
+#[error("{0}")]
+pub struct ParamErrorText(pub String);
+
+impl From<ParamError> for ParamErrorText {
+    fn from(e: ParamError) -> Self {
+        ParamErrorText(e.to_string())
+    }
+}
+
+/// The manager's answer.
+pub type Response = Result<Reply, ControlError>;
+
+/// What happened.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum EventKind {
+    /// A monitor's condition held.
+    MonitorFired {
+        /// Monitor id.
+        id: u64,
+        /// Its owner.
+        client: String,
+        /// The condition.
+        expr: String,
+        /// Each path it read and its value in that cycle.
+        values: Vec<(String, Value)>,
+    },
+    /// A skill registered.
+    SkillRegistered {
+        /// Instance name.
+        skill: String,
+        /// Process id.
+        pid: u32,
+        /// Whether a previous instance of that name existed (a restart).
+        restarted: bool,
+    },
+    /// A skill was activated.
+    SkillActivated {
+        /// Instance name.
+        skill: String,
+    },
+    /// A skill was deactivated.
+    SkillDeactivated {
+        /// Instance name.
+        skill: String,
+    },
+    /// A skill's process died.
+    SkillDied {
+        /// Instance name.
+        skill: String,
+        /// Process id.
+        pid: u32,
+    },
+    /// A skill left cleanly.
+    SkillLeft {
+        /// Instance name.
+        skill: String,
+    },
+    /// A parameter changed.
+    ParamChanged {
+        /// Skill instance.
+        skill: String,
+        /// Parameter.
+        param: String,
+        /// Previous value.
+        old: ParamValue,
+        /// New value.
+        new: ParamValue,
+        /// The client that changed it.
+        by: String,
+    },
+    /// A skill's priority changed.
+    PriorityChanged {
+        /// Skill instance.
+        skill: String,
+        /// Previous priority.
+        old: i32,
+        /// New priority.
+        new: i32,
+        /// The client that changed it.
+        by: String,
+    },
+    /// A cycle passed its deadline.
+    CycleOverrun {
+        /// Expected runs that had not finished.
+        unfinished: u32,
+    },
+    /// The manager started or stopped cycling.
+    Cycling {
+        /// Whether it runs now.
+        running: bool,
+    },
+}
+
+/// One event of the stream.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Event {
+    /// Sequence number, from 1, without gaps: a subscriber sees a gap if it lost events.
+    pub seq: u64,
+    /// Cycle it happened in (the current or last cycle).
+    pub cycle: u64,
+    /// Monotonic clock (ns).
+    pub time_ns: u64,
+    /// What happened.
+    pub kind: EventKind,
+}
+
+/// The declared type names of a skill's schema, for lists.
+pub fn type_name(schema: &MessageSchema) -> String {
+    schema.type_name.clone()
+}
+
+/// Encodes a request.
+pub fn encode_request(client: &str, request: &Request) -> Result<Vec<u8>, postcard::Error> {
+    postcard::to_allocvec(&RequestEnvelope {
+        version: PROTOCOL_VERSION,
+        client: client.to_string(),
+        request: request.clone(),
+    })
+}
+
+/// Decodes a request, checking the version first.
+pub fn decode_request(bytes: &[u8]) -> Result<RequestEnvelope, ControlError> {
+    // The version is the envelope's first field: read it alone so that a client of another
+    // version gets a version error rather than a decoding error.
+    let (version, _): (u16, _) =
+        postcard::take_from_bytes(bytes).map_err(|e| ControlError::Malformed(e.to_string()))?;
+    if version != PROTOCOL_VERSION {
+        return Err(ControlError::Version {
+            client: version,
+            manager: PROTOCOL_VERSION,
+        });
+    }
+    postcard::from_bytes(bytes).map_err(|e| ControlError::Malformed(e.to_string()))
+}
+
+/// Encodes a response.
+pub fn encode_response(response: &Response) -> Vec<u8> {
+    // Encoding into a Vec of plain data cannot fail; fall back to an error reply anyway.
+    postcard::to_allocvec(response).unwrap_or_else(|e| {
+        postcard::to_allocvec(&Response::Err(ControlError::Refused(format!(
+            "encoding reply: {e}"
+        ))))
+        .unwrap_or_default()
+    })
+}
+
+/// Decodes a response.
+pub fn decode_response(bytes: &[u8]) -> Result<Response, postcard::Error> {
+    postcard::from_bytes(bytes)
+}
+
+/// Encodes an event.
+pub fn encode_event(event: &Event) -> Result<Vec<u8>, postcard::Error> {
+    postcard::to_allocvec(event)
+}
+
+/// Decodes an event.
+pub fn decode_event(bytes: &[u8]) -> Result<Event, postcard::Error> {
+    postcard::from_bytes(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn requests_round_trip_and_versions_are_checked() {
+        let r = Request::SetParam {
+            skill: "scale".into(),
+            param: "gain".into(),
+            value: ParamArg::Text("3".into()),
+        };
+        let b = encode_request("12-1", &r).unwrap();
+        assert_eq!(decode_request(&b).unwrap().request, r);
+        let mut other = b.clone();
+        other[0] = 9; // a varint 9: another protocol version
+        assert!(matches!(
+            decode_request(&other),
+            Err(ControlError::Version { client: 9, .. })
+        ));
+        assert!(matches!(
+            decode_request(&b[..3]),
+            Err(ControlError::Malformed(_))
+        ));
+        assert!(matches!(
+            decode_request(&[]),
+            Err(ControlError::Malformed(_))
+        ));
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic_the_decoder() {
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        for len in 0..2000usize {
+            let bytes: Vec<u8> = (0..len % 64)
+                .map(|_| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    x as u8
+                })
+                .collect();
+            let mut versioned = vec![PROTOCOL_VERSION as u8];
+            versioned.extend_from_slice(&bytes);
+            let _ = decode_request(&bytes);
+            let _ = decode_request(&versioned);
+            let _ = decode_response(&bytes);
+            let _ = decode_event(&bytes);
+        }
+    }
+}

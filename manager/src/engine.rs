@@ -277,6 +277,9 @@ impl Manager {
         self.check_liveness();
         self.board.close();
         let cleaned = self.node.try_cleanup_dead_nodes();
+        // The control thread's node is ours too: close it before looking for others.
+        drop(self.control.take());
+        self.readers.clear();
         let others_alive = self.others_alive();
         let (domain, cycles) = (self.config.domain.clone(), self.cycle);
         drop(self);
@@ -725,6 +728,11 @@ impl Manager {
             }
             self.order.retain(|&s| s != i);
             self.dirty = true;
+            // Stop reading its outputs: the manager must not keep a dead producer's topics
+            // alive. They are read again when a new producer is ready.
+            for p in &e.decl.outputs {
+                self.readers.remove(&p.topic);
+            }
         }
         slot.active.store(0, Ordering::Release);
         slot.pid.store(0, Ordering::Release);

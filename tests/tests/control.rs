@@ -1,0 +1,330 @@
+//! The sequencer's control plane: `skillfab ctl` and the client library against a running
+//! hello network (real processes, real iceoryx2).
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use nix::sys::signal::Signal;
+use skill_sdk::client::{Client, ClientError};
+use skill_sdk::control::{ControlError, EventKind, MonitorMode};
+use skill_sdk::params::ParamValue;
+use skillfab_tests::TestDomain;
+use std::time::Duration;
+
+const HELLO: &str = "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n";
+
+/// Starts the hello network under `skillfab up` and waits until all three skills run.
+fn hello(tag: &str) -> TestDomain {
+    let mut t = TestDomain::new(tag);
+    let launch = t.launch_file(HELLO);
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("the hello network to run", || {
+        ["ticker", "scale", "smooth"]
+            .iter()
+            .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 2))
+    });
+    t
+}
+
+/// Runs `skillfab ctl ARGS`; returns (success, stdout, stderr).
+fn ctl(t: &TestDomain, args: &[&str]) -> (bool, String, String) {
+    let out = t.run("skillfab", &[&["ctl"], args].concat());
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn ok(t: &TestDomain, args: &[&str]) -> String {
+    let (success, out, err) = ctl(t, args);
+    assert!(success, "ctl {args:?} failed: {err}");
+    out
+}
+
+fn json(t: &TestDomain, args: &[&str]) -> serde_json::Value {
+    let out = ok(t, &[&["--json"], args].concat());
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("ctl {args:?}: not JSON ({e}): {out}"))
+}
+
+fn runs_of(stats: &serde_json::Value, name: &str) -> u64 {
+    stats["skills"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["name"] == name)
+        .unwrap()["runs"]
+        .as_u64()
+        .unwrap()
+}
+
+#[test]
+fn ls_set_get_query() {
+    let t = hello("lsset");
+    let ls = ok(&t, &["ls"]);
+    for name in ["ticker", "scale", "smooth"] {
+        assert!(ls.contains(name), "{ls}");
+    }
+    let listed = json(&t, &["ls"]);
+    assert_eq!(listed.as_array().unwrap().len(), 3);
+    let scale = listed
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["name"] == "scale")
+        .unwrap();
+    assert_eq!(scale["params"][0]["name"], "gain");
+    assert_eq!(scale["params"][0]["min"], -1e6);
+    assert_eq!(scale["mode"], "sync");
+
+    ok(&t, &["set", "scale.gain=3"]);
+    assert_eq!(ok(&t, &["get", "scale.gain"]).trim(), "3");
+    // Applied from the next cycle: soon every new sample is 3 × its tick (= its cycle).
+    t.wait_until("scaled = 3 × tick", || {
+        let q = json(&t, &["query", "scale.scaled.value"]);
+        let (v, cycle) = (q["value"].as_f64().unwrap(), q["cycle"].as_f64().unwrap());
+        v == 3.0 * cycle
+    });
+    let whole = json(&t, &["query", "scale.scaled"]);
+    assert!(whole["value"]["value"].is_number(), "{whole}");
+}
+
+#[test]
+fn bad_requests_get_clear_errors_and_nothing_breaks() {
+    let t = hello("badreq");
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["set", "scale.gain=abc"],
+            "parameter 'gain' takes a float, got 'abc'",
+        ),
+        (&["set", "nosuch.gain=1"], "unknown skill 'nosuch'"),
+        (&["set", "scale.nope=1"], "unknown parameter 'nope'"),
+        (&["set", "scale.gain=1e9"], "out of range"),
+        (&["get", "scale"], "expected SKILL.PARAM"),
+        (
+            &["query", "scale.nope"],
+            "skill 'scale' has no output 'nope'",
+        ),
+        (&["query", "scale.scaled.nope"], "has no field 'nope'"),
+        (&["query", "ticker.tick.value[3]"], "not an array"),
+        (
+            &["monitor", "ticker.tick.value >", "--once"],
+            "bad expression",
+        ),
+        (
+            &["monitor", "ticker.tick > 1", "--once"],
+            "more than one number",
+        ),
+        (&["activate", "scale", "ghost"], "unknown skill 'ghost'"),
+        (&["unmonitor", "999"], "unknown monitor 999"),
+        (&["priority", "ghost", "3"], "unknown skill 'ghost'"),
+    ];
+    for (args, expected) in cases {
+        let (success, _, err) = ctl(&t, args);
+        assert!(!success, "ctl {args:?} should fail");
+        assert!(
+            err.contains(expected),
+            "ctl {args:?}: expected '{expected}' in: {err}"
+        );
+        assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    }
+    // All-or-nothing: the failed `activate scale ghost` changed nothing; the fabric runs on.
+    let before = json(&t, &["stats"]);
+    t.wait_until("cycles to go on", || {
+        json(&t, &["stats"])["cycles"].as_u64() > before["cycles"].as_u64()
+    });
+    assert_eq!(ok(&t, &["get", "scale.gain"]).trim(), "2");
+}
+
+#[test]
+fn a_once_monitor_prints_one_event_in_the_cycle_it_became_true() {
+    let t = hello("monitor");
+    // The ticker's value is the cycle number: the condition first holds in cycle 51 (or, if
+    // the network is already past it, in the cycle the monitor was installed in).
+    let out = ok(&t, &["monitor", "ticker.tick.value > 50", "--once"]);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 1, "{out}");
+    let ev: serde_json::Value = serde_json::from_str(lines[0]).unwrap();
+    assert_eq!(ev["event"], "monitor_fired");
+    let value = ev["values"]["ticker.tick.value"].as_u64().unwrap();
+    assert!(value > 50);
+    assert_eq!(
+        ev["cycle"].as_u64().unwrap(),
+        value,
+        "fired in the cycle whose value made it true: {ev}"
+    );
+    // A spent `once` monitor is gone.
+    assert_eq!(json(&t, &["monitors"]), serde_json::json!([]));
+}
+
+#[test]
+fn deactivate_stops_runs_activate_resumes_and_step_counts_exactly() {
+    let t = hello("activation");
+    ok(&t, &["deactivate", "scale"]);
+    let a = json(&t, &["stats"]);
+    t.wait_until("cycles without scale", || {
+        json(&t, &["stats"])["cycles"].as_u64().unwrap() > a["cycles"].as_u64().unwrap() + 20
+    });
+    let b = json(&t, &["stats"]);
+    assert_eq!(
+        runs_of(&a, "scale"),
+        runs_of(&b, "scale"),
+        "an inactive skill does not run"
+    );
+    assert!(runs_of(&b, "ticker") > runs_of(&a, "ticker"));
+    let state = json(&t, &["ls"]);
+    assert!(
+        state
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["name"] == "scale" && s["state"] == "inactive")
+    );
+
+    ok(&t, &["activate", "scale"]);
+    t.wait_until("scale to run again", || {
+        runs_of(&json(&t, &["stats"]), "scale") > runs_of(&b, "scale") + 5
+    });
+
+    ok(&t, &["stop"]);
+    let stopped = json(&t, &["stats"]);
+    assert_eq!(stopped["running"], false);
+    let c0 = stopped["cycles"].as_u64().unwrap();
+    let stepped = json(&t, &["step", "5"]);
+    assert_eq!(stepped["cycle"].as_u64().unwrap(), c0 + 5);
+    let after = json(&t, &["stats"]);
+    assert_eq!(
+        after["cycles"].as_u64().unwrap(),
+        c0 + 5,
+        "exactly 5 cycles"
+    );
+    assert_eq!(after["running"], false);
+    assert_eq!(runs_of(&after, "ticker"), runs_of(&stopped, "ticker") + 5);
+    ok(&t, &["run"]);
+    t.wait_until("cycling again", || {
+        json(&t, &["stats"])["cycles"].as_u64().unwrap() > c0 + 10
+    });
+}
+
+#[test]
+fn the_client_library_sees_events_in_order_with_typed_errors() {
+    let mut t = hello("client");
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+
+    c.set_param_value("scale", "gain", ParamValue::Int(4))
+        .unwrap();
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(4.0)
+    );
+    match c.set_param_value("scale", "gain", ParamValue::Bool(true)) {
+        Err(ClientError::Refused(ControlError::Param { skill, .. })) => assert_eq!(skill, "scale"),
+        other => panic!("expected a parameter error, got {other:?}"),
+    }
+    assert!(matches!(
+        c.query("nobody.x"),
+        Err(ClientError::Refused(ControlError::UnknownSkill(_)))
+    ));
+    c.set_priority("scale", 9).unwrap();
+    let id = c
+        .add_monitor(
+            "scale.scaled.value >= 0 and smooth.smoothed.samples > 0",
+            MonitorMode::Every,
+            2,
+        )
+        .unwrap();
+
+    let mut seen = Vec::new();
+    let mut fired = 0;
+    while fired < 3 {
+        let ev = c
+            .next_event(Duration::from_secs(20))
+            .unwrap()
+            .expect("an event");
+        if let EventKind::MonitorFired { id: m, values, .. } = &ev.kind {
+            assert_eq!(*m, id);
+            assert_eq!(values.len(), 2);
+            fired += 1;
+        }
+        seen.push(ev);
+    }
+    let seqs: Vec<u64> = seen.iter().map(|e| e.seq).collect();
+    assert!(
+        seqs.windows(2).all(|w| w[1] == w[0] + 1),
+        "consecutive: {seqs:?}"
+    );
+    assert!(seen.iter().any(|e| matches!(&e.kind,
+        EventKind::ParamChanged { skill, param, old: ParamValue::Float(o), new: ParamValue::Float(n), by }
+            if skill == "scale" && param == "gain" && *o == 2.0 && *n == 4.0 && by == c.id())));
+    assert!(
+        seen.iter()
+            .any(|e| matches!(&e.kind, EventKind::PriorityChanged { new: 9, .. }))
+    );
+    assert_eq!(c.lost_events(), 0);
+    c.remove_monitor(id).unwrap();
+
+    // A skill killed: the stream says so.
+    let board = t.board();
+    let pid = skillfab_tests::registered(&board, "smooth")
+        .unwrap()
+        .decl
+        .pid;
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
+    let mut died = false;
+    for _ in 0..100 {
+        match c.next_event(Duration::from_secs(20)).unwrap() {
+            Some(ev) if matches!(&ev.kind, EventKind::SkillDied { skill, .. } if skill == "smooth") =>
+            {
+                died = true;
+                break;
+            }
+            Some(_) => {}
+            None => break,
+        }
+    }
+    assert!(died, "no skill_died event");
+    // `skillfab up` restarts it (on-failure): a registration that says so.
+    let mut back = false;
+    for _ in 0..100 {
+        match c.next_event(Duration::from_secs(20)).unwrap() {
+            Some(ev) if matches!(&ev.kind, EventKind::SkillRegistered { skill, restarted: true, .. } if skill == "smooth") =>
+            {
+                back = true;
+                break;
+            }
+            Some(_) => {}
+            None => break,
+        }
+    }
+    assert!(back, "no restart registration");
+    drop(t.board());
+    let _ = &mut t;
+}
+
+#[test]
+fn monitors_go_away_with_their_client() {
+    let mut t = hello("owner");
+    let m = t.spawn("skillfab", &["ctl", "monitor", "ticker.tick.value < 0"]);
+    t.wait_until("the monitor to be installed", || {
+        json(&t, &["monitors"])
+            .as_array()
+            .is_some_and(|a| a.len() == 1)
+    });
+    t.signal(m, Signal::SIGKILL);
+    t.wait_exit(m);
+    t.wait_until("the monitor to be removed", || {
+        json(&t, &["monitors"])
+            .as_array()
+            .is_some_and(|a| a.is_empty())
+    });
+}
+
+#[test]
+fn ctl_without_a_manager_says_so() {
+    let t = TestDomain::new("nomanager");
+    let (success, _, err) = ctl(&t, &["ls"]);
+    assert!(!success);
+    assert!(err.contains("no manager is running in domain"), "{err}");
+}

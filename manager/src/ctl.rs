@@ -143,6 +143,7 @@ pub fn event_json(e: &Event) -> Json {
             client,
             expr,
             values,
+            stamp_ns,
         } => {
             let vals: serde_json::Map<String, Json> = values
                 .iter()
@@ -150,7 +151,7 @@ pub fn event_json(e: &Event) -> Json {
                 .collect();
             (
                 "monitor_fired",
-                json!({"monitor": id, "client": client, "expr": expr, "values": vals}),
+                json!({"monitor": id, "client": client, "expr": expr, "values": vals, "stamp_ns": stamp_ns}),
             )
         }
         EventKind::SkillRegistered {

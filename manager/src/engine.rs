@@ -36,6 +36,8 @@ use std::time::{Duration, Instant};
 
 /// How often the manager checks that registered processes are alive.
 pub const LIVENESS_TICK: Duration = Duration::from_millis(50);
+/// How often the manager removes what dead processes of the domain left behind.
+const NODE_SWEEP: Duration = Duration::from_secs(1);
 /// Shortest cycle period in free-running mode while no skill is expected (avoids a busy loop).
 const IDLE_FREE_RUN: Duration = Duration::from_millis(1);
 
@@ -157,6 +159,7 @@ pub struct Manager {
     pub(crate) stats: CycleStats,
     pub(crate) deaths: u64,
     last_liveness: Instant,
+    last_node_sweep: Instant,
     /// Events to publish at the end of this loop iteration.
     pub(crate) outbox: Vec<EventKind>,
     /// Installed monitors.
@@ -205,6 +208,7 @@ impl Manager {
             stats: CycleStats::default(),
             deaths: 0,
             last_liveness: now,
+            last_node_sweep: now,
         })
     }
 
@@ -577,11 +581,18 @@ impl Manager {
         };
         for m in &mut self.monitors {
             if let Some(values) = m.step(&read) {
+                let stamp_ns = m
+                    .paths
+                    .iter()
+                    .filter_map(|p| readers.get(&p.topic)?.latest().map(|(_, h)| h.stamp_ns))
+                    .max()
+                    .unwrap_or(0);
                 self.outbox.push(EventKind::MonitorFired {
                     id: m.id,
                     client: m.client.clone(),
                     expr: m.text.clone(),
                     values,
+                    stamp_ns,
                 });
             }
         }
@@ -754,8 +765,10 @@ impl Manager {
                 died = true;
             }
         }
-        if died {
-            // Frees the dead processes' ports so a restarted instance can take their place.
+        // Frees the ports of dead processes (skills, or clients killed with Ctrl-C) so a
+        // restarted instance can take their place and no shared memory is left behind.
+        if died || self.last_node_sweep.elapsed() >= NODE_SWEEP {
+            self.last_node_sweep = Instant::now();
             let _ = self.node.try_cleanup_dead_nodes();
         }
     }

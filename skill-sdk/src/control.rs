@@ -284,6 +284,9 @@ pub enum EventKind {
         expr: String,
         /// Each path it read and its value in that cycle.
         values: Vec<(String, Value)>,
+        /// Monotonic clock (ns) when the newest sample it read was sent: the moment the
+        /// condition became true in a skill's output.
+        stamp_ns: u64,
     },
     /// A skill registered.
     SkillRegistered {
@@ -447,6 +450,23 @@ mod tests {
             decode_request(&[]),
             Err(ControlError::Malformed(_))
         ));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_bytes_decode_or_error_without_panicking(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..256)) {
+            let _ = decode_request(&bytes);
+            let _ = decode_response(&bytes);
+            let _ = decode_event(&bytes);
+        }
+
+        #[test]
+        fn set_param_requests_round_trip(skill in "[a-z]{1,12}", param in "[a-z_]{1,12}", text in ".{0,32}", client in "[0-9]{1,6}-[0-9]{1,3}") {
+            let r = Request::SetParam { skill, param, value: ParamArg::Text(text) };
+            let env = decode_request(&encode_request(&client, &r).unwrap()).unwrap();
+            proptest::prop_assert_eq!(env.request, r);
+            proptest::prop_assert_eq!(env.client, client);
+        }
     }
 
     #[test]

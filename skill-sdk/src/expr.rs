@@ -620,6 +620,27 @@ mod tests {
         assert!(parse(&"(".repeat(100)).is_err());
     }
 
+    proptest::proptest! {
+        #[test]
+        fn any_text_parses_or_errors_without_panicking(s in ".{0,64}") {
+            if let Ok(e) = parse(&s) {
+                let _ = eval(&e, &vals);
+            }
+        }
+
+        #[test]
+        fn comparisons_agree_with_f64(a in -1e6f64..1e6, b in -1e6f64..1e6) {
+            let lookup = |p: &PathRef| match p.text.as_str() {
+                "x.y.a" => Some(vec![a]),
+                "x.y.b" => Some(vec![b]),
+                _ => None,
+            };
+            proptest::prop_assert_eq!(eval(&parse("x.y.a < x.y.b").unwrap(), &lookup), a < b);
+            proptest::prop_assert_eq!(eval(&parse("x.y.a - x.y.b >= 0").unwrap(), &lookup), a - b >= 0.0);
+            proptest::prop_assert_eq!(eval(&parse("not x.y.a == x.y.b").unwrap(), &lookup), a != b);
+        }
+    }
+
     #[test]
     fn arbitrary_bytes_never_panic() {
         // A deterministic sweep of generated inputs: every prefix of a set of tricky strings

@@ -24,7 +24,7 @@ use skill_sdk::domain::Domain;
 use skill_sdk::header::now_ns;
 use skill_sdk::params::{ParamError, ParamValue, check_bounds};
 use skill_sdk::services::RawReader;
-use skill_sdk::value::{self, FieldPath};
+use skill_sdk::value::{self, FieldPath, Value};
 use skill_sdk::{SdkError, expr, names, services};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -462,6 +462,9 @@ impl Manager {
                     let old = e.decl.priority;
                     e.decl.priority = priority;
                     if old != priority {
+                        // Written to the board at the next cycle start: arbitration changes
+                        // from the next cycle.
+                        self.dirty = true;
                         self.outbox.push(EventKind::PriorityChanged {
                             skill,
                             old,
@@ -535,6 +538,22 @@ impl Manager {
                 .collect(),
             deaths: self.deaths,
             events: self.events_published,
+            channels: {
+                let mut v: Vec<(String, String, u64)> = self
+                    .channels
+                    .iter()
+                    .map(|(c, v)| {
+                        let who = match (&v.winner, v.weights.is_empty()) {
+                            (Some(w), _) => w.clone(),
+                            (None, true) => "safe".to_string(),
+                            (None, false) => "blend".to_string(),
+                        };
+                        (c.clone(), who, v.cycle)
+                    })
+                    .collect();
+                v.sort();
+                v
+            },
         }
     }
 
@@ -550,12 +569,10 @@ impl Manager {
             if e.active == active {
                 continue;
             }
+            // Takes effect at the next cycle start (the plan writes it to the board), so a
+            // skill deactivated mid-cycle still finishes the run the cycle counts on.
             e.active = active;
             let skill = e.decl.name.clone();
-            self.board
-                .slot(s)
-                .active
-                .store(u32::from(active), Ordering::Release);
             self.dirty = true;
             tracing::info!(%skill, active, "activation changed");
             self.outbox.push(if active {
@@ -682,8 +699,98 @@ impl Manager {
         Ok(())
     }
 
+    /// `channel.<name>[.command[.field]]`: the channel's last arbitration and command.
+    fn query_channel(&mut self, text: &str, rest: &str) -> Response {
+        let (name, sub) = match rest.split_once('.') {
+            Some((n, s)) => (n, Some(s)),
+            None => (rest, None),
+        };
+        let view = self
+            .channels
+            .get(name)
+            .cloned()
+            .ok_or_else(|| ControlError::BadPath {
+                path: text.into(),
+                reason: format!("no channel '{name}' has been arbitrated (channels: {})", {
+                    let mut c: Vec<&str> = self.channels.keys().map(String::as_str).collect();
+                    c.sort();
+                    c.join(", ")
+                }),
+            })?;
+        let schema = self
+            .order
+            .iter()
+            .filter_map(|&s| self.skills[s].as_ref())
+            .flat_map(|e| e.decl.inputs.iter())
+            .find(|p| {
+                p.channel_name() == Some(name)
+                    && matches!(p.kind, skill_sdk::decl::PortKind::Channel(_))
+            })
+            .map(|p| p.schema.clone())
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        let topic = skill_sdk::names::command_topic(name);
+        if !self.readers.contains_key(&topic) {
+            let r = RawReader::open(&self.node, &topic, &schema)
+                .map_err(|e| ControlError::Refused(e.to_string()))?;
+            self.readers.insert(topic.clone(), r);
+        }
+        let field = match sub {
+            None => "",
+            Some(s) => s
+                .strip_prefix("command")
+                .ok_or_else(|| ControlError::BadPath {
+                    path: text.into(),
+                    reason: "a channel has '.command[.field]' and nothing else".into(),
+                })?,
+        };
+        let f = value::resolve(&schema, field).map_err(|e| ControlError::BadPath {
+            path: text.into(),
+            reason: e.reason,
+        })?;
+        let reader = self
+            .readers
+            .get_mut(&topic)
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        reader
+            .poll()
+            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        let command = reader
+            .latest()
+            .and_then(|(b, h)| Some((f.read(b)?, h.cycle)));
+        if sub.is_some() {
+            let (value, cycle) = command.ok_or_else(|| ControlError::NoValue(text.into()))?;
+            return Ok(Reply::Value { value, cycle });
+        }
+        let value = Value::Struct(vec![
+            ("channel".into(), Value::Text(name.into())),
+            ("device".into(), Value::Text(view.device.clone())),
+            ("policy".into(), Value::Text(view.policy.to_string())),
+            (
+                "winner".into(),
+                view.winner.clone().map_or(Value::Null, Value::Text),
+            ),
+            (
+                "weights".into(),
+                Value::Struct(
+                    view.weights
+                        .iter()
+                        .map(|(n, w)| (n.clone(), Value::Float(*w)))
+                        .collect(),
+                ),
+            ),
+            ("command".into(), command.map_or(Value::Null, |c| c.0)),
+        ]);
+        Ok(Reply::Value {
+            value,
+            cycle: view.cycle,
+        })
+    }
+
     fn query(&mut self, path: &str) -> Response {
         let text = path.trim();
+        if let Some(rest) = text.strip_prefix("channel.") {
+            return self.query_channel(text, rest);
+        }
         let (skill, rest) = text.split_once('.').ok_or_else(|| ControlError::BadPath {
             path: text.into(),
             reason: "expected skill.output[.field][index]".into(),

@@ -189,6 +189,18 @@ pub fn event_json(e: &Event) -> Json {
             ("cycle_overrun", json!({"unfinished": unfinished}))
         }
         EventKind::Cycling { running } => ("cycling", json!({"running": running})),
+        EventKind::ChannelWinner {
+            channel,
+            winner,
+            weights,
+        } => {
+            let w: serde_json::Map<String, Json> =
+                weights.iter().map(|(n, x)| (n.clone(), json!(x))).collect();
+            (
+                "channel_winner",
+                json!({"channel": channel, "winner": winner, "weights": w}),
+            )
+        }
     };
     obj["event"] = json!(name);
     if let (Some(o), Json::Object(f)) = (obj.as_object_mut(), fields) {
@@ -340,6 +352,9 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
                 s.deaths,
                 s.events
             );
+            for (channel, who, cycle) in &s.channels {
+                human.push_str(&format!("\n  channel {channel:<10} {who} (cycle {cycle})"));
+            }
             for (name, runs, skips, fails, us) in &s.skills {
                 human.push_str(&format!("\n  {name:<16} runs {runs:>8} skips {skips:>6} failures {fails:>6} compute {us:.1} µs"));
             }
@@ -352,7 +367,8 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
                 human,
                 json!({"cycles": s.cycles, "running": s.running, "overruns": s.overruns,
                        "latency_us": {"p50": s.latency_us.0, "p99": s.latency_us.1, "max": s.latency_us.2},
-                       "deaths": s.deaths, "events": s.events, "skills": skills}),
+                       "deaths": s.deaths, "events": s.events, "skills": skills,
+                       "channels": s.channels.iter().map(|(c, w, k)| json!({"channel": c, "winner": w, "cycle": k})).collect::<Vec<_>>()}),
             );
         }
         CtlCmd::Run => {

@@ -173,6 +173,18 @@ pub struct Manager {
     control: Option<ControlPlane>,
     /// Events published so far.
     pub(crate) events_published: u64,
+    /// Last arbitration seen per channel.
+    pub(crate) channels: HashMap<String, ChannelView>,
+}
+
+/// The latest arbitration of a channel, as the manager last read it from the board.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ChannelView {
+    pub(crate) device: String,
+    pub(crate) policy: skill_sdk::decl::Policy,
+    pub(crate) cycle: u64,
+    pub(crate) winner: Option<String>,
+    pub(crate) weights: Vec<(String, f64)>,
 }
 
 impl Manager {
@@ -203,6 +215,7 @@ impl Manager {
             seen: HashSet::new(),
             control: Some(control),
             events_published: 0,
+            channels: HashMap::new(),
             started: false,
             created: now,
             stats: CycleStats::default(),
@@ -440,6 +453,35 @@ impl Manager {
                 .fresh_mask
                 .store(mask, Ordering::Release);
         }
+        for &s in &self.order {
+            if let Some(e) = &self.skills[s] {
+                let slot = self.board.slot(s);
+                slot.active.store(u32::from(e.active), Ordering::Release);
+                slot.priority.store(e.decl.priority, Ordering::Release);
+            }
+        }
+        for ch in &self.plan.channels {
+            if ch.index < skill_sdk::board::MAX_CHANNELS {
+                self.board.slot(ch.device).channel_proposers[ch.index]
+                    .store(ch.proposers, Ordering::Release);
+            }
+            // Read the commands from now on (queries find the latest one).
+            let topic = names::command_topic(&ch.channel);
+            let schema = self.skills[ch.device]
+                .as_ref()
+                .and_then(|e| e.decl.inputs.get(ch.index))
+                .map(|p| p.schema.clone());
+            if let Some(schema) = schema
+                && !self.readers.contains_key(&topic)
+            {
+                match RawReader::open(&self.node, &topic, &schema) {
+                    Ok(r) => {
+                        self.readers.insert(topic, r);
+                    }
+                    Err(e) => tracing::warn!(%topic, error = %e, "cannot read commands"),
+                }
+            }
+        }
         self.dirty = false;
     }
 
@@ -519,6 +561,21 @@ impl Manager {
             }
             run.cancelled[s] = true;
             n += 1;
+            self.board
+                .slot(s)
+                .cancelled_cycle
+                .store(run.k, Ordering::Release);
+            // A device waiting for this skill's proposal must look again.
+            for ch in self
+                .plan
+                .channels
+                .iter()
+                .filter(|c| c.proposers & (1 << s) != 0)
+            {
+                if let Some(e) = &self.skills[ch.device] {
+                    let _ = e.trigger.notify();
+                }
+            }
             if let Some(per_output) = self.plan.consumers.get(&s) {
                 todo.extend(per_output.iter().flatten());
             }
@@ -544,9 +601,74 @@ impl Manager {
         };
         self.stats.record(latency, overrun);
         self.cycle = run.k;
+        if !self.plan.channels.is_empty() {
+            self.read_channels(run.k);
+        }
         if !self.monitors.is_empty() {
             self.evaluate_monitors();
         }
+    }
+
+    /// Reads each channel's arbitration of cycle `k` from the board; a new winner is an event.
+    fn read_channels(&mut self, k: u64) {
+        let name_of = |s: usize| self.skills.get(s)?.as_ref().map(|e| e.decl.name.clone());
+        let mut changes = Vec::new();
+        for ch in &self.plan.channels {
+            if ch.index >= skill_sdk::board::MAX_CHANNELS {
+                continue;
+            }
+            let slot = self.board.slot(ch.device);
+            if slot.channel_cycle[ch.index].load(Ordering::Acquire) != k {
+                continue;
+            }
+            let winner = slot.channel_winner[ch.index].load(Ordering::Acquire);
+            let mask = slot.channel_mask[ch.index].load(Ordering::Acquire);
+            let winner = (winner > 0).then(|| name_of(winner as usize - 1)).flatten();
+            let contributors: Vec<usize> =
+                (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0).collect();
+            let weight = |s: usize| -> f64 {
+                if ch.policy == skill_sdk::decl::Policy::Priority {
+                    return 1.0;
+                }
+                let w = |s: usize| {
+                    f64::from(self.board.slot(s).priority.load(Ordering::Acquire).max(0))
+                };
+                let total: f64 = contributors.iter().map(|&c| w(c)).sum();
+                if total > 0.0 {
+                    w(s) / total
+                } else {
+                    1.0 / contributors.len() as f64
+                }
+            };
+            let weights = contributors
+                .iter()
+                .filter_map(|&s| name_of(s).map(|n| (n, weight(s))))
+                .collect();
+            let view = ChannelView {
+                device: name_of(ch.device).unwrap_or_default(),
+                policy: ch.policy,
+                cycle: k,
+                winner,
+                weights,
+            };
+            let changed = self.channels.get(&ch.channel).is_none_or(|old| {
+                old.winner != view.winner
+                    || old
+                        .weights
+                        .iter()
+                        .map(|w| &w.0)
+                        .ne(view.weights.iter().map(|w| &w.0))
+            });
+            if changed {
+                changes.push(EventKind::ChannelWinner {
+                    channel: ch.channel.clone(),
+                    winner: view.winner.clone(),
+                    weights: view.weights.clone(),
+                });
+            }
+            self.channels.insert(ch.channel.clone(), view);
+        }
+        self.outbox.extend(changes);
     }
 
     /// Starts or stops cycling.

@@ -2,7 +2,7 @@
 //! each cycle (which sync skills are expected to run, which inputs must be same-cycle, whom
 //! the manager wakes at cycle start). Pure code, no I/O.
 
-use skill_sdk::decl::{Mode, PortDecl, SkillDecl};
+use skill_sdk::decl::{Mode, PortDecl, PortKind, SkillDecl};
 use std::collections::HashMap;
 
 /// Why a registration is refused.
@@ -54,6 +54,18 @@ pub enum WiringError {
         /// Its type.
         other_ty: String,
     },
+    /// A second device for a channel.
+    #[error(
+        "channel '{channel}' is already served by device '{device}'; '{skill}' cannot serve it too"
+    )]
+    ChannelServed {
+        /// The channel.
+        channel: String,
+        /// The device serving it.
+        device: String,
+        /// The newcomer.
+        skill: String,
+    },
     /// Sync skills would wait on each other in a loop.
     #[error("data-flow loop among sync skills: {path} (make one of them async to break it)")]
     Loop {
@@ -103,6 +115,13 @@ pub fn check_join<'a>(
     for out in &new.outputs {
         for d in existing.clone() {
             if let Some(o) = d.outputs.iter().find(|o| o.topic == out.topic) {
+                // Many skills propose on one channel: fine when they agree on the type.
+                if out.kind == PortKind::Proposal
+                    && o.kind == PortKind::Proposal
+                    && same_type(o, out)
+                {
+                    continue;
+                }
                 return Err(Box::new(if same_type(o, out) {
                     WiringError::TwoProducers {
                         topic: out.topic.clone(),
@@ -124,6 +143,17 @@ pub fn check_join<'a>(
     }
     for inp in &new.inputs {
         for d in existing.clone() {
+            if matches!(inp.kind, PortKind::Channel(_))
+                && d.inputs
+                    .iter()
+                    .any(|i| matches!(i.kind, PortKind::Channel(_)) && i.topic == inp.topic)
+            {
+                return Err(Box::new(WiringError::ChannelServed {
+                    channel: inp.channel_name().unwrap_or(&inp.port).to_string(),
+                    device: d.name.clone(),
+                    skill: new.name.clone(),
+                }));
+            }
             if let Some(o) = d
                 .outputs
                 .iter()
@@ -154,7 +184,12 @@ fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
         .iter()
         .enumerate()
         .filter(|(_, d)| d.mode == Mode::Sync)
-        .flat_map(|(i, d)| d.outputs.iter().map(move |o| (o.topic.as_str(), i)))
+        .flat_map(|(i, d)| {
+            d.outputs
+                .iter()
+                .filter(|o| is_data(o))
+                .map(move |o| (o.topic.as_str(), i))
+        })
         .collect();
     // 0 = unvisited, 1 = on the stack, 2 = done
     let mut mark = vec![0u8; skills.len()];
@@ -168,7 +203,7 @@ fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
     ) -> Option<String> {
         mark[i] = 1;
         stack.push(i);
-        for inp in &skills[i].inputs {
+        for inp in skills[i].inputs.iter().filter(|p| is_data(p)) {
             let Some(&p) = producer.get(inp.topic.as_str()) else {
                 continue;
             };
@@ -228,6 +263,8 @@ pub struct Plan {
     /// For each expected slot and each of its outputs, the expected slots that consume it
     /// as a same-cycle input (to cancel them when the output is not produced).
     pub consumers: HashMap<usize, Vec<Vec<usize>>>,
+    /// Actuator channels and their proposers.
+    pub channels: Vec<ChannelPlan>,
 }
 
 /// Plans a cycle: a sync skill is expected when it is active and every input has an active
@@ -236,7 +273,13 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
     let producer: HashMap<&str, usize> = nodes
         .iter()
         .enumerate()
-        .flat_map(|(i, n)| n.decl.outputs.iter().map(move |o| (o.topic.as_str(), i)))
+        .flat_map(|(i, n)| {
+            n.decl
+                .outputs
+                .iter()
+                .filter(|o| is_data(o))
+                .map(move |o| (o.topic.as_str(), i))
+        })
         .collect();
     // None = not decided, Some(b) = decided; `visiting` guards loops (refused at
     // registration, but never trust that here).
@@ -259,7 +302,7 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
         let n = &nodes[i];
         let mut ok = n.active && n.decl.mode == Mode::Sync;
         if ok {
-            for inp in &n.decl.inputs {
+            for inp in n.decl.inputs.iter().filter(|p| is_data(p)) {
                 let fine = producer.get(inp.topic.as_str()).is_some_and(|&p| {
                     nodes[p].active
                         && (nodes[p].decl.mode == Mode::Async
@@ -281,7 +324,7 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
     let mut plan = Plan::default();
     for (i, n) in nodes.iter().enumerate() {
         let mut mask = 0u64;
-        for (bit, inp) in n.decl.inputs.iter().enumerate() {
+        for (bit, inp) in n.decl.inputs.iter().enumerate().filter(|(_, p)| is_data(p)) {
             if let Some(&p) = producer.get(inp.topic.as_str())
                 && nodes[p].decl.mode == Mode::Sync
             {
@@ -315,8 +358,57 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
         } else if n.active && n.decl.mode == Mode::Async && n.decl.inputs.is_empty() {
             plan.sources.push(n.slot);
         }
+        // A device: for each channel it serves, every registered skill that proposes on it.
+        for (c, ch) in n
+            .decl
+            .inputs
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| matches!(p.kind, PortKind::Channel(_)))
+        {
+            let mask = nodes
+                .iter()
+                .filter(|p| {
+                    p.decl
+                        .outputs
+                        .iter()
+                        .any(|o| o.kind == PortKind::Proposal && o.topic == ch.topic)
+                })
+                .fold(0u64, |m, p| m | (1 << p.slot));
+            plan.channels.push(ChannelPlan {
+                device: n.slot,
+                index: c,
+                channel: ch.channel_name().unwrap_or(&ch.port).to_string(),
+                policy: match ch.kind {
+                    PortKind::Channel(p) => p,
+                    _ => skill_sdk::decl::Policy::Priority,
+                },
+                proposers: mask,
+            });
+        }
     }
     plan
+}
+
+/// A channel served by a device, and who proposes on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelPlan {
+    /// The device's slot.
+    pub device: usize,
+    /// The channel's index among the device's inputs.
+    pub index: usize,
+    /// Channel name.
+    pub channel: String,
+    /// Arbitration policy.
+    pub policy: skill_sdk::decl::Policy,
+    /// Slots that propose on it.
+    pub proposers: u64,
+}
+
+/// Plain data ports take part in readiness; proposals and channels do not (a device samples
+/// at cycle start and takes the cycle's commands at its end, so they close no loop).
+fn is_data(p: &PortDecl) -> bool {
+    p.kind == PortKind::Data
 }
 
 #[cfg(test)]

@@ -17,7 +17,7 @@ use nix::sys::stat::Mode as FileMode;
 use std::cell::UnsafeCell;
 use std::num::NonZeroUsize;
 use std::ptr::NonNull;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU32, AtomicU64, Ordering};
 
 /// Most skill instances in one domain.
 pub const MAX_SLOTS: usize = 64;
@@ -25,9 +25,11 @@ pub const MAX_SLOTS: usize = 64;
 pub const DECL_BYTES: usize = 16 * 1024;
 /// Room for the manager's answer text.
 pub const MSG_BYTES: usize = 1024;
+/// Most actuator channels one device serves.
+pub const MAX_CHANNELS: usize = 4;
 /// Room for a skill's encoded parameter values.
 pub const PARAM_BYTES: usize = 4096;
-const MAGIC: u64 = 0x5346_424f_4152_4401; // "SFBOARD" + layout version 1
+const MAGIC: u64 = 0x5346_424f_4152_4402; // "SFBOARD" + layout version 2
 
 /// Life of a slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,6 +145,19 @@ pub struct Slot {
     pub last_start_ns: AtomicU64,
     /// Monotonic clock (ns) when the last run finished and its outputs were sent.
     pub last_end_ns: AtomicU64,
+    /// Arbitration priority (written by the manager at cycle start).
+    pub priority: AtomicI32,
+    /// The cycle in which the manager found this skill unable to run (an upstream run
+    /// failed): a device waiting for its proposal stops waiting.
+    pub cancelled_cycle: AtomicU64,
+    /// For a device: per channel, the slots that propose on it (written by the manager).
+    pub channel_proposers: [AtomicU64; MAX_CHANNELS],
+    /// For a device: per channel, the cycle of the last arbitration.
+    pub channel_cycle: [AtomicU64; MAX_CHANNELS],
+    /// For a device: per channel, the winner's slot + 1 (0: nobody proposed, safe command).
+    pub channel_winner: [AtomicU32; MAX_CHANNELS],
+    /// For a device: per channel, the slots whose proposals made the command.
+    pub channel_mask: [AtomicU64; MAX_CHANNELS],
     /// Parameter snapshot generation (a seqlock: odd while the manager writes).
     pub param_gen: AtomicU64,
     param_len: AtomicU32,
@@ -451,10 +466,17 @@ impl Slot {
             &self.fresh_mask,
             &self.expected_cycle,
             &self.param_gen,
+            &self.cancelled_cycle,
         ] {
             a.store(0, Ordering::Relaxed);
         }
         self.status.store(RunStatus::None as u32, Ordering::Relaxed);
+        for c in 0..MAX_CHANNELS {
+            self.channel_proposers[c].store(0, Ordering::Relaxed);
+            self.channel_cycle[c].store(0, Ordering::Relaxed);
+            self.channel_winner[c].store(0, Ordering::Relaxed);
+            self.channel_mask[c].store(0, Ordering::Relaxed);
+        }
     }
 }
 

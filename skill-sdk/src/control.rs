@@ -176,6 +176,8 @@ pub struct Stats {
     pub deaths: u64,
     /// Events published so far.
     pub events: u64,
+    /// Per actuator channel: (channel, winner or `blend`/`safe`, cycle of the last command).
+    pub channels: Vec<(String, String, u64)>,
 }
 
 /// What the manager answers.
@@ -347,6 +349,15 @@ pub enum EventKind {
     CycleOverrun {
         /// Expected runs that had not finished.
         unfinished: u32,
+    },
+    /// The command of an actuator channel now comes from another skill (or blend).
+    ChannelWinner {
+        /// Channel.
+        channel: String,
+        /// The winning skill (priority policy); `None`: blend, or nobody proposed (safe command).
+        winner: Option<String>,
+        /// Contributors and their weights.
+        weights: Vec<(String, f64)>,
     },
     /// The manager started or stopped cycling.
     Cycling {

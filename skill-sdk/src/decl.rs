@@ -24,15 +24,48 @@ impl fmt::Display for Mode {
     }
 }
 
+/// How an actuator channel turns the proposals of a cycle into one command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Policy {
+    /// The highest-priority proposal wins; equal priorities: the skill name that sorts first.
+    Priority,
+    /// Priority-weighted average of the proposals (messages whose fields are all floats).
+    Blend,
+}
+
+impl fmt::Display for Policy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Policy::Priority => "priority",
+            Policy::Blend => "blend",
+        })
+    }
+}
+
+/// What a port is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PortKind {
+    /// Plain data: one producer per topic.
+    Data,
+    /// A proposal on an actuator channel (an output; many skills may propose on a channel).
+    Proposal,
+    /// An actuator channel a device serves (an input: the arbitrated command of each cycle).
+    Channel(Policy),
+}
+
 /// One input or output port.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PortDecl {
     /// The port's name in the skill's code (the struct field).
     pub port: String,
-    /// The topic it is wired to: the port name unless remapped (`--remap port=topic`).
+    /// The topic it is wired to: the port name unless remapped (`--remap port=topic`); for
+    /// proposals and channels `channel/<channel name>`.
     pub topic: String,
     /// Layout and type name of the message.
     pub schema: MessageSchema,
+    /// Data, proposal or channel.
+    pub kind: PortKind,
 }
 
 impl PortDecl {
@@ -42,6 +75,25 @@ impl PortDecl {
             port: port.to_string(),
             topic: port.to_string(),
             schema: T::schema(),
+            kind: PortKind::Data,
+        }
+    }
+
+    /// A proposal or channel port of type `T` on channel `port`.
+    pub fn channel<T: crate::Message>(port: &str, kind: PortKind) -> PortDecl {
+        PortDecl {
+            port: port.to_string(),
+            topic: crate::names::channel_topic(port),
+            schema: T::schema(),
+            kind,
+        }
+    }
+
+    /// The channel name of a proposal or channel port.
+    pub fn channel_name(&self) -> Option<&str> {
+        match self.kind {
+            PortKind::Data => None,
+            _ => self.topic.strip_prefix("channel/"),
         }
     }
 }

@@ -68,6 +68,7 @@ impl InputSource for Scripted<'_> {
             InputMeta {
                 cycle: *c,
                 age: self.cycle.saturating_sub(*c),
+                source: None,
             },
         ))
     }
@@ -86,13 +87,11 @@ impl<S: Skill> Harness<S> {
             .into_iter()
             .map(|p| p.port)
             .collect();
-        let output_names: Vec<String> = <S::Outputs<'static> as OutputSet<'static>>::ports()
-            .into_iter()
-            .map(|p| p.port)
-            .collect();
+        let output_ports = <S::Outputs<'static> as OutputSet<'static>>::ports();
+        let output_names: Vec<String> = output_ports.iter().map(|p| p.port.clone()).collect();
         let maker = PortMaker {
             node: None,
-            topics: output_names.clone(),
+            ports: output_ports,
         };
         // Memory cells cannot fail to build.
         let outputs = <S::Outputs<'static> as OutputSet<'static>>::make(&maker).unwrap_or_default();

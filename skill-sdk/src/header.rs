@@ -12,6 +12,10 @@ pub struct SampleHeader {
     pub cycle: u64,
     /// Monotonic clock (ns, `CLOCK_MONOTONIC`) when it was sent.
     pub stamp_ns: u64,
+    /// The producer's slot on the cycle board (tells proposers on a channel apart).
+    pub slot: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
 }
 
 /// `CLOCK_MONOTONIC` in nanoseconds: comparable between processes on one host.

@@ -35,10 +35,12 @@
 
 extern crate self as skill_sdk;
 
+pub mod actuation;
 pub mod board;
 pub mod client;
 pub mod control;
 pub mod decl;
+pub mod device;
 pub mod domain;
 pub mod expr;
 pub mod harness;
@@ -53,7 +55,7 @@ pub mod services;
 pub mod skill;
 pub mod value;
 
-pub use runtime::main;
+pub use runtime::{device_main, main};
 
 /// A fixed-size `#[repr(C)]` message type. Derive it with `#[derive(Message)]`.
 pub trait Message:
@@ -142,6 +144,20 @@ pub enum SdkError {
     /// Encoding or decoding a declaration failed.
     #[error("declaration encoding: {0}")]
     Encoding(#[from] postcard::Error),
+    /// `--policy C=blend` on a channel whose command type has non-float fields.
+    #[error("channel '{channel}' cannot blend: {type_name} has fields that are not floats")]
+    NotBlendable {
+        /// Channel.
+        channel: String,
+        /// Its command type.
+        type_name: String,
+    },
+    /// `--policy` with an unknown policy.
+    #[error("unknown policy '{policy}': use priority or blend")]
+    BadPolicy {
+        /// As given.
+        policy: String,
+    },
     /// A runtime port was asked for without a node.
     #[error("internal: port requested without a node or topic")]
     NoNode,
@@ -150,9 +166,11 @@ pub enum SdkError {
 /// What skill code imports.
 pub mod prelude {
     pub use crate::Message;
+    pub use crate::actuation::{Actuation, Command};
     pub use crate::decl::Mode;
+    pub use crate::device::Device;
     pub use crate::params::{NoParams, Params};
-    pub use crate::ports::{Input, Output};
+    pub use crate::ports::{Input, Output, Proposal};
     pub use crate::skill::{Ctx, Skill, SkillError, SkillResult};
     pub use skill_sdk_macros::{Inputs, Message, Outputs, Params};
 }

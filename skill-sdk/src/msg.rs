@@ -54,3 +54,21 @@ pub struct Blob64K {
     /// The bytes.
     pub data: [u8; 65536],
 }
+
+/// A synchro-drive command: the `drive` actuator channel.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Drive")]
+#[repr(C)]
+pub struct Drive {
+    /// Translate velocity (m/s, forward positive).
+    pub translate: f64,
+    /// Rotate velocity (rad/s, counter-clockwise positive).
+    pub rotate: f64,
+}
+
+impl crate::actuation::Actuation for Drive {
+    /// Stop.
+    fn safe() -> Self {
+        Drive::default()
+    }
+}

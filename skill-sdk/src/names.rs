@@ -11,6 +11,17 @@ pub fn topic(topic: &str) -> String {
     format!("skillfab/topic/{topic}")
 }
 
+/// Topic on which skills propose commands for actuator channel `channel` (many publishers;
+/// the sample header names the proposer's slot).
+pub fn channel_topic(channel: &str) -> String {
+    format!("channel/{channel}")
+}
+
+/// Topic on which the device publishes the arbitrated command of each cycle.
+pub fn command_topic(channel: &str) -> String {
+    format!("channel/{channel}/command")
+}
+
 /// Event service through which the manager wakes skill `name` (cycle start for skills with no
 /// same-cycle inputs, registration answers, shutdown).
 pub fn skill_trigger(name: &str) -> String {

@@ -6,7 +6,7 @@
 //! when the body returns `Ok`. The same types work over plain memory in the test harness.
 
 use crate::Message;
-use crate::decl::PortDecl;
+use crate::decl::{PortDecl, PortKind};
 use crate::header::SampleHeader;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::ipc;
@@ -21,6 +21,9 @@ pub struct InputMeta {
     pub cycle: u64,
     /// How many cycles old it is now (0 for a same-cycle input).
     pub age: u64,
+    /// Board slot of the producer; for an arbitrated command, of the winning proposer
+    /// (`None`: nobody proposed, this is the safe command).
+    pub source: Option<u32>,
 }
 
 /// Where a body's inputs come from: the runtime's subscribers or the harness's script.
@@ -94,13 +97,16 @@ impl<'a, T: Message> InputField<'a> for Input<'a, T> {
 pub struct PortMaker<'n> {
     /// The process's node; `None` builds in-memory cells (harness).
     pub node: Option<&'n iceoryx2::node::Node<ipc::Service>>,
-    /// Topic of each port, in declaration order (after remapping).
-    pub topics: Vec<String>,
+    /// Each port, in declaration order (after remapping).
+    pub ports: Vec<PortDecl>,
 }
 
 impl PortMaker<'_> {
     fn topic(&self, idx: usize) -> Result<String, crate::SdkError> {
-        self.topics.get(idx).cloned().ok_or(crate::SdkError::NoNode)
+        self.ports
+            .get(idx)
+            .map(|p| p.topic.clone())
+            .ok_or(crate::SdkError::NoNode)
     }
 }
 
@@ -124,6 +130,10 @@ pub trait ErasedInput {
     fn is_fresh(&self) -> bool;
     /// Marks the newest sample as seen.
     fn consume(&mut self);
+    /// The channel view of a channel port.
+    fn as_channel(&mut self) -> Option<&mut dyn ErasedChannel> {
+        None
+    }
 }
 
 impl<T: Message> ErasedInput for InputPort<T> {
@@ -156,6 +166,36 @@ impl<T: Message> ErasedInput for InputPort<T> {
     fn consume(&mut self) {
         self.fresh = false;
     }
+}
+
+/// One candidate proposer of a cycle, as the device's runtime sees it on the board.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate<'a> {
+    /// Board slot.
+    pub slot: u32,
+    /// Current priority.
+    pub priority: i32,
+    /// Instance name (breaks ties: the name that sorts first wins).
+    pub name: &'a str,
+}
+
+/// The outcome of arbitrating one channel in one cycle.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Arbitration {
+    /// The winner's slot (priority policy); `None` under blend or when nobody proposed.
+    pub winner: Option<u32>,
+    /// Slots whose proposals made the command, with their weights (1.0 for a priority win).
+    pub weights: Vec<(u32, f64)>,
+}
+
+/// Type-erased channel port (the device runtime arbitrates through it).
+pub trait ErasedChannel {
+    /// Turns the proposals of `cycle` from `candidates` into the cycle's command.
+    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate<'_>]) -> Arbitration;
+    /// Publishes the cycle's command on the channel's command topic.
+    fn publish(&mut self, header: SampleHeader) -> Result<(), crate::SdkError>;
+    /// Whether the proposer in `slot` has proposed for `cycle`.
+    fn has_proposal(&self, slot: u32, cycle: u64) -> bool;
 }
 
 /// A skill's inputs. Derive it with `#[derive(Inputs)]`; `()` is "no inputs".
@@ -258,6 +298,9 @@ pub trait ErasedOutputCell {
     fn discard(&mut self);
     /// Takes a value written in memory (harness): a `Box<T>`.
     fn take_memory(&mut self) -> Option<Box<dyn Any>>;
+    /// Wakes the topic's listeners without sending (a proposer that did not propose tells
+    /// the device so).
+    fn wake(&self);
 }
 
 impl<T: Message> ErasedOutputCell for OutputCell<T> {
@@ -298,6 +341,11 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
     }
     fn discard(&mut self) {
         self.pending = None;
+    }
+    fn wake(&self) {
+        if let Some(n) = &self.notifier {
+            let _ = n.notify();
+        }
     }
     fn take_memory(&mut self) -> Option<Box<dyn Any>> {
         match self.pending.take() {
@@ -389,6 +437,41 @@ impl<'a, T: Message> OutputField<'a> for Output<'a, T> {
                 ))
             }
         })
+    }
+}
+
+/// A proposal on an actuator channel: written like an [`Output`]; the device serving the
+/// channel arbitrates among the cycle's proposals by the proposers' priorities.
+pub struct Proposal<'a, T: Message> {
+    inner: Output<'a, T>,
+}
+
+impl<T: Message> Proposal<'_, T> {
+    /// Proposes this command for the cycle.
+    pub fn set(&mut self, value: T) {
+        self.inner.set(value);
+    }
+    /// The command to fill in place.
+    pub fn get_mut(&mut self) -> &mut T {
+        self.inner.get_mut()
+    }
+    /// Whether the body proposed in this run.
+    pub fn is_written(&self) -> bool {
+        self.inner.is_written()
+    }
+}
+
+impl<'a, T: Message> OutputField<'a> for Proposal<'a, T> {
+    fn decl(port: &str) -> PortDecl {
+        PortDecl::channel::<T>(port, PortKind::Proposal)
+    }
+    fn bind(cell: &'a mut ErasedOutput) -> Self {
+        Proposal {
+            inner: <Output<'a, T> as OutputField<'a>>::bind(cell),
+        }
+    }
+    fn make(maker: &PortMaker<'_>, idx: usize) -> Result<ErasedOutput, crate::SdkError> {
+        <Output<'a, T> as OutputField<'a>>::make(maker, idx)
     }
 }
 

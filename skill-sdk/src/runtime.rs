@@ -13,16 +13,19 @@
 //! 5. on SIGINT/SIGTERM leave the slot cleanly; if the manager goes away, go back to 2.
 
 use crate::SdkError;
-use crate::board::{Board, MAX_SLOTS, RunStatus, SlotState};
-use crate::decl::{Mode, SkillDecl};
+use crate::board::{Board, MAX_CHANNELS, MAX_SLOTS, RunStatus, SlotState};
+use crate::decl::{Mode, Policy, PortDecl, PortKind, SkillDecl};
+use crate::device::Device;
 use crate::domain::{DOMAIN_ENV, Domain};
 use crate::header::{SampleHeader, now_ns};
 use crate::names;
 use crate::params::Params;
+use crate::ports::Candidate;
 use crate::ports::{
     ErasedInput, ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker,
 };
 use crate::services;
+use crate::skill::SkillResult;
 use crate::skill::{Ctx, Skill};
 use clap::Parser;
 use iceoryx2::node::Node;
@@ -31,6 +34,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use std::any::Any;
+use std::collections::HashMap;
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -59,13 +63,25 @@ pub struct SkillArgs {
     /// Register inactive; a sequencer activates it later.
     #[arg(long)]
     pub inactive: bool,
-    /// Wire a port to another topic (repeatable).
+    /// Wire a port to another topic, or a proposal/channel to another channel (repeatable).
     #[arg(long = "remap", value_name = "PORT=TOPIC")]
     pub remaps: Vec<String>,
+    /// A device's arbitration policy for a channel: `priority` or `blend` (repeatable).
+    #[arg(long = "policy", value_name = "CHANNEL=POLICY")]
+    pub policies: Vec<String>,
 }
 
 /// A skill binary's whole `main`: `fn main() -> ExitCode { skill_sdk::main::<MySkill>() }`.
 pub fn main<S: Skill>() -> ExitCode {
+    main_unit::<SkillUnit<S>>()
+}
+
+/// A device binary's whole `main`: `fn main() -> ExitCode { skill_sdk::device_main::<MyDevice>() }`.
+pub fn device_main<D: Device>() -> ExitCode {
+    main_unit::<DeviceUnit<D>>()
+}
+
+fn main_unit<U: Unit>() -> ExitCode {
     let args = SkillArgs::parse();
     init_tracing();
     let kind = std::env::args()
@@ -76,7 +92,7 @@ pub fn main<S: Skill>() -> ExitCode {
                 .map(|f| f.to_string_lossy().into_owned())
         })
         .unwrap_or_else(|| "skill".to_string());
-    match run::<S>(args, &kind) {
+    match run::<U>(args, &kind) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("{kind}: error: {e}");
@@ -99,16 +115,69 @@ pub fn init_tracing() {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
 }
 
-/// Builds the declaration of skill `S` from its arguments.
-pub fn declare<S: Skill>(args: &SkillArgs, kind: &str) -> Result<(SkillDecl, S::Params), SdkError> {
+/// What the runtime drives: a skill or a device. Internal; authors implement [`Skill`] or
+/// [`Device`].
+pub trait Unit: 'static {
+    /// Parameters.
+    type Params: Params;
+    /// Scheduling mode.
+    const MODE: Mode;
+    /// Default priority.
+    const PRIORITY: i32;
+    /// A fresh instance.
+    fn create() -> Self;
+    /// Input ports (for a device: its channels).
+    fn input_ports() -> Vec<PortDecl>;
+    /// Output ports.
+    fn output_ports() -> Vec<PortDecl>;
+    /// Runtime input ports.
+    fn make_inputs(m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError>;
+    /// Runtime output ports.
+    fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError>;
+    /// Runs whatever is due now.
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<Self::Params>);
+}
+
+/// The wrapper that runs a [`Skill`].
+pub struct SkillUnit<S: Skill>(S);
+
+/// The wrapper that runs a [`Device`].
+pub struct DeviceUnit<D: Device> {
+    device: D,
+    /// Last cycle whose sample phase ran.
+    sampled: u64,
+    /// Proposer names by slot, with the slot generation they belong to.
+    names: HashMap<u32, (u32, String)>,
+}
+
+/// Parameters and cycle bookkeeping shared by skills and devices.
+pub struct Common<P> {
+    params: P,
+    /// Generation of the last parameter snapshot applied.
+    param_gen: u64,
+    /// Last cycle this unit finished (ran, skipped or failed) for.
+    last_cycle: u64,
+    name: String,
+}
+
+/// A unit's runtime ports.
+pub struct Io {
+    inputs: Vec<Box<dyn ErasedInput>>,
+    outputs: Vec<ErasedOutput>,
+    /// Indexes of the outputs that are proposals.
+    proposals: Vec<usize>,
+}
+
+/// Builds the declaration of unit `U` from its arguments.
+pub fn declare<U: Unit>(args: &SkillArgs, kind: &str) -> Result<(SkillDecl, U::Params), SdkError> {
     let name = args.name.clone().unwrap_or_else(|| kind.to_string());
     names::check_name("skill", &name, false)?;
-    let mut params = S::Params::default();
+    let mut params = U::Params::default();
     for a in &args.params {
         params.assign(a)?;
     }
-    let mut inputs = <S::Inputs<'static> as InputSet<'static>>::ports();
-    let mut outputs = <S::Outputs<'static> as OutputSet<'static>>::ports();
+    let mut inputs = U::input_ports();
+    let mut outputs = U::output_ports();
     for r in &args.remaps {
         let (port, topic) = r
             .split_once('=')
@@ -120,7 +189,10 @@ pub fn declare<S: Skill>(args: &SkillArgs, kind: &str) -> Result<(SkillDecl, S::
             .chain(outputs.iter_mut())
             .filter(|p| p.port == port)
         {
-            p.topic = topic.to_string();
+            p.topic = match p.kind {
+                PortKind::Data => topic.to_string(),
+                _ => names::channel_topic(topic),
+            };
             found = true;
         }
         if !found {
@@ -129,24 +201,45 @@ pub fn declare<S: Skill>(args: &SkillArgs, kind: &str) -> Result<(SkillDecl, S::
             });
         }
     }
+    for a in &args.policies {
+        let (port, policy) = a
+            .split_once('=')
+            .ok_or_else(|| SdkError::UnknownPort { port: a.clone() })?;
+        let policy = match policy {
+            "priority" => Policy::Priority,
+            "blend" => Policy::Blend,
+            other => {
+                return Err(SdkError::BadPolicy {
+                    policy: other.to_string(),
+                });
+            }
+        };
+        let p = inputs
+            .iter_mut()
+            .find(|p| p.port == port && matches!(p.kind, PortKind::Channel(_)))
+            .ok_or_else(|| SdkError::UnknownPort {
+                port: port.to_string(),
+            })?;
+        p.kind = PortKind::Channel(policy);
+    }
     let decl = SkillDecl {
         name,
         kind: kind.to_string(),
-        mode: S::MODE,
-        priority: args.priority.unwrap_or(S::PRIORITY),
+        mode: U::MODE,
+        priority: args.priority.unwrap_or(U::PRIORITY),
         start_active: !args.inactive,
         pid: std::process::id(),
         inputs,
         outputs,
-        params: S::Params::specs(),
+        params: U::Params::specs(),
         param_values: params.values(),
     };
     Ok((decl, params))
 }
 
-/// Runs skill `S` until SIGINT/SIGTERM.
-pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
-    let (decl, params) = declare::<S>(&args, kind)?;
+/// Runs unit `U` (a [`SkillUnit`] or [`DeviceUnit`]) until SIGINT/SIGTERM.
+pub fn run<U: Unit>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
+    let (decl, params) = declare::<U>(&args, kind)?;
     let domain = Domain::new(&args.domain)?;
     let span = tracing::info_span!("skill", name = %decl.name, domain = %domain);
     let _enter = span.enter();
@@ -154,14 +247,14 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
     let trigger = services::listener(&node, &names::skill_trigger(&decl.name))?;
     let wake = services::notifier(&node, &names::manager_wake())?;
 
-    let mut ports: Option<Ports> = None;
+    let mut io: Option<Io> = None;
     let listeners = decl
         .inputs
         .iter()
         .map(|p| services::listener(&node, &names::topic(&p.topic)))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut state = State::<S> {
-        skill: S::default(),
+    let mut unit = U::create();
+    let mut common = Common {
         params,
         param_gen: 0,
         last_cycle: 0,
@@ -173,7 +266,7 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
             return Ok(());
         };
         // A new manager learns the values the previous one set.
-        decl.param_values = state.params.values();
+        decl.param_values = common.params.values();
         let encoded = postcard::to_allocvec(&decl)?;
         let idx = match register(&node, &board, &decl, &encoded, &trigger, &wake)? {
             Registration::Accepted(idx) => idx,
@@ -181,19 +274,26 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
             Registration::Terminated => return Ok(()),
         };
         tracing::info!(slot = idx, "registered");
-        if ports.is_none() {
-            let topics = |p: &[crate::decl::PortDecl]| p.iter().map(|p| p.topic.clone()).collect();
-            let ins = <S::Inputs<'static> as InputSet<'static>>::make(&PortMaker {
-                node: Some(&node),
-                topics: topics(&decl.inputs),
-            })?;
-            let outs = <S::Outputs<'static> as OutputSet<'static>>::make(&PortMaker {
-                node: Some(&node),
-                topics: topics(&decl.outputs),
-            })?;
-            ports = Some((ins, outs));
+        if io.is_none() {
+            io = Some(Io {
+                inputs: U::make_inputs(&PortMaker {
+                    node: Some(&node),
+                    ports: decl.inputs.clone(),
+                })?,
+                outputs: U::make_outputs(&PortMaker {
+                    node: Some(&node),
+                    ports: decl.outputs.clone(),
+                })?,
+                proposals: decl
+                    .outputs
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.kind == PortKind::Proposal)
+                    .map(|(i, _)| i)
+                    .collect(),
+            });
         }
-        let Some((inputs, outputs)) = ports.as_mut() else {
+        let Some(io) = io.as_mut() else {
             continue;
         };
         if !board
@@ -203,8 +303,8 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
             continue;
         }
         let _ = wake.notify();
-        state.last_cycle = 0;
-        state.param_gen = 0;
+        common.last_cycle = 0;
+        common.param_gen = 0;
         let link = Link {
             board: &board,
             idx,
@@ -212,7 +312,7 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
             listeners: &listeners,
             wake: &wake,
         };
-        match serve(&link, inputs, outputs, &mut state)? {
+        match serve(&link, io, &mut unit, &mut common)? {
             End::Terminated => {
                 let slot = board.slot(idx);
                 if slot.pid.load(Ordering::Acquire) == std::process::id() {
@@ -229,26 +329,13 @@ pub fn run<S: Skill>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
     }
 }
 
-/// A skill's runtime input and output ports, opened once and kept across managers.
-type Ports = (Vec<Box<dyn ErasedInput>>, Vec<ErasedOutput>);
-
-/// What a registered skill uses to talk to its manager.
-struct Link<'a> {
+/// What a registered unit uses to talk to its manager.
+pub struct Link<'a> {
     board: &'a Board,
     idx: usize,
     trigger: &'a Listener<ipc::Service>,
     listeners: &'a [Listener<ipc::Service>],
     wake: &'a Notifier<ipc::Service>,
-}
-
-struct State<S: Skill> {
-    skill: S,
-    params: S::Params,
-    /// Generation of the last parameter snapshot applied.
-    param_gen: u64,
-    /// Last cycle this skill ran (or skipped) for.
-    last_cycle: u64,
-    name: String,
 }
 
 enum Registration {
@@ -345,16 +432,17 @@ impl InputSource for RuntimeInputs<'_> {
             InputMeta {
                 cycle: h.cycle,
                 age: self.cycle.saturating_sub(h.cycle),
+                source: (h.slot != u32::MAX).then_some(h.slot),
             },
         ))
     }
 }
 
-fn serve<S: Skill>(
+fn serve<U: Unit>(
     link: &Link<'_>,
-    inputs: &mut [Box<dyn ErasedInput>],
-    outputs: &mut [ErasedOutput],
-    state: &mut State<S>,
+    io: &mut Io,
+    unit: &mut U,
+    common: &mut Common<U::Params>,
 ) -> Result<End, SdkError> {
     let Link {
         board,
@@ -407,7 +495,7 @@ fn serve<S: Skill>(
         for l in listeners {
             let _ = l.try_wait(|_| {});
         }
-        for i in inputs.iter_mut() {
+        for i in io.inputs.iter_mut() {
             i.poll()?;
         }
         if ticked
@@ -417,7 +505,14 @@ fn serve<S: Skill>(
         {
             return Ok(End::ManagerGone);
         }
-        step(link, inputs, outputs, state);
+        let s = board.slot(idx);
+        if let Some((generation, bytes)) = s.read_params(common.param_gen) {
+            common.param_gen = generation;
+            apply_params(&mut common.params, &bytes);
+        }
+        if s.active.load(Ordering::Acquire) != 0 {
+            unit.step(link, io, common);
+        }
     }
 }
 
@@ -438,74 +533,24 @@ fn apply_params<P: Params>(params: &mut P, bytes: &[u8]) {
     }
 }
 
-/// Runs the skill if it is due; see the module docs for when that is.
-fn step<S: Skill>(
-    link: &Link<'_>,
-    inputs: &mut [Box<dyn ErasedInput>],
-    outputs: &mut [ErasedOutput],
-    state: &mut State<S>,
-) {
-    let (board, wake) = (link.board, link.wake);
-    let slot = board.slot(link.idx);
-    if let Some((generation, bytes)) = slot.read_params(state.param_gen) {
-        state.param_gen = generation;
-        apply_params(&mut state.params, &bytes);
-    }
-    if slot.active.load(Ordering::Acquire) == 0 {
-        return;
-    }
-    let k = board.header().cycle.load(Ordering::Acquire);
-    let due = match S::MODE {
-        Mode::Sync => {
-            let fresh = slot.fresh_mask.load(Ordering::Acquire);
-            k > state.last_cycle
-                && slot.expected_cycle.load(Ordering::Acquire) == k
-                && inputs.iter().enumerate().all(|(i, p)| {
-                    fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
-                })
+/// Outcome of running a body once (error or panic logged).
+fn guarded(cycle: u64, body: impl FnOnce() -> SkillResult) -> RunStatus {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
+        Ok(Ok(())) => RunStatus::Ok,
+        Ok(Err(e)) => {
+            tracing::warn!(cycle, error = %e, "run failed");
+            RunStatus::Failed
         }
-        Mode::Async if inputs.is_empty() => k > state.last_cycle,
-        Mode::Async => inputs.iter().any(|p| p.is_fresh()),
-    };
-    if !due {
-        return;
-    }
-    let start = now_ns();
-    slot.last_start_ns.store(start, Ordering::Relaxed);
-    let status = {
-        let src = RuntimeInputs { inputs, cycle: k };
-        match <S::Inputs<'_> as InputSet<'_>>::fetch(&src) {
-            None => RunStatus::Skipped,
-            Some(input) => {
-                let mut out = <S::Outputs<'_> as OutputSet<'_>>::bind(outputs);
-                let ctx = Ctx {
-                    params: &state.params,
-                    cycle: k,
-                    name: &state.name,
-                };
-                let skill = &mut state.skill;
-                match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    skill.compute(&ctx, input, &mut out)
-                })) {
-                    Ok(Ok(())) => RunStatus::Ok,
-                    Ok(Err(e)) => {
-                        tracing::warn!(cycle = k, error = %e, "run failed");
-                        RunStatus::Failed
-                    }
-                    Err(_) => {
-                        tracing::error!(cycle = k, "run panicked");
-                        RunStatus::Failed
-                    }
-                }
-            }
+        Err(_) => {
+            tracing::error!(cycle, "run panicked");
+            RunStatus::Failed
         }
-    };
-    let end = now_ns();
+    }
+}
+
+/// Sends the written outputs of a successful run (or drops them); returns the sent mask.
+fn commit_outputs(outputs: &mut [ErasedOutput], status: RunStatus, header: SampleHeader) -> u64 {
     let mut mask = 0u64;
-    let header = SampleHeader {
-        cycle: k,
-        stamp_ns: end,
-    };
     for (i, o) in outputs.iter_mut().enumerate() {
         if status != RunStatus::Ok {
             o.discard();
@@ -514,13 +559,39 @@ fn step<S: Skill>(
         match o.commit(header) {
             Ok(true) => mask |= 1 << i,
             Ok(false) => {}
-            Err(e) => tracing::warn!(cycle = k, error = %e, "publish failed"),
+            Err(e) => tracing::warn!(cycle = header.cycle, error = %e, "publish failed"),
         }
     }
-    for i in inputs.iter_mut() {
-        i.consume();
-    }
-    state.last_cycle = k;
+    mask
+}
+
+/// Stamps a finished run on the board and, for a sync unit, takes it off the cycle's counter
+/// (waking the manager if that finished the cycle or the run passed nothing on).
+/// One finished run, as stamped on the board.
+struct RunRecord {
+    k: u64,
+    status: RunStatus,
+    /// Outputs sent.
+    mask: u64,
+    /// Number of outputs.
+    outputs: usize,
+    start: u64,
+    end: u64,
+    /// Whether the cycle waits for this unit.
+    sync: bool,
+}
+
+fn finish_run(link: &Link<'_>, r: RunRecord) {
+    let RunRecord {
+        k,
+        status,
+        mask,
+        outputs,
+        start,
+        end,
+        sync,
+    } = r;
+    let slot = link.board.slot(link.idx);
     let counter = match status {
         RunStatus::Ok => &slot.runs,
         RunStatus::Skipped => &slot.skips,
@@ -534,15 +605,271 @@ fn step<S: Skill>(
     slot.status.store(status as u32, Ordering::Relaxed);
     slot.last_end_ns.store(now_ns(), Ordering::Relaxed);
     slot.done_cycle.store(k, Ordering::Release);
-    if S::MODE == Mode::Sync {
-        let all = if outputs.len() >= 64 {
+    if sync {
+        let all = if outputs >= 64 {
             u64::MAX
         } else {
-            (1u64 << outputs.len()) - 1
+            (1u64 << outputs) - 1
         };
-        let finished = board.complete(k, 1);
+        let finished = link.board.complete(k, 1);
         if finished || status != RunStatus::Ok || mask != all {
-            let _ = wake.notify();
+            let _ = link.wake.notify();
         }
+    }
+}
+
+impl<S: Skill> Unit for SkillUnit<S> {
+    type Params = S::Params;
+    const MODE: Mode = S::MODE;
+    const PRIORITY: i32 = S::PRIORITY;
+    fn create() -> Self {
+        SkillUnit(S::default())
+    }
+    fn input_ports() -> Vec<PortDecl> {
+        <S::Inputs<'static> as InputSet<'static>>::ports()
+    }
+    fn output_ports() -> Vec<PortDecl> {
+        <S::Outputs<'static> as OutputSet<'static>>::ports()
+    }
+    fn make_inputs(m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        <S::Inputs<'static> as InputSet<'static>>::make(m)
+    }
+    fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
+        <S::Outputs<'static> as OutputSet<'static>>::make(m)
+    }
+
+    /// A sync skill runs when the manager expects it in cycle k and every same-cycle input
+    /// carries cycle k; an async one when an input changed (or once per cycle without inputs).
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<S::Params>) {
+        let board = link.board;
+        let slot = board.slot(link.idx);
+        let k = board.header().cycle.load(Ordering::Acquire);
+        let inputs = &mut io.inputs;
+        let due = match S::MODE {
+            Mode::Sync => {
+                let fresh = slot.fresh_mask.load(Ordering::Acquire);
+                k > common.last_cycle
+                    && slot.expected_cycle.load(Ordering::Acquire) == k
+                    && inputs.iter().enumerate().all(|(i, p)| {
+                        fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
+                    })
+            }
+            Mode::Async if inputs.is_empty() => k > common.last_cycle,
+            Mode::Async => inputs.iter().any(|p| p.is_fresh()),
+        };
+        if !due {
+            return;
+        }
+        let start = now_ns();
+        slot.last_start_ns.store(start, Ordering::Relaxed);
+        let status = {
+            let src = RuntimeInputs { inputs, cycle: k };
+            match <S::Inputs<'_> as InputSet<'_>>::fetch(&src) {
+                None => RunStatus::Skipped,
+                Some(input) => {
+                    let mut out = <S::Outputs<'_> as OutputSet<'_>>::bind(&mut io.outputs);
+                    let ctx = Ctx {
+                        params: &common.params,
+                        cycle: k,
+                        name: &common.name,
+                    };
+                    let skill = &mut self.0;
+                    guarded(k, || skill.compute(&ctx, input, &mut out))
+                }
+            }
+        };
+        let end = now_ns();
+        let header = SampleHeader {
+            cycle: k,
+            stamp_ns: end,
+            slot: link.idx as u32,
+            reserved: 0,
+        };
+        let mask = commit_outputs(&mut io.outputs, status, header);
+        for i in io.inputs.iter_mut() {
+            i.consume();
+        }
+        common.last_cycle = k;
+        finish_run(
+            link,
+            RunRecord {
+                k,
+                status,
+                mask,
+                outputs: io.outputs.len(),
+                start,
+                end,
+                sync: S::MODE == Mode::Sync,
+            },
+        );
+        // A proposal not made: the device waiting for it learns from the board, once woken.
+        for &i in &io.proposals {
+            if mask & (1 << i) == 0 {
+                io.outputs[i].wake();
+            }
+        }
+    }
+}
+
+impl<D: Device> Unit for DeviceUnit<D> {
+    type Params = D::Params;
+    const MODE: Mode = Mode::Sync;
+    const PRIORITY: i32 = 0;
+    fn create() -> Self {
+        DeviceUnit {
+            device: D::default(),
+            sampled: 0,
+            names: HashMap::new(),
+        }
+    }
+    fn input_ports() -> Vec<PortDecl> {
+        <D::Commands<'static> as InputSet<'static>>::ports()
+    }
+    fn output_ports() -> Vec<PortDecl> {
+        <D::Outputs<'static> as OutputSet<'static>>::ports()
+    }
+    fn make_inputs(m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        <D::Commands<'static> as InputSet<'static>>::make(m)
+    }
+    fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
+        <D::Outputs<'static> as OutputSet<'static>>::make(m)
+    }
+
+    /// Cycle k: at the start, publish the latest sample at once; then, when every proposer
+    /// the manager expects in k has finished (or was cancelled), arbitrate each channel, hand
+    /// the commands to the body, publish them, and finish the cycle's run.
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<D::Params>) {
+        let board = link.board;
+        let me = board.slot(link.idx);
+        let k = board.header().cycle.load(Ordering::Acquire);
+        if k <= common.last_cycle || me.expected_cycle.load(Ordering::Acquire) != k {
+            return;
+        }
+        let ctx_name = common.name.clone();
+        if self.sampled < k {
+            self.sampled = k;
+            let start = now_ns();
+            me.last_start_ns.store(start, Ordering::Relaxed);
+            let status = {
+                let mut out = <D::Outputs<'_> as OutputSet<'_>>::bind(&mut io.outputs);
+                let ctx = Ctx {
+                    params: &common.params,
+                    cycle: k,
+                    name: &ctx_name,
+                };
+                let device = &mut self.device;
+                guarded(k, || device.sample(&ctx, &mut out))
+            };
+            let header = SampleHeader {
+                cycle: k,
+                stamp_ns: now_ns(),
+                slot: link.idx as u32,
+                reserved: 0,
+            };
+            let mask = commit_outputs(&mut io.outputs, status, header);
+            me.published_mask.store(mask, Ordering::Relaxed);
+        }
+        // Who may still propose in this cycle? A proposer is settled once its proposal for k
+        // is in, or it finished k without proposing (it then wakes us), or it was cancelled.
+        let mut channels: Vec<Vec<(u32, i32, String)>> = Vec::new();
+        for c in 0..io.inputs.len().min(MAX_CHANNELS) {
+            let mask = me.channel_proposers[c].load(Ordering::Acquire);
+            let mut cands = Vec::new();
+            for s in (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0) {
+                let p = board.slot(s);
+                if p.expected_cycle.load(Ordering::Acquire) != k {
+                    continue;
+                }
+                let proposed = io.inputs[c]
+                    .as_channel()
+                    .is_some_and(|ch| ch.has_proposal(s as u32, k));
+                let done = proposed
+                    || p.done_cycle.load(Ordering::Acquire) == k
+                    || p.cancelled_cycle.load(Ordering::Acquire) == k;
+                if !done {
+                    return;
+                }
+                let generation = p.generation.load(Ordering::Acquire);
+                let name = match self.names.get(&(s as u32)) {
+                    Some((g, n)) if *g == generation => n.clone(),
+                    _ => {
+                        let n = postcard::from_bytes::<SkillDecl>(&p.read_decl())
+                            .map(|d| d.name)
+                            .unwrap_or_else(|_| format!("slot{s}"));
+                        self.names.insert(s as u32, (generation, n.clone()));
+                        n
+                    }
+                };
+                cands.push((s as u32, p.priority.load(Ordering::Acquire), name));
+            }
+            channels.push(cands);
+        }
+        let start = now_ns();
+        for (c, cands) in channels.iter().enumerate() {
+            let Some(ch) = io.inputs[c].as_channel() else {
+                continue;
+            };
+            let list: Vec<Candidate<'_>> = cands
+                .iter()
+                .map(|(slot, priority, name)| Candidate {
+                    slot: *slot,
+                    priority: *priority,
+                    name,
+                })
+                .collect();
+            let arb = ch.arbitrate(k, &list);
+            me.channel_winner[c].store(arb.winner.map_or(0, |w| w + 1), Ordering::Relaxed);
+            me.channel_mask[c].store(
+                arb.weights.iter().fold(0u64, |m, (s, _)| m | (1 << s)),
+                Ordering::Relaxed,
+            );
+            me.channel_cycle[c].store(k, Ordering::Release);
+        }
+        let status = {
+            let src = RuntimeInputs {
+                inputs: &io.inputs,
+                cycle: k,
+            };
+            match <D::Commands<'_> as InputSet<'_>>::fetch(&src) {
+                None => RunStatus::Skipped,
+                Some(cmds) => {
+                    let ctx = Ctx {
+                        params: &common.params,
+                        cycle: k,
+                        name: &ctx_name,
+                    };
+                    let device = &mut self.device;
+                    guarded(k, || device.command(&ctx, cmds))
+                }
+            }
+        };
+        let header = SampleHeader {
+            cycle: k,
+            stamp_ns: now_ns(),
+            slot: link.idx as u32,
+            reserved: 0,
+        };
+        for i in io.inputs.iter_mut() {
+            if let Some(ch) = i.as_channel()
+                && let Err(e) = ch.publish(header)
+            {
+                tracing::warn!(cycle = k, error = %e, "command not published");
+            }
+        }
+        let end = now_ns();
+        common.last_cycle = k;
+        let mask = me.published_mask.load(Ordering::Relaxed);
+        finish_run(
+            link,
+            RunRecord {
+                k,
+                status,
+                mask,
+                outputs: io.outputs.len(),
+                start,
+                end,
+                sync: true,
+            },
+        );
     }
 }

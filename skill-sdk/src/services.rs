@@ -37,6 +37,17 @@ fn transport(what: String, e: impl std::fmt::Debug) -> SdkError {
     }
 }
 
+/// (max publishers, max subscriber buffer) of a topic: channel proposal topics have many
+/// publishers and a buffer for one proposal of each per cycle.
+fn topic_sizes(topic: &str) -> (usize, usize) {
+    let is_proposals = topic.starts_with("channel/") && topic.matches('/').count() == 1;
+    if is_proposals {
+        (CHANNEL_MAX_PUBLISHERS, CHANNEL_MAX_PUBLISHERS)
+    } else {
+        (TOPIC_MAX_PUBLISHERS, SUBSCRIBER_BUFFER)
+    }
+}
+
 fn service_name(name: &str) -> Result<ServiceName, SdkError> {
     ServiceName::new(name).map_err(|e| transport(format!("service name '{name}'"), e))
 }
@@ -49,14 +60,15 @@ fn pubsub<T: Message>(
     SdkError,
 > {
     let name = crate::names::topic(topic);
+    let (publishers, buffer) = topic_sizes(topic);
     node.service_builder(&service_name(&name)?)
         .publish_subscribe::<T>()
         .user_header::<SampleHeader>()
-        .max_publishers(TOPIC_MAX_PUBLISHERS)
+        .max_publishers(publishers)
         .max_subscribers(TOPIC_MAX_SUBSCRIBERS)
         .max_nodes(MAX_NODES)
         .history_size(1)
-        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .subscriber_max_buffer_size(buffer)
         .subscriber_max_borrowed_samples(SUBSCRIBER_BORROWED)
         .enable_safe_overflow(true)
         .open_or_create()
@@ -73,6 +85,22 @@ pub fn publisher<T: Message>(
         .max_loaned_samples(2)
         .create()
         .map_err(|e| transport(format!("publisher on '{topic}'"), e))
+}
+
+/// Publishers of a channel's proposal topic: every skill that may propose on it.
+pub const CHANNEL_MAX_PUBLISHERS: usize = 16;
+
+/// The subscriber a device holds on a channel's proposal topic: room for one proposal from
+/// every proposer per cycle.
+pub fn proposal_subscriber<T: Message>(
+    node: &Node<ipc::Service>,
+    topic: &str,
+) -> Result<Subscriber<ipc::Service, T, SampleHeader>, SdkError> {
+    pubsub::<T>(node, topic)?
+        .subscriber_builder()
+        .buffer_size(CHANNEL_MAX_PUBLISHERS)
+        .create()
+        .map_err(|e| transport(format!("proposal subscriber on '{topic}'"), e))
 }
 
 /// A subscriber of `topic` that also receives the last sample sent before it connected.
@@ -173,17 +201,18 @@ impl RawReader {
         .map_err(|e| transport(format!("type name '{}'", schema.type_name), e))?;
         // SAFETY: the details are those of the producer's type (same schema), so the segment
         // holds `size` bytes of that layout per sample; we only ever read them as bytes.
+        let (publishers, buffer) = topic_sizes(topic);
         let factory = unsafe {
             node.service_builder(&service_name(&name)?)
                 .publish_subscribe::<[CustomPayloadMarker]>()
                 .user_header::<SampleHeader>()
                 .__internal_set_payload_type_details(&details)
         }
-        .max_publishers(TOPIC_MAX_PUBLISHERS)
+        .max_publishers(publishers)
         .max_subscribers(TOPIC_MAX_SUBSCRIBERS)
         .max_nodes(MAX_NODES)
         .history_size(1)
-        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .subscriber_max_buffer_size(buffer)
         .subscriber_max_borrowed_samples(SUBSCRIBER_BORROWED)
         .enable_safe_overflow(true)
         .open_or_create()

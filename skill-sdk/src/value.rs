@@ -18,6 +18,8 @@ pub enum Value {
     Float(f64),
     Array(Vec<Value>),
     Struct(Vec<(String, Value)>),
+    Text(String),
+    Null,
 }
 
 impl Value {
@@ -50,7 +52,8 @@ impl fmt::Display for Value {
             Value::Int(i) => write!(f, "{i}"),
             Value::UInt(u) => write!(f, "{u}"),
             Value::Float(x) if x.is_finite() => write!(f, "{x}"),
-            Value::Float(_) => f.write_str("null"),
+            Value::Float(_) | Value::Null => f.write_str("null"),
+            Value::Text(t) => write!(f, "{t:?}"),
             Value::Array(v) => {
                 f.write_str("[")?;
                 for (i, x) in v.iter().enumerate() {

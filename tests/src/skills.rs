@@ -189,3 +189,77 @@ mod tests {
         assert!(h.step().is_err());
     }
 }
+
+/// Parameters of [`Proposer`].
+#[derive(Params, Debug, Clone)]
+pub struct ProposerParams {
+    /// Proposed translate velocity.
+    #[param(default = 0.0)]
+    pub translate: f64,
+    /// Proposed rotate velocity.
+    #[param(default = 0.0)]
+    pub rotate: f64,
+    /// Whether to propose at all.
+    #[param(default = true)]
+    pub propose: bool,
+}
+
+/// Output of [`Proposer`].
+#[derive(Outputs)]
+pub struct ProposerOut<'a> {
+    /// The proposal on the `drive` channel.
+    pub drive: Proposal<'a, skill_sdk::msg::Drive>,
+}
+
+/// Sync, no inputs: proposes a fixed drive command every cycle (unless `propose=false`).
+#[derive(Default)]
+pub struct Proposer;
+
+impl Skill for Proposer {
+    type Params = ProposerParams;
+    type Inputs<'a> = ();
+    type Outputs<'a> = ProposerOut<'a>;
+    fn compute(&mut self, ctx: &Ctx<ProposerParams>, _: (), o: &mut ProposerOut) -> SkillResult {
+        if ctx.params.propose {
+            o.drive.set(skill_sdk::msg::Drive {
+                translate: ctx.params.translate,
+                rotate: ctx.params.rotate,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Channels of [`MockDevice`].
+#[derive(Inputs)]
+pub struct MockCommands<'a> {
+    /// The drive channel.
+    pub drive: Command<'a, skill_sdk::msg::Drive>,
+}
+
+/// A device with one channel, `drive`; fails a cycle if it ever gets a command of another
+/// cycle (so "exactly one command per channel per cycle" shows as runs == cycles, failures == 0).
+#[derive(Default)]
+pub struct MockDevice {
+    last: u64,
+}
+
+impl Device for MockDevice {
+    type Params = NoParams;
+    type Outputs<'a> = ();
+    type Commands<'a> = MockCommands<'a>;
+    fn sample(&mut self, _: &Ctx<NoParams>, _: &mut ()) -> SkillResult {
+        Ok(())
+    }
+    fn command(&mut self, ctx: &Ctx<NoParams>, c: MockCommands) -> SkillResult {
+        if c.drive.cycle() != ctx.cycle || ctx.cycle <= self.last {
+            return Err(SkillError::msg(format!(
+                "command of cycle {} in cycle {}",
+                c.drive.cycle(),
+                ctx.cycle
+            )));
+        }
+        self.last = ctx.cycle;
+        Ok(())
+    }
+}

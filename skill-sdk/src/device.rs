@@ -1,0 +1,29 @@
+//! The device trait: the paper's dskill. A device process hides hardware behind buffers and
+//! never blocks the cycle: at the start of every cycle it publishes its latest buffered sample
+//! at once; once the cycle's proposals are in it receives one arbitrated command per channel.
+
+use crate::params::Params;
+use crate::ports::{InputSet, OutputSet};
+use crate::skill::{Ctx, SkillResult};
+
+/// A device: sensor outputs published at cycle start, actuator channels served at cycle end.
+///
+/// `Commands` is a struct of `Command<'a, T>` fields (derive `Inputs`): the field name is the
+/// channel (`--remap drive=drive2` renames it, `--policy drive=blend` blends it), `T` an
+/// [`Actuation`](crate::actuation::Actuation) whose `safe()` is sent when nobody proposes.
+pub trait Device: Default + 'static {
+    /// Parameters (derive `Params`), or [`crate::params::NoParams`].
+    type Params: Params;
+    /// Sensor outputs (derive `Outputs`), or `()`.
+    type Outputs<'a>: OutputSet<'a>;
+    /// Channels served (derive `Inputs` over `Command<'a, T>` fields), or `()`.
+    type Commands<'a>: InputSet<'a>;
+
+    /// Cycle start: write the latest buffered sample. Must not block on the hardware.
+    fn sample(&mut self, ctx: &Ctx<'_, Self::Params>, out: &mut Self::Outputs<'_>) -> SkillResult;
+
+    /// The cycle's arbitrated commands, one per channel (the safe command when nobody
+    /// proposed). Hand them to the hardware's buffer; must not block.
+    fn command(&mut self, ctx: &Ctx<'_, Self::Params>, commands: Self::Commands<'_>)
+    -> SkillResult;
+}

@@ -1,0 +1,4 @@
+//! Test skill `proposer` (see `skillfab_tests::skills`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skillfab_tests::skills::Proposer>()
+}

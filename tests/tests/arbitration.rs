@@ -1,0 +1,214 @@
+//! Priority-based actuator arbitration across skill processes: a device serving `drive`,
+//! skills proposing on it.
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use skill_sdk::client::Client;
+use skill_sdk::control::EventKind;
+use skill_sdk::value::Value;
+use skillfab_tests::{TestDomain, registered};
+use std::time::Duration;
+
+/// `skillfab up` with a mock device and the given proposer entries.
+fn network(
+    tag: &str,
+    device_args: &str,
+    proposers: &[(&str, i32, f64, f64)],
+) -> (TestDomain, Client) {
+    let mut t = TestDomain::new(tag);
+    let mut launch = format!(
+        "[manager]\nperiod_ms = 5\ndeadline_ms = 2000\n[[process]]\nname = \"dev\"\nbin = \"{{bin:mock-device}}\"\nargs = [{device_args}]\n"
+    );
+    for (name, prio, v, w) in proposers {
+        launch.push_str(&format!(
+            "[[process]]\nname = \"{name}\"\nbin = \"{{bin:proposer}}\"\npriority = {prio}\nparams = {{ translate = {v:?}, rotate = {w:?} }}\n"
+        ));
+    }
+    let path = t.launch_file(&launch);
+    t.spawn("skillfab", &["up", path.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("the network to run", || {
+        registered(&board, "dev").is_some_and(|s| s.runs > 3)
+            && proposers
+                .iter()
+                .all(|(n, ..)| registered(&board, n).is_some_and(|s| s.runs > 3))
+    });
+    let c = Client::connect(&t.domain).unwrap();
+    (t, c)
+}
+
+fn field<'a>(v: &'a Value, name: &str) -> &'a Value {
+    match v {
+        Value::Struct(f) => &f.iter().find(|(n, _)| n == name).unwrap().1,
+        other => panic!("not a struct: {other}"),
+    }
+}
+
+/// The channel's winner and command once the condition holds.
+fn wait_channel(t: &TestDomain, c: &Client, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
+    let mut last = Value::Null;
+    t.wait_until(what, || {
+        last = c
+            .query("channel.drive")
+            .map(|(v, _)| v)
+            .unwrap_or(Value::Null);
+        last != Value::Null && ok(&last)
+    });
+    last
+}
+
+fn winner(v: &Value) -> Option<String> {
+    match field(v, "winner") {
+        Value::Text(s) => Some(s.clone()),
+        _ => None,
+    }
+}
+
+fn translate(v: &Value) -> f64 {
+    field(field(v, "command"), "translate").as_f64().unwrap()
+}
+
+#[test]
+fn the_higher_priority_wins_and_a_runtime_priority_change_flips_it_next_cycle() {
+    let (t, mut c) = network("prio", "", &[("lo", 1, 1.0, 0.0), ("hi", 2, 2.0, 0.0)]);
+    let v = wait_channel(&t, &c, "hi to win", |v| winner(v).as_deref() == Some("hi"));
+    assert_eq!(
+        translate(&v),
+        2.0,
+        "the winner's proposal reaches the device: {v}"
+    );
+    assert_eq!(field(&v, "policy"), &Value::Text("priority".into()));
+
+    c.subscribe().unwrap();
+    c.set_priority("lo", 5).unwrap();
+    let mut changed_at = None;
+    let mut flipped_at = None;
+    while flipped_at.is_none() {
+        let ev = c
+            .next_event(Duration::from_secs(20))
+            .unwrap()
+            .expect("events");
+        match ev.kind {
+            EventKind::PriorityChanged {
+                ref skill, new: 5, ..
+            } if skill == "lo" => changed_at = Some(ev.cycle),
+            EventKind::ChannelWinner {
+                winner: Some(ref w),
+                ..
+            } if w == "lo" => flipped_at = Some(ev.cycle),
+            _ => {}
+        }
+    }
+    let (changed, flipped) = (changed_at.unwrap(), flipped_at.unwrap());
+    // Asked between cycles `changed` and `changed + 1` (which may already be running): the
+    // first cycle that starts afterwards has the new winner.
+    assert!(
+        flipped <= changed + 2,
+        "priority changed after cycle {changed}, winner flipped in {flipped}"
+    );
+    let v = c.query("channel.drive").unwrap().0;
+    assert_eq!(translate(&v), 1.0);
+    let stats = c.stats().unwrap();
+    assert_eq!(stats.channels[0].0, "drive");
+    assert_eq!(stats.channels[0].1, "lo");
+}
+
+#[test]
+fn deactivating_or_killing_the_winner_hands_the_channel_over() {
+    let (t, c) = network("handover", "", &[("lo", 1, 1.0, 0.0), ("hi", 2, 2.0, 0.0)]);
+    wait_channel(&t, &c, "hi to win", |v| winner(v).as_deref() == Some("hi"));
+    c.deactivate(&["hi"]).unwrap();
+    wait_channel(&t, &c, "lo to take over", |v| {
+        winner(v).as_deref() == Some("lo") && translate(v) == 1.0
+    });
+    c.activate(&["hi"]).unwrap();
+    wait_channel(&t, &c, "hi back", |v| winner(v).as_deref() == Some("hi"));
+    let board = t.board();
+    let pid = registered(&board, "hi").unwrap().decl.pid;
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    wait_channel(&t, &c, "lo after hi died", |v| {
+        winner(v).as_deref() == Some("lo")
+    });
+    // The device got exactly one command per cycle throughout.
+    let dev = c
+        .list()
+        .unwrap()
+        .into_iter()
+        .find(|s| s.name == "dev")
+        .unwrap();
+    assert_eq!(dev.failures, 0);
+}
+
+#[test]
+fn blend_is_the_exact_priority_weighted_mean() {
+    let (t, c) = network(
+        "blend",
+        "\"--policy\", \"drive=blend\"",
+        &[("a", 1, 1.0, -1.0), ("b", 3, 5.0, 3.0)],
+    );
+    let v = wait_channel(&t, &c, "a blend of both", |v| match field(v, "weights") {
+        Value::Struct(w) => w.len() == 2,
+        _ => false,
+    });
+    assert_eq!(field(&v, "policy"), &Value::Text("blend".into()));
+    assert_eq!(winner(&v), None);
+    // (1·1 + 3·5) / 4 = 4 and (1·-1 + 3·3) / 4 = 2, exactly.
+    assert_eq!(
+        field(&v, "command").to_string(),
+        r#"{"translate": 4, "rotate": 2}"#
+    );
+    assert_eq!(
+        field(&v, "weights").to_string(),
+        r#"{"a": 0.25, "b": 0.75}"#
+    );
+}
+
+#[test]
+fn nobody_proposing_yields_the_safe_command() {
+    let (t, c) = network("safe", "", &[("quiet", 1, 3.0, 1.0)]);
+    wait_channel(&t, &c, "quiet to win", |v| {
+        winner(v).as_deref() == Some("quiet")
+    });
+    c.set_param("quiet", "propose", "false").unwrap();
+    let v = wait_channel(&t, &c, "the safe command", |v| winner(v).is_none());
+    assert_eq!(
+        field(&v, "command").to_string(),
+        r#"{"translate": 0, "rotate": 0}"#
+    );
+    assert_eq!(c.stats().unwrap().channels[0].1, "safe");
+    // Cycles go on: a proposer that does not propose does not stall the device.
+    let k = c.stats().unwrap().cycles;
+    t.wait_until("cycles without proposals", || {
+        c.stats().unwrap().cycles > k + 20
+    });
+}
+
+#[test]
+fn ties_go_to_the_name_that_sorts_first_in_every_run() {
+    for order in [["beta", "alpha"], ["alpha", "beta"]] {
+        let (t, c) = network(
+            "tie",
+            "",
+            &[(order[0], 4, 1.0, 0.0), (order[1], 4, 2.0, 0.0)],
+        );
+        let v = wait_channel(&t, &c, "a winner", |v| winner(v).is_some());
+        assert_eq!(winner(&v).as_deref(), Some("alpha"), "order {order:?}: {v}");
+    }
+}
+
+#[test]
+fn a_second_device_for_a_channel_is_refused() {
+    let (t, _c) = network("twodev", "", &[]);
+    let out = t.run("mock-device", &["--name", "dev2"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("channel 'drive' is already served by device 'dev'"),
+        "{err}"
+    );
+}

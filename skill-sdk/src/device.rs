@@ -6,6 +6,15 @@ use crate::params::Params;
 use crate::ports::{InputSet, OutputSet};
 use crate::skill::{Ctx, SkillResult};
 
+/// Where a device's hardware is (`--port`, `--baud`).
+#[derive(Debug, Clone, Default)]
+pub struct DeviceOptions {
+    /// Serial port path (a tty, or a simulator's pty link).
+    pub port: Option<String>,
+    /// Baud rate.
+    pub baud: Option<u32>,
+}
+
 /// A device: sensor outputs published at cycle start, actuator channels served at cycle end.
 ///
 /// `Commands` is a struct of `Command<'a, T>` fields (derive `Inputs`): the field name is the
@@ -18,6 +27,11 @@ pub trait Device: Default + 'static {
     type Outputs<'a>: OutputSet<'a>;
     /// Channels served (derive `Inputs` over `Command<'a, T>` fields), or `()`.
     type Commands<'a>: InputSet<'a>;
+
+    /// Called once before registration: open the hardware (start its I/O thread).
+    fn init(&mut self, _options: &DeviceOptions) -> SkillResult {
+        Ok(())
+    }
 
     /// Cycle start: write the latest buffered sample. Must not block on the hardware.
     fn sample(&mut self, ctx: &Ctx<'_, Self::Params>, out: &mut Self::Outputs<'_>) -> SkillResult;

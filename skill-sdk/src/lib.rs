@@ -152,6 +152,12 @@ pub enum SdkError {
         /// Its command type.
         type_name: String,
     },
+    /// A device could not open its hardware.
+    #[error("device start-up failed: {reason}")]
+    DeviceInit {
+        /// Why.
+        reason: String,
+    },
     /// `--policy` with an unknown policy.
     #[error("unknown policy '{policy}': use priority or blend")]
     BadPolicy {
@@ -168,7 +174,7 @@ pub mod prelude {
     pub use crate::Message;
     pub use crate::actuation::{Actuation, Command};
     pub use crate::decl::Mode;
-    pub use crate::device::Device;
+    pub use crate::device::{Device, DeviceOptions};
     pub use crate::params::{NoParams, Params};
     pub use crate::ports::{Input, Output, Proposal};
     pub use crate::skill::{Ctx, Skill, SkillError, SkillResult};

@@ -72,3 +72,90 @@ impl crate::actuation::Actuation for Drive {
         Drive::default()
     }
 }
+
+/// Number of sonars on the Denning ring.
+pub const SONARS: usize = 24;
+
+/// The sonar ring: 24 sonars 15° apart, sonar 0 facing forward, counter-clockwise.
+#[derive(Message, Debug, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Sonar")]
+#[repr(C)]
+pub struct Sonar {
+    /// Latest range of each sonar (m); `f64::INFINITY`: no echo; NaN: never read.
+    pub range: [f64; SONARS],
+    /// Age of each reading (ms).
+    pub age_ms: [f64; SONARS],
+}
+
+/// Dead-reckoned pose and velocities.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Odometry")]
+#[repr(C)]
+pub struct Odometry {
+    /// x (m), from where the device connected.
+    pub x: f64,
+    /// y (m).
+    pub y: f64,
+    /// Heading (rad).
+    pub theta: f64,
+    /// Translate velocity (m/s).
+    pub v: f64,
+    /// Rotate velocity (rad/s).
+    pub w: f64,
+}
+
+/// Contact sensing.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Bumpers")]
+#[repr(C)]
+pub struct Bumpers {
+    /// Bit i: bumper segment i hit (front first, clockwise).
+    pub hit: u32,
+    /// Whether the drive stalls.
+    pub stall: bool,
+}
+
+/// Battery voltage.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Battery")]
+#[repr(C)]
+pub struct Battery {
+    /// Volts.
+    pub volts: f64,
+}
+
+/// Barcode sightings of the latest camera frame.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Barcodes")]
+#[repr(C)]
+pub struct Barcodes {
+    /// Number of valid entries.
+    pub count: u32,
+    /// Barcode ids.
+    pub id: [u32; 8],
+    /// Bearings (rad, counter-clockwise from the front).
+    pub bearing: [f64; 8],
+    /// Ranges (m).
+    pub range: [f64; 8],
+    /// Age of the sightings (ms).
+    pub age_ms: f64,
+}
+
+/// The state of a device's link to its hardware.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Link")]
+#[repr(C)]
+pub struct Link {
+    /// Whether the link is up.
+    pub connected: bool,
+    /// Age of the latest data (ms).
+    pub age_ms: f64,
+    /// Good frames received.
+    pub frames: u64,
+    /// Frames dropped (bad checksum or COUNT).
+    pub bad_frames: u64,
+    /// Bytes skipped as garbage.
+    pub garbage: u64,
+    /// Successful handshakes.
+    pub connects: u64,
+}

@@ -66,6 +66,12 @@ pub struct SkillArgs {
     /// Wire a port to another topic, or a proposal/channel to another channel (repeatable).
     #[arg(long = "remap", value_name = "PORT=TOPIC")]
     pub remaps: Vec<String>,
+    /// A device's serial port (a tty, or a simulator's pty link).
+    #[arg(long)]
+    pub port: Option<String>,
+    /// A device's baud rate.
+    #[arg(long)]
+    pub baud: Option<u32>,
     /// A device's arbitration policy for a channel: `priority` or `blend` (repeatable).
     #[arg(long = "policy", value_name = "CHANNEL=POLICY")]
     pub policies: Vec<String>,
@@ -136,6 +142,10 @@ pub trait Unit: 'static {
     fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError>;
     /// Runs whatever is due now.
     fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<Self::Params>);
+    /// Once, before registration.
+    fn init(&mut self, _args: &SkillArgs) -> Result<(), SdkError> {
+        Ok(())
+    }
 }
 
 /// The wrapper that runs a [`Skill`].
@@ -254,6 +264,7 @@ pub fn run<U: Unit>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
         .map(|p| services::listener(&node, &names::topic(&p.topic)))
         .collect::<Result<Vec<_>, _>>()?;
     let mut unit = U::create();
+    unit.init(&args)?;
     let mut common = Common {
         params,
         param_gen: 0,
@@ -715,6 +726,17 @@ impl<D: Device> Unit for DeviceUnit<D> {
     type Params = D::Params;
     const MODE: Mode = Mode::Sync;
     const PRIORITY: i32 = 0;
+    fn init(&mut self, args: &SkillArgs) -> Result<(), SdkError> {
+        let options = crate::device::DeviceOptions {
+            port: args.port.clone(),
+            baud: args.baud,
+        };
+        self.device
+            .init(&options)
+            .map_err(|e| SdkError::DeviceInit {
+                reason: e.to_string(),
+            })
+    }
     fn create() -> Self {
         DeviceUnit {
             device: D::default(),

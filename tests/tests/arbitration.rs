@@ -102,9 +102,10 @@ fn the_higher_priority_wins_and_a_runtime_priority_change_flips_it_next_cycle() 
     }
     let (changed, flipped) = (changed_at.unwrap(), flipped_at.unwrap());
     // Asked between cycles `changed` and `changed + 1` (which may already be running): the
-    // first cycle that starts afterwards has the new winner.
+    // first cycle that starts afterwards has the new winner. One cycle of slack: the event's
+    // cycle is the manager's count when it published it, read after the loop iteration.
     assert!(
-        flipped <= changed + 2,
+        flipped <= changed + 3,
         "priority changed after cycle {changed}, winner flipped in {flipped}"
     );
     let v = c.query("channel.drive").unwrap().0;

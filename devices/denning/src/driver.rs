@@ -1,0 +1,345 @@
+//! The driver thread: owns the transport, keeps the latest sample, sends the latest command.
+//!
+//! It never blocks the fabric: the device process reads the latest sample and hands over the
+//! latest command through a mutex held for microseconds. The thread does the handshake,
+//! decodes the status stream (resynchronising after garbage), unwraps odometry, re-sends the
+//! drive command every 100 ms (which also feeds the robot's 2 s watchdog), stops the drive on
+//! its own when the fabric's commands stop (500 ms), and reconnects when the link goes quiet
+//! for 1 s or the port vanishes.
+
+use crate::codec::{Command, DecodeStats, Decoder, Packet, Sighting, Status, wrap_delta};
+use crate::transport::Transport;
+use std::io;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Number of sonars.
+pub const SONARS: usize = 24;
+/// A fabric command older than this is replaced by stop.
+pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(500);
+/// A link without a valid packet for this long is reconnected.
+pub const LINK_TIMEOUT: Duration = Duration::from_secs(1);
+/// How often the drive command (and so the keep-alive) is sent.
+pub const RESEND: Duration = Duration::from_millis(100);
+
+/// What the robot reported last.
+#[derive(Debug, Clone, Default)]
+pub struct Sample {
+    /// Whether the handshake is done and packets flow.
+    pub connected: bool,
+    /// When the last valid packet arrived.
+    pub received: Option<Instant>,
+    /// Odometry (m, m, rad), unwrapped, relative to the first packet of this connection.
+    pub pose: (f64, f64, f64),
+    /// Velocities (m/s, rad/s).
+    pub vel: (f64, f64),
+    /// Latest range of each sonar (m; `None`: no echo) and when it was read.
+    pub sonar: [Option<(Option<f64>, Instant)>; SONARS],
+    /// Stall and bumper flags.
+    pub flags: u16,
+    /// Battery (V).
+    pub battery: f64,
+    /// Latest barcode sightings and when.
+    pub barcodes: (Vec<Sighting>, Option<Instant>),
+    /// Decoder counters (this connection and all before).
+    pub stats: DecodeStats,
+    /// Successful handshakes.
+    pub connects: u64,
+}
+
+struct Shared {
+    sample: Sample,
+    command: Option<((f64, f64), Instant)>,
+}
+
+/// The running driver.
+pub struct Driver {
+    shared: Arc<Mutex<Shared>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+fn lock(m: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
+    // A poisoned lock only means the driver thread panicked mid-update: the data is still
+    // the best there is.
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Opens a transport (called again on every reconnect).
+pub type Opener = Box<dyn Fn() -> io::Result<Box<dyn Transport>> + Send>;
+
+impl Driver {
+    /// Starts the driver thread.
+    pub fn start(open: Opener) -> Driver {
+        let shared = Arc::new(Mutex::new(Shared {
+            sample: Sample::default(),
+            command: None,
+        }));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (s, st) = (shared.clone(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name("denning-driver".into())
+            .spawn(move || run(&open, &s, &st))
+            .ok();
+        Driver {
+            shared,
+            stop,
+            thread,
+        }
+    }
+
+    /// The latest sample.
+    pub fn latest(&self) -> Sample {
+        lock(&self.shared).sample.clone()
+    }
+
+    /// Sets the drive command (m/s, rad/s).
+    pub fn command(&self, translate: f64, rotate: f64) {
+        lock(&self.shared).command = Some(((translate, rotate), Instant::now()));
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn run(open: &Opener, shared: &Mutex<Shared>, stop: &AtomicBool) {
+    let mut total = DecodeStats::default();
+    while !stop.load(Ordering::Acquire) {
+        match open() {
+            Ok(mut t) => {
+                match session(t.as_mut(), shared, stop, &mut total) {
+                    Ok(()) => {}
+                    Err(e) => tracing::warn!(error = %e, "robot link lost; reconnecting"),
+                }
+                // Leave the robot stopped if the link is still there.
+                let _ = t.write_all(&Command::Vel(0).encode());
+                let _ = t.write_all(&Command::RVel(0).encode());
+            }
+            Err(e) => tracing::debug!(error = %e, "cannot open the port yet"),
+        }
+        lock(shared).sample.connected = false;
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+fn read_packets(t: &mut dyn Transport, d: &mut Decoder, out: &mut Vec<Packet>) -> io::Result<()> {
+    let mut buf = [0u8; 512];
+    let n = t.read(&mut buf)?;
+    d.push(&buf[..n]);
+    while let Some(f) = d.next_frame() {
+        if let Ok(p) = f.and_then(|p| Packet::decode(&p)) {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+fn handshake(t: &mut dyn Transport, d: &mut Decoder) -> io::Result<bool> {
+    for (cmd, echo) in [
+        (Command::Sync0, 0u8),
+        (Command::Sync1, 1),
+        (Command::Sync2, 2),
+    ] {
+        t.write_all(&cmd.encode())?;
+        let deadline = Instant::now() + Duration::from_millis(300);
+        let mut ok = false;
+        while !ok && Instant::now() < deadline {
+            let mut pk = Vec::new();
+            read_packets(t, d, &mut pk)?;
+            ok = pk.contains(&Packet::Sync(echo));
+        }
+        if !ok {
+            return Ok(false);
+        }
+    }
+    t.write_all(&Command::Sync1.encode())?; // OPEN
+    t.write_all(&Command::Enable(true).encode())?;
+    Ok(true)
+}
+
+fn session(
+    t: &mut dyn Transport,
+    shared: &Mutex<Shared>,
+    stop: &AtomicBool,
+    total: &mut DecodeStats,
+) -> io::Result<()> {
+    let mut d = Decoder::default();
+    if !handshake(t, &mut d)? {
+        return Err(io::Error::new(
+            io::ErrorKind::TimedOut,
+            "no handshake answer",
+        ));
+    }
+    tracing::info!("robot connected");
+    {
+        let mut s = lock(shared);
+        s.sample.connected = true;
+        s.sample.connects += 1;
+        s.sample.received = Some(Instant::now());
+    }
+    let mut origin: Option<(u16, u16)> = None;
+    let mut acc = (0i64, 0i64);
+    let mut last_sent = Instant::now() - RESEND;
+    let mut last_packet = Instant::now();
+    let base = *total;
+    while !stop.load(Ordering::Acquire) {
+        let mut packets = Vec::new();
+        read_packets(t, &mut d, &mut packets)?;
+        let now = Instant::now();
+        if !packets.is_empty() {
+            last_packet = now;
+        }
+        {
+            let mut s = lock(shared);
+            for p in packets {
+                match p {
+                    Packet::Status(st) => {
+                        apply_status(&mut s.sample, &st, &mut origin, &mut acc, now)
+                    }
+                    Packet::Barcodes(b) => s.sample.barcodes = (b, Some(now)),
+                    Packet::Sync(_) => {}
+                }
+            }
+            s.sample.stats = DecodeStats {
+                frames: base.frames + d.stats.frames,
+                garbage: base.garbage + d.stats.garbage,
+                bad_checksum: base.bad_checksum + d.stats.bad_checksum,
+                bad_count: base.bad_count + d.stats.bad_count,
+            };
+            *total = s.sample.stats;
+        }
+        if now.duration_since(last_packet) > LINK_TIMEOUT {
+            return Err(io::Error::new(io::ErrorKind::TimedOut, "no packet for 1 s"));
+        }
+        if now.duration_since(last_sent) >= RESEND {
+            last_sent = now;
+            let cmd = lock(shared).command;
+            let (v, w) = match cmd {
+                Some((vw, at)) if now.duration_since(at) < COMMAND_TIMEOUT => vw,
+                _ => (0.0, 0.0),
+            };
+            let mms = (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16;
+            let dds = (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16;
+            t.write_all(&Command::Vel(mms).encode())?;
+            t.write_all(&Command::RVel(dds).encode())?;
+        }
+    }
+    Ok(())
+}
+
+fn apply_status(
+    s: &mut Sample,
+    st: &Status,
+    origin: &mut Option<(u16, u16)>,
+    acc: &mut (i64, i64),
+    now: Instant,
+) {
+    match origin {
+        None => *origin = Some((st.x, st.y)),
+        Some((px, py)) => {
+            acc.0 += i64::from(wrap_delta(*px, st.x));
+            acc.1 += i64::from(wrap_delta(*py, st.y));
+            *origin = Some((st.x, st.y));
+        }
+    }
+    let th = f64::from(st.th) / 4096.0 * std::f64::consts::TAU;
+    s.pose = (acc.0 as f64 / 1000.0, acc.1 as f64 / 1000.0, th);
+    s.vel = (
+        f64::from(st.vel) / 1000.0,
+        (f64::from(st.rvel) / 10.0).to_radians(),
+    );
+    s.flags = st.flags;
+    s.battery = f64::from(st.battery) / 10.0;
+    s.received = Some(now);
+    for &(n, r) in &st.sonars {
+        if let Some(slot) = s.sonar.get_mut(usize::from(n)) {
+            *slot = Some(((r > 0).then(|| f64::from(r) / 1000.0), now));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::memory_pair;
+
+    /// A scripted robot on the other end of an in-memory pair.
+    #[test]
+    fn handshake_status_and_commands_over_a_fake_link() {
+        let (client, mut robot) = memory_pair();
+        let slot = Mutex::new(Some(client));
+        let driver = Driver::start(Box::new(move || {
+            slot.lock()
+                .ok()
+                .and_then(|mut s| s.take())
+                .map(|c| Box::new(c) as Box<dyn Transport>)
+                .ok_or_else(|| io::Error::other("used"))
+        }));
+        let mut d = Decoder::default();
+        let mut seen = Vec::new();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let mut x: u16 = 32760;
+        while Instant::now() < deadline {
+            let mut buf = [0u8; 256];
+            let n = robot.read(&mut buf).unwrap();
+            d.push(&buf[..n]);
+            while let Some(Ok(p)) = d.next_frame() {
+                let c = Command::decode(&p).unwrap();
+                if let Command::Sync0 | Command::Sync1 | Command::Sync2 = c
+                    && seen.len() < 3
+                {
+                    let n = match c {
+                        Command::Sync0 => 0,
+                        Command::Sync1 => 1,
+                        _ => 2,
+                    };
+                    robot.write_all(&Packet::Sync(n).encode()).unwrap();
+                }
+                seen.push(c);
+            }
+            if seen.contains(&Command::Enable(true)) {
+                // Stream status packets across the 15-bit rollover.
+                x = (x + 3) & 0x7fff;
+                let st = Status {
+                    x,
+                    th: 1024,
+                    sonars: vec![(3, 1500)],
+                    ..Status::default()
+                };
+                robot.write_all(&Packet::Status(st).encode()).unwrap();
+                driver.command(0.25, 0.0);
+            }
+            if seen.contains(&Command::Vel(250)) && driver.latest().pose.0 > 0.02 {
+                break;
+            }
+        }
+        let s = driver.latest();
+        assert!(s.connected);
+        assert!(seen.starts_with(&[
+            Command::Sync0,
+            Command::Sync1,
+            Command::Sync2,
+            Command::Sync1,
+            Command::Enable(true)
+        ]));
+        assert!(
+            seen.contains(&Command::Vel(250)),
+            "the fabric's command reached the robot"
+        );
+        assert!(
+            s.pose.0 > 0.02,
+            "odometry unwrapped across the rollover: {:?}",
+            s.pose
+        );
+        assert!((s.pose.2 - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
+        assert_eq!(s.sonar[3].unwrap().0, Some(1.5));
+    }
+}

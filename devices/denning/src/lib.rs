@@ -1,0 +1,13 @@
+//! The Denning-style robot's client side.
+//!
+//! ## Layout
+//! - [`codec`]: the frame codec of `PROTOCOL.md` — pure, unit-, property- and fuzz-tested.
+//! - [`transport`]: byte transports: a serial port (a real tty or the simulator's pty) and an
+//!   in-memory fake for unit tests.
+//! - [`driver`]: the thread that owns the port: handshake, reading, the latest sample,
+//!   commands, keep-alive, resynchronisation and reconnection.
+//! - `src/bin/denning.rs`: the device process, a thin shell over the driver.
+
+pub mod codec;
+pub mod driver;
+pub mod transport;

@@ -166,6 +166,8 @@ pub fn event_json(e: &Event) -> Json {
         EventKind::SkillDeactivated { skill } => ("skill_deactivated", json!({"skill": skill})),
         EventKind::SkillDied { skill, pid } => ("skill_died", json!({"skill": skill, "pid": pid})),
         EventKind::SkillLeft { skill } => ("skill_left", json!({"skill": skill})),
+        EventKind::DeviceLost { device } => ("device_lost", json!({"device": device})),
+        EventKind::DeviceBack { device } => ("device_back", json!({"device": device})),
         EventKind::ParamChanged {
             skill,
             param,

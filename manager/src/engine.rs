@@ -816,6 +816,11 @@ impl Manager {
             active = decl.start_active, "skill registered"
         );
         let restarted = !self.seen.insert(decl.name.clone());
+        if restarted && is_device(&decl) {
+            self.outbox.push(EventKind::DeviceBack {
+                device: decl.name.clone(),
+            });
+        }
         self.outbox.push(EventKind::SkillRegistered {
             skill: decl.name.clone(),
             pid: decl.pid,
@@ -853,6 +858,11 @@ impl Manager {
                     skill: e.decl.name.clone(),
                     pid: e.decl.pid,
                 });
+                if is_device(&e.decl) {
+                    self.outbox.push(EventKind::DeviceLost {
+                        device: e.decl.name.clone(),
+                    });
+                }
             } else {
                 tracing::info!(skill = %e.decl.name, "skill left");
                 self.outbox.push(EventKind::SkillLeft {
@@ -935,4 +945,11 @@ impl Manager {
             deaths: self.deaths,
         }
     }
+}
+
+/// Whether a registered unit is a device (it serves an actuator channel).
+fn is_device(d: &SkillDecl) -> bool {
+    d.inputs
+        .iter()
+        .any(|p| matches!(p.kind, skill_sdk::decl::PortKind::Channel(_)))
 }

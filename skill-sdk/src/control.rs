@@ -316,6 +316,16 @@ pub enum EventKind {
         /// Process id.
         pid: u32,
     },
+    /// A device process died: its hardware is out of the fabric until it is back.
+    DeviceLost {
+        /// Instance name.
+        device: String,
+    },
+    /// A device process registered again after it was lost.
+    DeviceBack {
+        /// Instance name.
+        device: String,
+    },
     /// A skill left cleanly.
     SkillLeft {
         /// Instance name.

@@ -143,6 +143,8 @@ fn read_packets(t: &mut dyn Transport, d: &mut Decoder, out: &mut Vec<Packet>) -
 }
 
 fn handshake(t: &mut dyn Transport, d: &mut Decoder) -> io::Result<bool> {
+    // CLOSE first: a robot still streaming to a previous connection returns to the handshake.
+    t.write_all(&Command::Sync2.encode())?;
     for (cmd, echo) in [
         (Command::Sync0, 0u8),
         (Command::Sync1, 1),
@@ -294,7 +296,7 @@ mod tests {
             while let Some(Ok(p)) = d.next_frame() {
                 let c = Command::decode(&p).unwrap();
                 if let Command::Sync0 | Command::Sync1 | Command::Sync2 = c
-                    && seen.len() < 3
+                    && (1..4).contains(&seen.len())
                 {
                     let n = match c {
                         Command::Sync0 => 0,
@@ -324,6 +326,7 @@ mod tests {
         let s = driver.latest();
         assert!(s.connected);
         assert!(seen.starts_with(&[
+            Command::Sync2,
             Command::Sync0,
             Command::Sync1,
             Command::Sync2,

@@ -1,0 +1,287 @@
+//! `denning-sim`: the robot at the other end of a pseudo-terminal.
+//!
+//! It opens a pty (keeping its own slave fd open so the device can come and go), sets raw
+//! mode, optionally links the slave to a stable path (`--link`), and speaks the robot side of
+//! `devices/denning/PROTOCOL.md`: handshake, status packets every period, barcode packets,
+//! commands, the 2 s watchdog. Bytes are paced at the baud rate; `--time-factor` runs faster
+//! than real time; `--corrupt-rate`/`--drop-rate` inject faults into the robot's output.
+
+mod sim;
+mod world;
+
+use anyhow::{Context, bail};
+use clap::Parser;
+use denning::codec::{Command, Decoder, Packet};
+use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use nix::pty::openpty;
+use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+use sim::{Rng, Sim};
+use std::io::Write;
+use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use world::World;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "denning-sim",
+    about = "A Denning-style robot simulated on a pseudo-terminal"
+)]
+struct Args {
+    /// World file (see devices/denning-sim/worlds/).
+    #[arg(long)]
+    world: PathBuf,
+    /// Seed of every random choice (noise, drift, faults).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Simulated seconds per real second.
+    #[arg(long, default_value_t = 1.0)]
+    time_factor: f64,
+    /// Make a symlink to the pty slave here, for a stable port path.
+    #[arg(long)]
+    link: Option<PathBuf>,
+    /// Baud rate the output is paced at.
+    #[arg(long, default_value_t = 38_400)]
+    baud: u32,
+    /// Probability that an output byte is corrupted.
+    #[arg(long, default_value_t = 0.0)]
+    corrupt_rate: f64,
+    /// Probability that an output byte is dropped.
+    #[arg(long, default_value_t = 0.0)]
+    drop_rate: f64,
+    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside).
+    #[arg(long)]
+    trajectory: Option<PathBuf>,
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: nix::libc::c_int) {
+    STOP.store(true, Ordering::Release);
+}
+
+/// Simulation step (s of simulated time).
+const DT: f64 = 0.01;
+/// Watchdog (s of simulated time).
+const WATCHDOG: f64 = 2.0;
+
+#[derive(PartialEq)]
+enum Link {
+    /// Waiting for SYNC n.
+    Sync(u8),
+    /// Handshake done; streaming when open.
+    Ready { open: bool },
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("denning-sim: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: &Args) -> anyhow::Result<()> {
+    if !(args.time_factor > 0.0 && args.time_factor.is_finite()) {
+        bail!("--time-factor must be positive, got {}", args.time_factor);
+    }
+    for (name, p) in [
+        ("--corrupt-rate", args.corrupt_rate),
+        ("--drop-rate", args.drop_rate),
+    ] {
+        if !(0.0..=1.0).contains(&p) {
+            bail!("{name} must be within 0..=1, got {p}");
+        }
+    }
+    let world = World::load(&args.world)?;
+    for sig in [
+        nix::sys::signal::Signal::SIGINT,
+        nix::sys::signal::Signal::SIGTERM,
+    ] {
+        // SAFETY: the handler only stores to an atomic.
+        unsafe { nix::sys::signal::signal(sig, nix::sys::signal::SigHandler::Handler(on_signal)) }
+            .context("installing signal handlers")?;
+    }
+    let pty = openpty(None, None).context("opening a pseudo-terminal")?;
+    let mut t = tcgetattr(&pty.slave).context("reading terminal attributes")?;
+    cfmakeraw(&mut t);
+    tcsetattr(&pty.slave, SetArg::TCSANOW, &t).context("setting raw mode")?;
+    let slave_path = nix::unistd::ttyname(&pty.slave).context("naming the pty slave")?;
+    let master: OwnedFd = pty.master;
+    let flags = OFlag::from_bits_truncate(fcntl(&master, FcntlArg::F_GETFL)?);
+    fcntl(&master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+    if let Some(link) = &args.link {
+        let _ = std::fs::remove_file(link);
+        std::os::unix::fs::symlink(&slave_path, link)
+            .with_context(|| format!("linking {} to {}", link.display(), slave_path.display()))?;
+    }
+    // Keep our own slave fd open: the device may close and reopen the port at will.
+    let _slave = pty.slave;
+    tracing::info!(world = %world.name, pty = %slave_path.display(), link = ?args.link, "robot ready");
+    println!("{}", slave_path.display());
+    let _ = std::io::stdout().flush();
+
+    let mut trajectory = match &args.trajectory {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
+        )),
+        None => None,
+    };
+    if let Some(t) = trajectory.as_mut() {
+        writeln!(t, "t,x,y,theta,v,w,stall,collisions,outside")?;
+    }
+    let mut sim = Sim::new(world, args.seed);
+    let mut faults = Rng::new(args.seed.wrapping_mul(31).wrapping_add(7));
+    let mut decoder = Decoder::default();
+    let mut link = Link::Sync(0);
+    let mut period = 0.1f64;
+    let mut next_status = 0.0f64;
+    let mut last_command = 0.0f64;
+    let mut outbox: Vec<u8> = Vec::new();
+    let started = Instant::now();
+    let byte_time = 10.0 / (f64::from(args.baud) * args.time_factor);
+    let mut send_budget = 0.0f64; // seconds of line time already used
+    while !STOP.load(Ordering::Acquire) {
+        // Commands in.
+        let mut buf = [0u8; 256];
+        loop {
+            match nix::unistd::read(master.as_fd(), &mut buf) {
+                Ok(0) | Err(nix::Error::EAGAIN) | Err(nix::Error::EIO) => break,
+                Ok(n) => decoder.push(&buf[..n]),
+                Err(e) => return Err(e).context("reading the pty"),
+            }
+        }
+        while let Some(frame) = decoder.next_frame() {
+            let Ok(cmd) = frame.and_then(|p| Command::decode(&p)) else {
+                continue;
+            };
+            last_command = sim.time;
+            let streaming = link == Link::Ready { open: true };
+            match cmd {
+                // SYNC0 while streaming is the keep-alive (PULSE); otherwise it (re)starts
+                // the handshake.
+                Command::Sync0 if streaming => {}
+                Command::Sync0 => {
+                    link = Link::Sync(1);
+                    sim.enabled = false;
+                    sim.cmd = [0.0; 2];
+                    outbox.extend(Packet::Sync(0).encode());
+                }
+                Command::Sync1 => match link {
+                    Link::Sync(1) => {
+                        link = Link::Sync(2);
+                        outbox.extend(Packet::Sync(1).encode());
+                    }
+                    Link::Ready { .. } => {
+                        link = Link::Ready { open: true };
+                        tracing::info!("client connected");
+                    }
+                    _ => {}
+                },
+                Command::Sync2 => match link {
+                    Link::Sync(2) => {
+                        link = Link::Ready { open: false };
+                        outbox.extend(Packet::Sync(2).encode());
+                    }
+                    // CLOSE: stop, and wait for a new handshake.
+                    Link::Ready { .. } => {
+                        link = Link::Sync(0);
+                        sim.enabled = false;
+                        sim.cmd = [0.0; 2];
+                    }
+                    _ => {}
+                },
+                _ if !matches!(link, Link::Ready { .. }) => {}
+                Command::Enable(on) => sim.enabled = on,
+                Command::Vel(v) => sim.cmd[0] = f64::from(v).clamp(-1000.0, 1000.0) / 1000.0,
+                Command::RVel(w) => {
+                    sim.cmd[1] = (f64::from(w).clamp(-1800.0, 1800.0) / 10.0).to_radians()
+                }
+                Command::Period(ms) => period = f64::from(ms.clamp(20, 1000)) / 1000.0,
+            }
+        }
+        if sim.time - last_command > WATCHDOG && sim.cmd != [0.0, 0.0] {
+            tracing::info!("watchdog: no command for 2 s, stopping");
+            sim.cmd = [0.0; 2];
+        }
+        sim.step(DT);
+        if sim.time >= next_status {
+            next_status += period;
+            if link == (Link::Ready { open: true }) {
+                let status = sim.status();
+                outbox.extend(Packet::Status(status).encode());
+                let seen = sim.camera();
+                if !seen.is_empty() {
+                    outbox.extend(Packet::Barcodes(seen).encode());
+                }
+            }
+            if let Some(t) = trajectory.as_mut() {
+                let [x, y, th] = sim.pose;
+                writeln!(
+                    t,
+                    "{:.3},{x:.4},{y:.4},{th:.4},{:.3},{:.3},{},{},{}",
+                    sim.time,
+                    sim.vel[0],
+                    sim.vel[1],
+                    u8::from(sim.stall),
+                    sim.collisions,
+                    u8::from(sim.world.is_outside([x, y]))
+                )?;
+                t.flush()?;
+            }
+        }
+        // Bytes out, with fault injection, paced at the baud rate.
+        if !outbox.is_empty() {
+            let mut bytes: Vec<u8> = Vec::with_capacity(outbox.len());
+            for b in outbox.drain(..) {
+                if args.drop_rate > 0.0 && faults.uniform() < args.drop_rate {
+                    continue;
+                }
+                let b = if args.corrupt_rate > 0.0 && faults.uniform() < args.corrupt_rate {
+                    b ^ (1 << (faults.uniform() * 8.0) as u32)
+                } else {
+                    b
+                };
+                bytes.push(b);
+            }
+            write_all(&master, &bytes)?;
+            send_budget += bytes.len() as f64 * byte_time;
+        }
+        // Real time: one step of simulated time, or the line time of the bytes sent.
+        let target = (sim.time / args.time_factor).max(send_budget);
+        let elapsed = started.elapsed().as_secs_f64();
+        if target > elapsed {
+            std::thread::sleep(Duration::from_secs_f64(target - elapsed));
+        }
+        send_budget = send_budget.max(started.elapsed().as_secs_f64());
+    }
+    if let Some(link) = &args.link {
+        let _ = std::fs::remove_file(link);
+    }
+    tracing::info!(time = sim.time, collisions = sim.collisions, "robot off");
+    Ok(())
+}
+
+fn write_all(fd: &OwnedFd, mut bytes: &[u8]) -> anyhow::Result<()> {
+    while !bytes.is_empty() {
+        match nix::unistd::write(fd, bytes) {
+            Ok(n) => bytes = &bytes[n..],
+            // Nobody reads the pty (no device): its buffer is full. A serial line loses the
+            // bytes then; the robot must not stall.
+            Err(nix::Error::EAGAIN) => return Ok(()),
+            Err(e) => return Err(e).context(format!("writing the pty (fd {})", fd.as_raw_fd())),
+        }
+    }
+    Ok(())
+}

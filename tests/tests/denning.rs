@@ -1,0 +1,230 @@
+//! The Denning robot end to end: simulator on a real pty, the device process on the same code
+//! path as a real serial port, a real manager.
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use nix::sys::signal::Signal;
+use skill_sdk::client::Client;
+use skill_sdk::control::EventKind;
+use skill_sdk::value::Value;
+use skillfab_tests::{TestDomain, bin};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// A 6 m × 4 m box room; the robot at (2, 2) facing +x: the east wall is 4 m ahead.
+const ROOM: &str = r#"
+name = "test-room"
+start = [2.0, 2.0, 0.0]
+outside = { min = [6.5, 0.0], max = [9.0, 4.0] }
+[[wall]]
+from = [0.0, 0.0]
+to = [6.0, 0.0]
+[[wall]]
+from = [6.0, 0.0]
+to = [6.0, 4.0]
+[[wall]]
+from = [6.0, 4.0]
+to = [0.0, 4.0]
+[[wall]]
+from = [0.0, 4.0]
+to = [0.0, 0.0]
+[[barcode]]
+id = 9
+at = [5.95, 2.0]
+"#;
+
+struct Robot {
+    t: TestDomain,
+    sim: usize,
+    dev: usize,
+    link: PathBuf,
+    world: PathBuf,
+    trajectory: PathBuf,
+    client: Client,
+}
+
+fn field(v: &Value, name: &str) -> Value {
+    match v {
+        Value::Struct(f) => f.iter().find(|(n, _)| n == name).unwrap().1.clone(),
+        other => panic!("not a struct: {other}"),
+    }
+}
+
+fn num(c: &Client, path: &str) -> Option<f64> {
+    c.query(path).ok().and_then(|(v, _)| v.as_f64())
+}
+
+impl Robot {
+    fn start(tag: &str, sim_args: &[&str]) -> Robot {
+        let mut t = TestDomain::new(tag);
+        let world = t.dir.join("room.toml");
+        std::fs::write(&world, ROOM).unwrap();
+        let link = t.dir.join("robot");
+        let trajectory = t.dir.join("trajectory.csv");
+        t.spawn(
+            "skillfab",
+            &["manager", "--period-ms", "20", "--deadline-ms", "2000"],
+        );
+        let sim = Self::spawn_sim(&mut t, &world, &link, &trajectory, sim_args);
+        let dev = t.spawn("denning", &["--port", link.to_str().unwrap()]);
+        let board = t.board();
+        t.wait_until("the device to register", || {
+            skillfab_tests::registered(&board, "denning").is_some()
+        });
+        let client = Client::connect(&t.domain).unwrap();
+        let r = Robot {
+            t,
+            sim,
+            dev,
+            link,
+            world,
+            trajectory,
+            client,
+        };
+        r.wait_connected(1);
+        r
+    }
+
+    fn spawn_sim(
+        t: &mut TestDomain,
+        world: &Path,
+        link: &Path,
+        traj: &Path,
+        extra: &[&str],
+    ) -> usize {
+        let mut args = vec![
+            "--world",
+            world.to_str().unwrap(),
+            "--link",
+            link.to_str().unwrap(),
+            "--trajectory",
+            traj.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let i = t.spawn("denning-sim", &args);
+        t.wait_until("the simulator's link", || link.exists());
+        i
+    }
+
+    fn wait_connected(&self, connects: u64) {
+        self.t.wait_until("the robot link", || {
+            self.client.query("denning.link").is_ok_and(|(v, _)| {
+                field(&v, "connected") == Value::Bool(true)
+                    && field(&v, "connects").as_f64().unwrap_or(0.0) >= connects as f64
+                    && field(&v, "frames").as_f64().unwrap_or(0.0) > 3.0
+            })
+        });
+    }
+
+    /// Last ground-truth row: (x, y, v).
+    fn truth(&self) -> (f64, f64, f64) {
+        let text = std::fs::read_to_string(&self.trajectory).unwrap_or_default();
+        let last = text.lines().last().unwrap_or("");
+        let f: Vec<f64> = last.split(',').filter_map(|x| x.parse().ok()).collect();
+        if f.len() < 5 {
+            (f64::NAN, f64::NAN, f64::NAN)
+        } else {
+            (f[1], f[2], f[4])
+        }
+    }
+}
+
+#[test]
+fn sonar_readings_match_the_world_geometry() {
+    let r = Robot::start("sonar", &[]);
+    // Sonar 0 faces the east wall: 6 − 2 − 0.36 = 3.64 m; sonar 6 faces north: 4 − 2 − 0.36.
+    r.t.wait_until("sonar 0 and 6", || {
+        let s0 = num(&r.client, "denning.sonar.range[0]").unwrap_or(f64::NAN);
+        let s6 = num(&r.client, "denning.sonar.range[6]").unwrap_or(f64::NAN);
+        (s0 - 3.64).abs() < 0.15 && (s6 - 1.64).abs() < 0.1
+    });
+    // The barcode on the east wall, straight ahead, 3.95 m away.
+    r.t.wait_until("the barcode", || {
+        num(&r.client, "denning.barcodes.count") == Some(1.0)
+            && num(&r.client, "denning.barcodes.id[0]") == Some(9.0)
+            && num(&r.client, "denning.barcodes.range[0]").is_some_and(|d| (d - 3.95).abs() < 0.1)
+    });
+}
+
+#[test]
+fn a_drive_proposal_moves_the_robot_and_the_robot_watchdog_stops_it() {
+    let mut r = Robot::start("drive", &[]);
+    let go =
+        r.t.spawn("proposer", &["--name", "go", "--param", "translate=0.3"]);
+    r.t.wait_until("odometry to advance", || {
+        num(&r.client, "denning.odometry.x").is_some_and(|x| x > 0.2)
+    });
+    r.t.wait_until("the simulated robot to move", || r.truth().0 > 2.2);
+    // Kill the device mid-motion: nobody feeds the robot's watchdog, which stops it (2 s).
+    let _ = go;
+    r.t.signal(r.dev, Signal::SIGKILL);
+    r.t.wait_exit(r.dev);
+    r.t.wait_until("the robot's watchdog to stop the drive", || {
+        r.truth().2 == 0.0
+    });
+}
+
+#[test]
+fn corrupted_bytes_are_counted_and_data_keeps_flowing() {
+    let r = Robot::start("corrupt", &["--corrupt-rate", "0.01", "--seed", "3"]);
+    let link = |c: &Client| c.query("denning.link").unwrap().0;
+    let first = field(&link(&r.client), "frames").as_f64().unwrap();
+    r.t.wait_until("bad frames counted while good ones keep coming", || {
+        let l = link(&r.client);
+        field(&l, "bad_frames").as_f64().unwrap() > 0.0
+            && field(&l, "frames").as_f64().unwrap() > first + 20.0
+    });
+    assert!(num(&r.client, "denning.sonar.range[0]").is_some());
+}
+
+#[test]
+fn the_device_survives_the_simulator_restarting() {
+    let mut r = Robot::start("simrestart", &[]);
+    r.t.signal(r.sim, Signal::SIGKILL);
+    r.t.wait_exit(r.sim);
+    let _ = std::fs::remove_file(&r.link);
+    r.t.wait_until("the device to notice", || {
+        r.client
+            .query("denning.link")
+            .is_ok_and(|(v, _)| field(&v, "connected") == Value::Bool(false))
+    });
+    let (world, link, traj) = (r.world.clone(), r.link.clone(), r.trajectory.clone());
+    r.sim = Robot::spawn_sim(&mut r.t, &world, &link, &traj, &["--seed", "2"]);
+    r.wait_connected(2);
+}
+
+#[test]
+fn hot_swap_of_the_device_under_a_running_manager() {
+    let mut r = Robot::start("hotswap", &[]);
+    r.client.subscribe().unwrap();
+    let before = r.client.stats().unwrap().cycles;
+    r.t.signal(r.dev, Signal::SIGKILL);
+    r.t.wait_exit(r.dev);
+    r.dev = r.t.spawn("denning", &["--port", r.link.to_str().unwrap()]);
+    let (mut lost, mut back) = (false, false);
+    while !(lost && back) {
+        match r
+            .client
+            .next_event(Duration::from_secs(30))
+            .unwrap()
+            .expect("events")
+            .kind
+        {
+            EventKind::DeviceLost { device } if device == "denning" => lost = true,
+            EventKind::DeviceBack { device } if device == "denning" => back = true,
+            _ => {}
+        }
+    }
+    r.wait_connected(1);
+    r.t.wait_until("fresh sonar again", || {
+        r.client
+            .query("denning.sonar.age_ms[0]")
+            .is_ok_and(|(v, _)| v.as_f64().is_some_and(|a| a < 1000.0))
+    });
+    assert!(
+        r.client.stats().unwrap().cycles > before,
+        "the manager kept cycling"
+    );
+    let _ = bin("denning");
+}

@@ -159,3 +159,39 @@ pub struct Link {
     /// Successful handshakes.
     pub connects: u64,
 }
+
+/// A tracked barcode, in the odometry frame.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Target")]
+#[repr(C)]
+pub struct Target {
+    /// Whether it has been seen at all.
+    pub seen: bool,
+    /// Whether it is in view in this cycle.
+    pub visible: bool,
+    /// Its id.
+    pub id: u32,
+    /// Estimated position (m, odometry frame).
+    pub x: f64,
+    /// Estimated position (m, odometry frame).
+    pub y: f64,
+    /// Distance from the robot now (m).
+    pub range: f64,
+    /// Bearing from the robot's heading now (rad).
+    pub bearing: f64,
+}
+
+/// A located door opening, in the odometry frame.
+#[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+#[message(type_name = "skillfab.Door")]
+#[repr(C)]
+pub struct Door {
+    /// Whether an opening was found.
+    pub found: bool,
+    /// Centre of the opening (m, odometry frame).
+    pub x: f64,
+    /// Centre of the opening (m, odometry frame).
+    pub y: f64,
+    /// Direction to drive through it (rad, odometry frame).
+    pub heading: f64,
+}

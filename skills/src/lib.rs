@@ -2,3 +2,4 @@
 //! SDK's harness) and a binary in `src/bin/` whose `main` is one line.
 
 pub mod hello;
+pub mod nav;

@@ -1,0 +1,4 @@
+//! The `avoid` skill (see `skills::nav`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skills::nav::Avoid>()
+}

@@ -1,0 +1,4 @@
+//! The `stop` skill (see `skills::nav`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skills::nav::Stop>()
+}

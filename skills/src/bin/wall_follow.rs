@@ -1,0 +1,4 @@
+//! The `wall_follow` skill (see `skills::nav`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skills::nav::WallFollow>()
+}

@@ -1,0 +1,4 @@
+//! The `wander` skill (see `skills::nav`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skills::nav::Wander>()
+}

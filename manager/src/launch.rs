@@ -214,7 +214,13 @@ impl Launch {
                     p.bin
                 ))
             })?;
-            let mut args = vec!["--name".to_string(), p.name.clone()];
+            // Skills and devices get their instance name; other programs (a simulator) only
+            // their own arguments.
+            let mut args = if p.registers.unwrap_or(true) {
+                vec!["--name".to_string(), p.name.clone()]
+            } else {
+                Vec::new()
+            };
             for (k, v) in &p.params {
                 let v = toml_value_text(v)
                     .ok_or_else(|| bad(format!("param '{k}' must be a string, number or bool")))?;
@@ -296,6 +302,13 @@ mod tests {
         );
         assert_eq!(p.restart, Restart::Always);
         assert_eq!(p.program, PathBuf::from("/bin/sh"));
+    }
+
+    #[test]
+    fn programs_that_do_not_register_get_only_their_own_arguments() {
+        let l = parse("[[process]]\nname = \"sim\"\nbin = \"/bin/sh\"\nregisters = false\nargs = [\"--world\", \"w.toml\"]\n").unwrap();
+        assert_eq!(l.processes[0].args, ["--world", "w.toml"]);
+        assert!(!l.processes[0].registers);
     }
 
     #[test]

@@ -14,6 +14,7 @@
 
 pub mod control;
 pub mod ctl;
+pub mod demo;
 pub mod engine;
 pub mod graph;
 pub mod launch;

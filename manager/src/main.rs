@@ -85,6 +85,11 @@ enum Cmd {
         #[arg(long, default_value_t = 30.0)]
         wait_timeout_s: f64,
     },
+    /// The paper's experiment.
+    Demo {
+        #[command(subcommand)]
+        which: DemoCmd,
+    },
     /// Talk to a running manager: the sequencer's link, from the shell.
     Ctl {
         /// Print JSON instead of text.
@@ -92,6 +97,34 @@ enum Cmd {
         json: bool,
         #[command(subcommand)]
         cmd: skillfab::ctl::CtlCmd,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum DemoCmd {
+    /// A sequencer drives the simulated Denning robot out of the lab.
+    ExitLab {
+        /// World file.
+        #[arg(long, default_value = "devices/denning-sim/worlds/exit-lab.toml")]
+        world: PathBuf,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Number of runs.
+        #[arg(long, default_value_t = 1)]
+        runs: u32,
+        /// Simulated seconds per real second.
+        #[arg(long, default_value_t = 4.0)]
+        time_factor: f64,
+        /// Write the first run's trajectory picture (SVG).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Print one JSON object: runs, successes, median time, each run.
+        #[arg(long)]
+        json: bool,
+        /// Simulated seconds before a run counts as failed.
+        #[arg(long, default_value_t = 300.0)]
+        limit_s: f64,
     },
 }
 
@@ -155,6 +188,48 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             print_report(&report, pace.json)
         }
         Cmd::Ctl { json, cmd } => skillfab::ctl::run(&domain, json, cmd),
+        Cmd::Demo {
+            which:
+                DemoCmd::ExitLab {
+                    world,
+                    seed,
+                    runs,
+                    time_factor,
+                    plot,
+                    json,
+                    limit_s,
+                },
+        } => {
+            if !(time_factor > 0.0 && time_factor <= 50.0) {
+                anyhow::bail!("--time-factor must be in (0, 50], got {time_factor}");
+            }
+            let opts = skillfab::demo::DemoOptions {
+                world,
+                seed,
+                runs: runs.max(1),
+                time_factor,
+                plot,
+                verbose: !json,
+                limit_s,
+            };
+            let summary = skillfab::demo::demo(&opts)?;
+            if json {
+                println!("{}", serde_json::to_string(&summary)?);
+            } else {
+                println!(
+                    "{} of {} runs left the lab; median time {}",
+                    summary.successes,
+                    summary.runs,
+                    summary
+                        .median_time_s
+                        .map_or("-".into(), |t| format!("{t:.1} s simulated"))
+                );
+            }
+            if summary.successes == 0 {
+                anyhow::bail!("the robot did not leave the lab");
+            }
+            Ok(())
+        }
     }
 }
 

@@ -59,10 +59,11 @@ pub struct Supervisor {
 fn spawn(spec: &ProcessSpec, domain: &Domain) -> std::io::Result<Child> {
     let mut cmd = Command::new(&spec.program);
     cmd.args(&spec.args)
-        .arg("--domain")
-        .arg(domain.name())
         .env(DOMAIN_ENV, domain.name())
         .stdin(Stdio::null());
+    if spec.registers {
+        cmd.arg("--domain").arg(domain.name());
+    }
     // Children's stdout goes to our stderr: our stdout is reserved for the report.
     if let Ok(err) = std::io::stderr().as_fd().try_clone_to_owned() {
         cmd.stdout(Stdio::from(err));

@@ -76,7 +76,10 @@ impl Skill for Avoid {
     const PRIORITY: i32 = 8;
     fn compute(&mut self, ctx: &Ctx<AvoidParams>, i: SonarIn, o: &mut DriveOut) -> SkillResult {
         let p = ctx.params;
-        let front = min_in(&i.sonar, -0.8, 0.8);
+        // The front arc at the safe distance, the flanks at half of it.
+        let front = min_in(&i.sonar, -0.8, 0.8)
+            .min(2.0 * min_in(&i.sonar, -1.4, -0.8))
+            .min(2.0 * min_in(&i.sonar, 0.8, 1.4));
         if front >= p.safe_distance {
             self.side = 0.0;
             return Ok(());

@@ -136,8 +136,10 @@ impl Sim {
             y + self.vel[0] * dt * mid.sin(),
         ];
         let (clear, contact) = self.clearance(np);
+        let (now_clear, _) = self.clearance([x, y]);
         self.bumpers = 0;
-        if clear < RADIUS && self.vel[0] != 0.0 {
+        // Blocked when the move would end inside an obstacle's reach and not away from it.
+        if clear < RADIUS && clear <= now_clear && self.vel[0] != 0.0 {
             // Blocked: rotate in place only, flag stall and the bumper segment touched.
             self.stall = true;
             self.collisions += 1;

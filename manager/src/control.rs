@@ -778,6 +778,11 @@ impl Manager {
                         .collect(),
                 ),
             ),
+            // The latest command may be from a later cycle than the arbitration record.
+            (
+                "command_cycle".into(),
+                command.as_ref().map_or(Value::Null, |c| Value::UInt(c.1)),
+            ),
             ("command".into(), command.map_or(Value::Null, |c| c.0)),
         ]);
         Ok(Reply::Value {

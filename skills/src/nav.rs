@@ -333,12 +333,33 @@ pub struct DoorOut<'a> {
     pub door: Output<'a, Door>,
 }
 
-/// Door location: near the door's barcode, the sonars that look through the wall (much
-/// longer than the wall's distance) mark the opening; their mean direction and the wall's
-/// distance place it in the odometry frame.
+/// Door location: near the door's barcode, the sonar echoes from the wall around the barcode
+/// give the wall's line (least squares); the sonars that look through it (much longer than the
+/// wall along their direction) mark the opening. The door is where those rays cross the wall
+/// line, and the way through is the wall's normal, away from the robot. Estimates are averaged.
 #[derive(Default)]
 pub struct DoorLocate {
     best: Option<(f64, f64, f64, usize)>,
+}
+
+/// Fits a line through points: (centroid, unit direction).
+fn fit_line(pts: &[(f64, f64)]) -> Option<((f64, f64), (f64, f64))> {
+    if pts.len() < 2 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (mx, my) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in pts {
+        let (dx, dy) = (p.0 - mx, p.1 - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    Some(((mx, my), (angle.cos(), angle.sin())))
 }
 
 impl Skill for DoorLocate {
@@ -348,47 +369,70 @@ impl Skill for DoorLocate {
     fn compute(&mut self, ctx: &Ctx<DoorParams>, i: DoorIn, o: &mut DoorOut) -> SkillResult {
         let (od, t, s) = (*i.odometry, *i.target, *i.sonar);
         if t.seen && t.range < ctx.params.near {
-            // The wall is about as far as the barcode; look 100° either side of it.
-            let wall = t.range;
-            let mut hits: Vec<(f64, f64)> = Vec::new();
-            for k in 0..SONARS {
-                let a = sonar_angle(k);
-                if wrap(a - t.bearing).abs() > 100f64.to_radians() {
-                    continue;
+            let to_code = (t.y - od.y).atan2(t.x - od.x);
+            // Sonars looking toward the barcode's wall: 75° either side.
+            let looking: Vec<(f64, f64)> = (0..SONARS)
+                .filter(|&k| s.age_ms[k] < 1000.0)
+                .filter_map(|k| {
+                    let a = od.theta + sonar_angle(k);
+                    (wrap(a - to_code).abs() < 75f64.to_radians())
+                        .then(|| range(&s, k).map(|r| (a, r)))?
+                })
+                .collect();
+            // Echoes about as far as the wall is expected along that direction are the wall.
+            let wall_d = t.range * 1.0;
+            let wall_pts: Vec<(f64, f64)> = looking
+                .iter()
+                .filter(|(a, r)| {
+                    let off = wrap(a - to_code);
+                    let expect = wall_d / off.cos().max(0.3);
+                    off.abs() < 55f64.to_radians() && (*r - expect).abs() < 0.8
+                })
+                .map(|(a, r)| (od.x + (r + 0.36) * a.cos(), od.y + (r + 0.36) * a.sin()))
+                .collect();
+            if let Some(((cx, cy), (dx, dy))) = fit_line(&wall_pts) {
+                // The normal pointing away from the robot.
+                let (mut nx, mut ny) = (-dy, dx);
+                if (cx - od.x) * nx + (cy - od.y) * ny < 0.0 {
+                    nx = -nx;
+                    ny = -ny;
                 }
-                if let Some(r) = range(&s, k)
-                    && r > wall + ctx.params.margin
-                    && s.age_ms[k] < 1000.0
-                {
-                    hits.push((a, r));
-                }
-            }
-            if !hits.is_empty() {
-                // The mean direction of the long readings.
-                let (sx, sy) = hits
-                    .iter()
-                    .fold((0.0, 0.0), |(x, y), (a, _)| (x + a.cos(), y + a.sin()));
-                let dir = od.theta + sy.atan2(sx);
-                let d = wall.max(0.8);
-                let (x, y) = (od.x + d * dir.cos(), od.y + d * dir.sin());
-                self.best = Some(match self.best {
-                    None => (x, y, dir, 1),
-                    Some((bx, by, bh, n)) => {
-                        let n1 = n as f64;
-                        let h = wrap(bh + wrap(dir - bh) / (n1 + 1.0));
-                        (
-                            (bx * n1 + x) / (n1 + 1.0),
-                            (by * n1 + y) / (n1 + 1.0),
-                            h,
-                            n + 1,
-                        )
+                let dist = (cx - od.x) * nx + (cy - od.y) * ny;
+                let mut crossings = Vec::new();
+                for (a, r) in &looking {
+                    let along = a.cos() * nx + a.sin() * ny;
+                    if along < 0.3 {
+                        continue;
                     }
-                });
+                    let to_wall = dist / along;
+                    if *r + 0.36 > to_wall + ctx.params.margin {
+                        crossings.push((od.x + to_wall * a.cos(), od.y + to_wall * a.sin()));
+                    }
+                }
+                if !crossings.is_empty() {
+                    let n = crossings.len() as f64;
+                    let (x, y) = crossings
+                        .iter()
+                        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+                    let h = ny.atan2(nx);
+                    self.best = Some(match self.best {
+                        None => (x, y, h, 1),
+                        Some((bx, by, bh, k)) => {
+                            let k1 = k as f64;
+                            (
+                                (bx * k1 + x) / (k1 + 1.0),
+                                (by * k1 + y) / (k1 + 1.0),
+                                wrap(bh + wrap(h - bh) / (k1 + 1.0)),
+                                k + 1,
+                            )
+                        }
+                    });
+                }
             }
         }
         let mut d = Door::default();
         if let Some((x, y, h, n)) = self.best
-            && n >= 3
+            && n >= 5
         {
             d = Door {
                 found: true,
@@ -616,10 +660,20 @@ mod tests {
     #[test]
     fn door_locate_finds_the_long_readings_near_the_barcode() {
         let mut h = Harness::<DoorLocate>::new();
-        // Wall 1.5 m ahead, an opening slightly to the left (sonars 1 and 2 see through).
-        let s = ring(|a| if (0.2..0.6).contains(&a) { 8.0 } else { 1.5 });
+        // A wall along x = 1.86 (1.5 m from the ring), an opening around y = 0.4..1.1: sonars
+        // whose rays cross the wall there see far.
+        let s = ring(|a| {
+            let y = 1.86 * a.tan();
+            if a.cos() <= 0.05 {
+                5.0
+            } else if (0.4..1.1).contains(&y) {
+                8.0
+            } else {
+                1.86 / a.cos() - 0.36
+            }
+        });
         let mut found = None;
-        for _ in 0..5 {
+        for _ in 0..6 {
             h.input("sonar", s);
             h.input("odometry", Odometry::default());
             h.input(
@@ -628,17 +682,21 @@ mod tests {
                     seen: true,
                     visible: true,
                     id: 7,
-                    x: 1.5,
+                    x: 1.86,
                     y: -0.5,
-                    range: 1.6,
-                    bearing: -0.3,
+                    range: 1.93,
+                    bearing: -0.26,
                 },
             );
             found = Some(*h.step().unwrap().output::<Door>("door").unwrap());
         }
         let d = found.unwrap();
-        assert!(d.found);
-        assert!(d.heading > 0.2 && d.heading < 0.6, "{d:?}");
+        assert!(d.found, "{d:?}");
+        assert!(
+            d.heading.abs() < 0.15,
+            "through the wall, along its normal: {d:?}"
+        );
+        assert!((d.x - 1.86).abs() < 0.2 && d.y > 0.3 && d.y < 1.2, "{d:?}");
     }
 
     #[test]

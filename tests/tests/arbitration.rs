@@ -49,13 +49,29 @@ fn field<'a>(v: &'a Value, name: &str) -> &'a Value {
 fn wait_channel(t: &TestDomain, c: &Client, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
     let mut last = Value::Null;
     t.wait_until(what, || {
-        last = c
-            .query("channel.drive")
-            .map(|(v, _)| v)
-            .unwrap_or(Value::Null);
+        last = match c.query("channel.drive") {
+            Ok((v, cycle)) => {
+                CYCLE.with(|k| k.set(cycle));
+                v
+            }
+            Err(_) => Value::Null,
+        };
         last != Value::Null && ok(&last)
     });
     last
+}
+
+/// Whether the command in a channel query is from the cycle of the arbitration record.
+fn same_cycle(v: &Value) -> bool {
+    match (field(v, "command_cycle"), v) {
+        (Value::UInt(c), Value::Struct(_)) => CYCLE.with(|k| k.get() == *c),
+        _ => false,
+    }
+}
+
+thread_local! {
+    /// The record's cycle of the last query (set by `wait_channel`).
+    static CYCLE: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
 }
 
 fn winner(v: &Value) -> Option<String> {
@@ -152,8 +168,9 @@ fn blend_is_the_exact_priority_weighted_mean() {
         "\"--policy\", \"drive=blend\"",
         &[("a", 1, 1.0, -1.0), ("b", 3, 5.0, 3.0)],
     );
+    // Both proposals in, and the command read from the same cycle as the record.
     let v = wait_channel(&t, &c, "a blend of both", |v| match field(v, "weights") {
-        Value::Struct(w) => w.len() == 2,
+        Value::Struct(w) => w.len() == 2 && same_cycle(v),
         _ => false,
     });
     assert_eq!(field(&v, "policy"), &Value::Text("blend".into()));

@@ -488,9 +488,7 @@ impl Manager {
             .iter()
             .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
             .map(|(s, e)| {
-                let slot = self.board.slot(s);
-                let runs = slot.runs.load(Ordering::Acquire);
-                let total = slot.compute_ns_total.load(Ordering::Acquire);
+                let f = self.figures(s);
                 SkillInfo {
                     name: e.decl.name.clone(),
                     kind: e.decl.kind.clone(),
@@ -509,16 +507,12 @@ impl Manager {
                     values: e.values.clone(),
                     inputs: ports(&e.decl.inputs),
                     outputs: ports(&e.decl.outputs),
-                    runs,
-                    skips: slot.skips.load(Ordering::Acquire),
-                    failures: slot.failures.load(Ordering::Acquire),
-                    last_cycle: slot.done_cycle.load(Ordering::Acquire),
-                    compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
-                    compute_us_mean: if runs == 0 {
-                        0.0
-                    } else {
-                        total as f64 / runs as f64 / 1000.0
-                    },
+                    runs: f.runs,
+                    skips: f.skips,
+                    failures: f.failures,
+                    last_cycle: f.last_cycle,
+                    compute_us_last: f.compute_us_last,
+                    compute_us_mean: f.compute_us_mean,
                 }
             })
             .collect()

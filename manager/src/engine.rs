@@ -177,6 +177,18 @@ pub struct Manager {
     pub(crate) channels: HashMap<String, ChannelView>,
 }
 
+/// A skill's run counters from the board.
+pub(crate) struct Figures {
+    pub(crate) runs: u64,
+    pub(crate) skips: u64,
+    pub(crate) failures: u64,
+    pub(crate) compute_us_mean: f64,
+    pub(crate) compute_us_last: f64,
+    pub(crate) last_cycle: u64,
+    pub(crate) last_start_ns: u64,
+    pub(crate) last_end_ns: u64,
+}
+
 /// The latest arbitration of a channel, as the manager last read it from the board.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ChannelView {
@@ -905,6 +917,27 @@ impl Manager {
         }
     }
 
+    /// A slot's run counters, as read from the board.
+    pub(crate) fn figures(&self, s: usize) -> Figures {
+        let slot = self.board.slot(s);
+        let runs = slot.runs.load(Ordering::Acquire);
+        let total = slot.compute_ns_total.load(Ordering::Acquire);
+        Figures {
+            runs,
+            skips: slot.skips.load(Ordering::Acquire),
+            failures: slot.failures.load(Ordering::Acquire),
+            compute_us_mean: if runs == 0 {
+                0.0
+            } else {
+                total as f64 / runs as f64 / 1000.0
+            },
+            compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
+            last_cycle: slot.done_cycle.load(Ordering::Acquire),
+            last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
+            last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
+        }
+    }
+
     /// Figures of the run so far.
     pub fn report(&self) -> Report {
         let skills = self
@@ -912,9 +945,7 @@ impl Manager {
             .iter()
             .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
             .map(|(s, e)| {
-                let slot = self.board.slot(s);
-                let runs = slot.runs.load(Ordering::Acquire);
-                let total = slot.compute_ns_total.load(Ordering::Acquire);
+                let f = self.figures(s);
                 SkillReport {
                     name: e.decl.name.clone(),
                     kind: e.decl.kind.clone(),
@@ -922,18 +953,14 @@ impl Manager {
                     active: e.active,
                     priority: e.decl.priority,
                     pid: e.decl.pid,
-                    runs,
-                    skips: slot.skips.load(Ordering::Acquire),
-                    failures: slot.failures.load(Ordering::Acquire),
-                    compute_us_mean: if runs == 0 {
-                        0.0
-                    } else {
-                        total as f64 / runs as f64 / 1000.0
-                    },
-                    compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
-                    last_cycle: slot.done_cycle.load(Ordering::Acquire),
-                    last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
-                    last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
+                    runs: f.runs,
+                    skips: f.skips,
+                    failures: f.failures,
+                    compute_us_mean: f.compute_us_mean,
+                    compute_us_last: f.compute_us_last,
+                    last_cycle: f.last_cycle,
+                    last_start_ns: f.last_start_ns,
+                    last_end_ns: f.last_end_ns,
                 }
             })
             .collect();

@@ -268,22 +268,24 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             } else if Some(id) == near && phase == 1 {
                 phase = 2;
                 c.set_param("avoid", "safe_distance", "0.2")?;
-                c.activate(&["door_locate", "go_through"])?;
+                c.set_param("wall_follow", "side", "-1")?;
+                c.deactivate(&["home"])?;
+                c.activate(&["door_locate", "go_through", "wall_follow"])?;
                 step(
                     &c,
                     &mut out,
-                    "near the door: avoid.safe_distance = 0.2; activate door_locate + go_through",
+                    "near the barcode: avoid.safe_distance = 0.2; home -> wall_follow (wall on the left); activate door_locate + go_through",
                     &mut rows,
                 );
                 located =
                     Some(c.add_monitor("door_locate.door.found == 1", MonitorMode::Once, 0)?);
             } else if Some(id) == located && phase == 2 {
                 phase = 3;
-                c.deactivate(&["home"])?;
+                c.deactivate(&["wall_follow"])?;
                 step(
                     &c,
                     &mut out,
-                    "door located: home off, go_through drives",
+                    "door located: wall_follow off, go_through drives",
                     &mut rows,
                 );
             }

@@ -160,9 +160,12 @@ pub struct WallFollowParams {
     /// Steering gain (rad/s per m).
     #[param(default = 1.5, min = 0.0, max = 10.0)]
     pub gain: f64,
+    /// Which side the wall is on: 1 right, -1 left.
+    #[param(default = 1, min = -1, max = 1)]
+    pub side: i32,
 }
 
-/// Hallway following: keeps `distance` from the wall on the right.
+/// Hallway following: keeps `distance` from the wall on the right (or left).
 #[derive(Default)]
 pub struct WallFollow;
 
@@ -178,14 +181,25 @@ impl Skill for WallFollow {
         o: &mut DriveOut,
     ) -> SkillResult {
         let p = ctx.params;
-        let right = min_in(&i.sonar, -1.9, -1.2);
-        if !right.is_finite() {
-            return Ok(());
-        }
-        let err = (right - p.distance).clamp(-1.0, 1.0);
+        let side = if p.side < 0 { -1.0 } else { 1.0 };
+        let (lo, hi) = if side > 0.0 { (-1.9, -1.2) } else { (1.2, 1.9) };
+        let beside = min_in(&i.sonar, lo, hi);
+        // A wall ahead: turn away from the wall side first.
+        let ahead = min_in(&i.sonar, -0.5, 0.5);
+        let err = if ahead < p.distance + 0.4 {
+            -1.0
+        } else if beside.is_finite() {
+            (beside - p.distance).clamp(-1.0, 1.0)
+        } else {
+            1.0
+        };
         o.drive.set(Drive {
-            translate: p.speed,
-            rotate: -p.gain * err,
+            translate: if ahead < p.distance + 0.2 {
+                0.0
+            } else {
+                p.speed
+            },
+            rotate: -side * p.gain * err,
         });
         Ok(())
     }

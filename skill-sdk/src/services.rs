@@ -37,6 +37,22 @@ fn transport(what: String, e: impl std::fmt::Debug) -> SdkError {
     }
 }
 
+/// The fabric's sizes of a topic service: every opener (typed or not) asks for the same.
+fn topic_qos<P: std::fmt::Debug + IceoryxSend + ?Sized>(
+    builder: iceoryx2::service::builder::publish_subscribe::Builder<P, SampleHeader, ipc::Service>,
+    topic: &str,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<P, SampleHeader, ipc::Service> {
+    let (publishers, buffer) = topic_sizes(topic);
+    builder
+        .max_publishers(publishers)
+        .max_subscribers(TOPIC_MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .history_size(1)
+        .subscriber_max_buffer_size(buffer)
+        .subscriber_max_borrowed_samples(SUBSCRIBER_BORROWED)
+        .enable_safe_overflow(true)
+}
+
 /// (max publishers, max subscriber buffer) of a topic: channel proposal topics have many
 /// publishers and a buffer for one proposal of each per cycle.
 fn topic_sizes(topic: &str) -> (usize, usize) {
@@ -60,17 +76,11 @@ fn pubsub<T: Message>(
     SdkError,
 > {
     let name = crate::names::topic(topic);
-    let (publishers, buffer) = topic_sizes(topic);
-    node.service_builder(&service_name(&name)?)
+    let builder = node
+        .service_builder(&service_name(&name)?)
         .publish_subscribe::<T>()
-        .user_header::<SampleHeader>()
-        .max_publishers(publishers)
-        .max_subscribers(TOPIC_MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .history_size(1)
-        .subscriber_max_buffer_size(buffer)
-        .subscriber_max_borrowed_samples(SUBSCRIBER_BORROWED)
-        .enable_safe_overflow(true)
+        .user_header::<SampleHeader>();
+    topic_qos(builder, topic)
         .open_or_create()
         .map_err(|e| transport(format!("open topic '{topic}' ({})", T::TYPE_NAME), e))
 }
@@ -201,22 +211,13 @@ impl RawReader {
         .map_err(|e| transport(format!("type name '{}'", schema.type_name), e))?;
         // SAFETY: the details are those of the producer's type (same schema), so the segment
         // holds `size` bytes of that layout per sample; we only ever read them as bytes.
-        let (publishers, buffer) = topic_sizes(topic);
-        let factory = unsafe {
+        let builder = unsafe {
             node.service_builder(&service_name(&name)?)
                 .publish_subscribe::<[CustomPayloadMarker]>()
                 .user_header::<SampleHeader>()
                 .__internal_set_payload_type_details(&details)
-        }
-        .max_publishers(publishers)
-        .max_subscribers(TOPIC_MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .history_size(1)
-        .subscriber_max_buffer_size(buffer)
-        .subscriber_max_borrowed_samples(SUBSCRIBER_BORROWED)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| {
+        };
+        let factory = topic_qos(builder, topic).open_or_create().map_err(|e| {
             transport(
                 format!("open topic '{topic}' ({}) untyped", schema.type_name),
                 e,

@@ -638,23 +638,19 @@ impl Manager {
             let winner = (winner > 0).then(|| name_of(winner as usize - 1)).flatten();
             let contributors: Vec<usize> =
                 (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0).collect();
-            let weight = |s: usize| -> f64 {
-                if ch.policy == skill_sdk::decl::Policy::Priority {
-                    return 1.0;
-                }
-                let w = |s: usize| {
-                    f64::from(self.board.slot(s).priority.load(Ordering::Acquire).max(0))
-                };
-                let total: f64 = contributors.iter().map(|&c| w(c)).sum();
-                if total > 0.0 {
-                    w(s) / total
-                } else {
-                    1.0 / contributors.len() as f64
-                }
+            let weights: Vec<f64> = if ch.policy == skill_sdk::decl::Policy::Priority {
+                vec![1.0; contributors.len()]
+            } else {
+                let priorities: Vec<i32> = contributors
+                    .iter()
+                    .map(|&s| self.board.slot(s).priority.load(Ordering::Acquire))
+                    .collect();
+                skill_sdk::actuation::blend_weights(&priorities)
             };
             let weights = contributors
                 .iter()
-                .filter_map(|&s| name_of(s).map(|n| (n, weight(s))))
+                .zip(weights)
+                .filter_map(|(&s, w)| name_of(s).map(|n| (n, w)))
                 .collect();
             let view = ChannelView {
                 device: name_of(ch.device).unwrap_or_default(),

@@ -91,6 +91,18 @@ pub fn blend<T: Message>(leaves: &[(usize, Prim)], items: &[(f64, &T)]) -> T {
     out
 }
 
+/// The blend weights of proposers with these priorities, normalised to sum to 1: each
+/// weight is `max(priority, 0)`; if all are 0, all are equal. The device and the manager's
+/// report use this one rule.
+pub fn blend_weights(priorities: &[i32]) -> Vec<f64> {
+    let mut w: Vec<f64> = priorities.iter().map(|p| f64::from((*p).max(0))).collect();
+    if w.iter().all(|x| *x == 0.0) {
+        w.iter_mut().for_each(|x| *x = 1.0);
+    }
+    let total: f64 = w.iter().sum();
+    w.iter().map(|x| x / total).collect()
+}
+
 /// Picks the command of a cycle from `proposals` (slot → value) of `candidates`.
 pub fn arbitrate<T: Message + Actuation>(
     policy: Policy,
@@ -107,21 +119,15 @@ pub fn arbitrate<T: Message + Actuation>(
     }
     match (policy, leaves) {
         (Policy::Blend, Some(leaves)) => {
-            let mut w: Vec<f64> = live
-                .iter()
-                .map(|(c, _)| f64::from(c.priority.max(0)))
-                .collect();
-            if w.iter().all(|x| *x == 0.0) {
-                w.iter_mut().for_each(|x| *x = 1.0);
-            }
+            let priorities: Vec<i32> = live.iter().map(|(c, _)| c.priority).collect();
+            let w = blend_weights(&priorities);
             let items: Vec<(f64, &T)> =
                 w.iter().copied().zip(live.iter().map(|(_, v)| v)).collect();
-            let total: f64 = w.iter().sum();
             let cmd = blend(leaves, &items);
             let weights = live
                 .iter()
                 .zip(&w)
-                .map(|((c, _), x)| (c.slot, x / total))
+                .map(|((c, _), x)| (c.slot, *x))
                 .collect();
             (
                 cmd,

@@ -826,6 +826,14 @@ impl<D: Device> Unit for DeviceUnit<D> {
             }
             channels.push(cands);
         }
+        // A proposer publishes its proposal before it marks its run done, but the proposal
+        // may have landed after the poll of this wake-up: receive again now that everyone has
+        // settled, or a proposal made in time would count as none.
+        for i in io.inputs.iter_mut() {
+            if let Err(e) = i.poll() {
+                tracing::warn!(cycle = k, error = %e, "proposals not received");
+            }
+        }
         let start = now_ns();
         for (c, cands) in channels.iter().enumerate() {
             let Some(ch) = io.inputs[c].as_channel() else {

@@ -10,15 +10,25 @@ use skill_sdk::value::Value;
 use skillfab_tests::{TestDomain, registered};
 use std::time::Duration;
 
-/// `skillfab up` with a mock device and the given proposer entries.
+/// `skillfab up` with a mock device and the given proposer entries, cycling every 5 ms.
 fn network(
     tag: &str,
     device_args: &str,
     proposers: &[(&str, i32, f64, f64)],
 ) -> (TestDomain, Client) {
+    network_at(tag, 5.0, device_args, proposers)
+}
+
+/// [`network`] with the given cycle period (0: back to back).
+fn network_at(
+    tag: &str,
+    period_ms: f64,
+    device_args: &str,
+    proposers: &[(&str, i32, f64, f64)],
+) -> (TestDomain, Client) {
     let mut t = TestDomain::new(tag);
     let mut launch = format!(
-        "[manager]\nperiod_ms = 5\ndeadline_ms = 2000\n[[process]]\nname = \"dev\"\nbin = \"{{bin:mock-device}}\"\nargs = [{device_args}]\n"
+        "[manager]\nperiod_ms = {period_ms}\ndeadline_ms = 2000\n[[process]]\nname = \"dev\"\nbin = \"{{bin:mock-device}}\"\nargs = [{device_args}]\n"
     );
     for (name, prio, v, w) in proposers {
         launch.push_str(&format!(
@@ -204,6 +214,32 @@ fn nobody_proposing_yields_the_safe_command() {
     t.wait_until("cycles without proposals", || {
         c.stats().unwrap().cycles > k + 20
     });
+}
+
+#[test]
+fn a_proposal_made_in_every_cycle_is_never_missed() {
+    // Back to back, the proposer's proposal and its "done" reach the device in either order;
+    // the device must arbitrate on the proposal, never on "done, nothing proposed".
+    let (t, mut c) = network_at("steady", 0.0, "", &[("only", 1, 1.0, 0.0)]);
+    wait_channel(&t, &c, "only to win", |v| {
+        winner(v).as_deref() == Some("only")
+    });
+    c.subscribe().unwrap();
+    let from = c.stats().unwrap().cycles;
+    let mut lost = Vec::new();
+    while c.stats().unwrap().cycles < from + 3000 {
+        while let Some(ev) = c.next_event(Duration::from_millis(10)).unwrap() {
+            if let EventKind::ChannelWinner { winner, .. } = ev.kind
+                && winner.as_deref() != Some("only")
+            {
+                lost.push(ev.cycle);
+            }
+        }
+    }
+    assert!(
+        lost.is_empty(),
+        "cycles where the proposal was missed: {lost:?}"
+    );
 }
 
 #[test]

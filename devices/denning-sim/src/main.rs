@@ -6,23 +6,20 @@
 //! commands, the 2 s watchdog. Bytes are paced at the baud rate; `--time-factor` runs faster
 //! than real time; `--corrupt-rate`/`--drop-rate` inject faults into the robot's output.
 
-mod sim;
-mod world;
-
 use anyhow::{Context, bail};
 use clap::Parser;
 use denning::codec::{Command, Decoder, Packet};
+use denning_sim::sim::{Rng, Sim};
+use denning_sim::world::World;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::pty::openpty;
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-use sim::{Rng, Sim};
 use std::io::Write;
 use std::os::fd::{AsFd, AsRawFd, OwnedFd};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use world::World;
 
 #[derive(Parser, Debug)]
 #[command(

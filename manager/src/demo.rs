@@ -2,11 +2,13 @@
 //! library drives the simulated Denning robot out of the lab:
 //!
 //! 1. activate wander + avoid + barcode_track; a monitor waits for the door's barcode;
-//! 2. switch wander for home (drive to the barcode);
-//! 3. near the barcode, lower `avoid.safe_distance` for the tight passage (the paper's
-//!    example of parameterising a skill) and activate door_locate + go_through;
-//! 4. once the door is located, homing ends; when the simulator's ground truth says the
-//!    robot is outside, stop it, restore the parameter, and report.
+//! 2. switch wander for home (drive to the barcode) and let door_locate look;
+//! 3. near the barcode, follow its wall (on the left; after 4 m without a door, home again
+//!    and follow it the other way) while door_locate gathers evidence;
+//! 4. once the door is located, lower `avoid.safe_distance` for the tight passage (the
+//!    paper's example of parameterising a skill) and let go_through drive; when the
+//!    simulator's ground truth says the robot is outside, stop it, restore the parameter,
+//!    and report.
 
 use crate::launch::find_program;
 use anyhow::{Context, bail};
@@ -207,6 +209,87 @@ fn connect(net: &Network) -> anyhow::Result<Client> {
     }
 }
 
+/// Where the sequencer is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// Wandering until the barcode is seen.
+    Search,
+    /// Homing on the barcode.
+    Home,
+    /// Following the wall from the barcode with the wall on this side (-1 left, 1 right).
+    Follow(i32),
+    /// Back to the barcode after following the wall on the left in vain.
+    Return,
+    /// Driving through the located door.
+    Through,
+}
+
+/// The exit-lab sequencer: which skills run in each phase, and the monitor that ends it.
+/// Barcode seen: wander -> home (and door_locate looks). Near the barcode: follow the wall
+/// with it on the left; 4 m away without a door, home again and follow it on the right. Door
+/// located (in any phase): lower `avoid.safe_distance` for the tight passage, go_through.
+struct Sequencer {
+    phase: Phase,
+    seen: u64,
+    near: Option<u64>,
+    far: Option<u64>,
+    found: Option<u64>,
+}
+
+impl Sequencer {
+    /// Reacts to a monitor firing; returns the step to report.
+    fn on_monitor(&mut self, c: &Client, id: u64) -> anyhow::Result<Option<String>> {
+        let near_code =
+            |c: &Client| c.add_monitor("barcode_track.target.range < 1.7", MonitorMode::Once, 2);
+        let step = match self.phase {
+            _ if Some(id) == self.found && self.phase != Phase::Through => {
+                self.phase = Phase::Through;
+                c.set_param("avoid", "safe_distance", "0.2")?;
+                c.deactivate(&["home", "wall_follow"])?;
+                c.activate(&["go_through"])?;
+                "door located: avoid.safe_distance = 0.2 for the passage; go_through drives"
+                    .to_string()
+            }
+            Phase::Search if id == self.seen => {
+                self.phase = Phase::Home;
+                c.deactivate(&["wander"])?;
+                c.activate(&["home", "door_locate"])?;
+                self.near = Some(near_code(c)?);
+                self.found =
+                    Some(c.add_monitor("door_locate.door.found == 1", MonitorMode::Once, 0)?);
+                "barcode seen: wander -> home; door_locate looks".to_string()
+            }
+            Phase::Home | Phase::Return if Some(id) == self.near => {
+                let side = if self.phase == Phase::Home { -1 } else { 1 };
+                self.phase = Phase::Follow(side);
+                c.deactivate(&["home"])?;
+                c.set_param("wall_follow", "side", &side.to_string())?;
+                c.activate(&["wall_follow"])?;
+                if side < 0 {
+                    self.far = Some(c.add_monitor(
+                        "barcode_track.target.range > 4.0",
+                        MonitorMode::Once,
+                        2,
+                    )?);
+                }
+                format!(
+                    "near the barcode: home -> wall_follow, wall on the {}",
+                    if side < 0 { "left" } else { "right" }
+                )
+            }
+            Phase::Follow(-1) if Some(id) == self.far => {
+                self.phase = Phase::Return;
+                c.deactivate(&["wall_follow"])?;
+                c.activate(&["home"])?;
+                self.near = Some(near_code(c)?);
+                "no door within 4 m that way: wall_follow -> home, then the other way".to_string()
+            }
+            _ => return Ok(None),
+        };
+        Ok(Some(step))
+    }
+}
+
 /// One run of the experiment.
 pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOutcome> {
     let (net, traj) = start(opts, seed, run)?;
@@ -241,10 +324,13 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         "activate wander + avoid + barcode_track; monitor the door's barcode",
         &mut rows,
     );
-    let seen = c.add_monitor("barcode_track.target.seen == 1", MonitorMode::Once, 0)?;
-    let mut near = None;
-    let mut located = None;
-    let mut phase = 0;
+    let mut seq = Sequencer {
+        phase: Phase::Search,
+        seen: c.add_monitor("barcode_track.target.seen == 1", MonitorMode::Once, 0)?,
+        near: None,
+        far: None,
+        found: None,
+    };
     let started = Instant::now();
     loop {
         if INTERRUPTED.load(Ordering::Acquire) {
@@ -254,41 +340,10 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             bail!("the simulator wrote no ground truth within 30 s (see the log of skillfab up)");
         }
         let ev = c.next_event(Duration::from_millis(100))?;
-        if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
-            if id == seen && phase == 0 {
-                phase = 1;
-                c.deactivate(&["wander"])?;
-                c.activate(&["home"])?;
-                step(&c, &mut out, "barcode seen: wander -> home", &mut rows);
-                near = Some(c.add_monitor(
-                    "barcode_track.target.range < 1.7",
-                    MonitorMode::Once,
-                    2,
-                )?);
-            } else if Some(id) == near && phase == 1 {
-                phase = 2;
-                c.set_param("avoid", "safe_distance", "0.2")?;
-                c.set_param("wall_follow", "side", "-1")?;
-                c.deactivate(&["home"])?;
-                c.activate(&["door_locate", "go_through", "wall_follow"])?;
-                step(
-                    &c,
-                    &mut out,
-                    "near the barcode: avoid.safe_distance = 0.2; home -> wall_follow (wall on the left); activate door_locate + go_through",
-                    &mut rows,
-                );
-                located =
-                    Some(c.add_monitor("door_locate.door.found == 1", MonitorMode::Once, 0)?);
-            } else if Some(id) == located && phase == 2 {
-                phase = 3;
-                c.deactivate(&["wall_follow"])?;
-                step(
-                    &c,
-                    &mut out,
-                    "door located: wall_follow off, go_through drives",
-                    &mut rows,
-                );
-            }
+        if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind)
+            && let Some(what) = seq.on_monitor(&c, id)?
+        {
+            step(&c, &mut out, &what, &mut rows);
         }
         if let Some((t, _, _, collisions, outside)) = truth(&traj, &mut rows) {
             out.time_s = t;

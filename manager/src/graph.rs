@@ -347,8 +347,14 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
                         .iter()
                         .enumerate()
                         .filter(|(j, c)| {
+                            // A device is not a consumer of the proposals on its channels: a
+                            // proposal not made is no reason to cancel it (it settles on its
+                            // own once every proposer is done).
                             expected[*j] == Some(true)
-                                && c.decl.inputs.iter().any(|ci| ci.topic == o.topic)
+                                && c.decl
+                                    .inputs
+                                    .iter()
+                                    .any(|ci| is_data(ci) && ci.topic == o.topic)
                         })
                         .map(|(_, c)| c.slot)
                         .collect()

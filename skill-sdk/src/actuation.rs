@@ -17,7 +17,6 @@ use crate::value::kind_size;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::ipc;
-use iceoryx2::sample::Sample;
 use std::any::Any;
 use std::collections::HashMap;
 use std::ops::Deref;
@@ -165,8 +164,9 @@ pub struct ChannelPort<T: Actuation> {
     publisher: Publisher<ipc::Service, T, SampleHeader>,
     policy: Policy,
     leaves: Option<Vec<(usize, Prim)>>,
-    /// Newest proposal of each proposer slot.
-    latest: HashMap<u32, Sample<ipc::Service, T, SampleHeader>>,
+    /// Newest proposal of each proposer slot, copied out: a held sample would count against
+    /// the subscriber's few borrowed samples and block receiving the next proposals.
+    latest: HashMap<u32, (SampleHeader, T)>,
     command: T,
     header: SampleHeader,
     winner: Option<u32>,
@@ -177,7 +177,8 @@ impl<T: Actuation> ErasedInput for ChannelPort<T> {
         loop {
             match self.subscriber.receive() {
                 Ok(Some(s)) => {
-                    self.latest.insert(s.user_header().slot, s);
+                    self.latest
+                        .insert(s.user_header().slot, (*s.user_header(), *s.payload()));
                 }
                 Ok(None) => return Ok(()),
                 Err(e) => {
@@ -210,8 +211,8 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
         let proposal = |slot: u32| {
             latest
                 .get(&slot)
-                .filter(|s| s.user_header().cycle == cycle)
-                .map(|s| *s.payload())
+                .filter(|(h, _)| h.cycle == cycle)
+                .map(|(_, p)| *p)
         };
         let (cmd, arb) = arbitrate(self.policy, self.leaves.as_deref(), candidates, &proposal);
         self.command = cmd;
@@ -230,7 +231,7 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
     fn has_proposal(&self, slot: u32, cycle: u64) -> bool {
         self.latest
             .get(&slot)
-            .is_some_and(|s| s.user_header().cycle == cycle)
+            .is_some_and(|(h, _)| h.cycle == cycle)
     }
     fn publish(&mut self, header: SampleHeader) -> Result<(), crate::SdkError> {
         let mut s = self

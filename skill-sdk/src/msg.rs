@@ -194,4 +194,6 @@ pub struct Door {
     pub y: f64,
     /// Direction to drive through it (rad, odometry frame).
     pub heading: f64,
+    /// Width of the opening (m).
+    pub width: f64,
 }

@@ -230,6 +230,39 @@ impl Skill for Proposer {
     }
 }
 
+/// Input of [`Reactor`].
+#[derive(Inputs)]
+pub struct ReactorIn<'a> {
+    /// The mock device's state.
+    pub state: Input<'a, skill_sdk::msg::Tick>,
+}
+
+/// Sync, downstream of the mock device like a real controller of a real device: proposes a
+/// fixed drive command every cycle once the device's state is in (unless `propose=false`).
+#[derive(Default)]
+pub struct Reactor;
+
+impl Skill for Reactor {
+    type Params = ProposerParams;
+    type Inputs<'a> = ReactorIn<'a>;
+    type Outputs<'a> = ProposerOut<'a>;
+    fn compute(
+        &mut self,
+        ctx: &Ctx<ProposerParams>,
+        _: ReactorIn,
+        o: &mut ProposerOut,
+    ) -> SkillResult {
+        Proposer.compute(ctx, (), o)
+    }
+}
+
+/// Output of [`MockDevice`].
+#[derive(Outputs)]
+pub struct MockOut<'a> {
+    /// The cycle of the sample.
+    pub state: Output<'a, skill_sdk::msg::Tick>,
+}
+
 /// Channels of [`MockDevice`].
 #[derive(Inputs)]
 pub struct MockCommands<'a> {
@@ -237,7 +270,7 @@ pub struct MockCommands<'a> {
     pub drive: Command<'a, skill_sdk::msg::Drive>,
 }
 
-/// A device with one channel, `drive`; fails a cycle if it ever gets a command of another
+/// A device with one channel, `drive`, publishing its `state` each cycle; fails a cycle if it ever gets a command of another
 /// cycle (so "exactly one command per channel per cycle" shows as runs == cycles, failures == 0).
 #[derive(Default)]
 pub struct MockDevice {
@@ -246,9 +279,10 @@ pub struct MockDevice {
 
 impl Device for MockDevice {
     type Params = NoParams;
-    type Outputs<'a> = ();
+    type Outputs<'a> = MockOut<'a>;
     type Commands<'a> = MockCommands<'a>;
-    fn sample(&mut self, _: &Ctx<NoParams>, _: &mut ()) -> SkillResult {
+    fn sample(&mut self, ctx: &Ctx<NoParams>, o: &mut MockOut) -> SkillResult {
+        o.state.set(skill_sdk::msg::Tick { value: ctx.cycle });
         Ok(())
     }
     fn command(&mut self, ctx: &Ctx<NoParams>, c: MockCommands) -> SkillResult {

@@ -218,9 +218,22 @@ fn nobody_proposing_yields_the_safe_command() {
 
 #[test]
 fn a_proposal_made_in_every_cycle_is_never_missed() {
-    // Back to back, the proposer's proposal and its "done" reach the device in either order;
-    // the device must arbitrate on the proposal, never on "done, nothing proposed".
-    let (t, mut c) = network_at("steady", 0.0, "", &[("only", 1, 1.0, 0.0)]);
+    // Back to back, a proposer's proposal and its "done" reach the device in either order;
+    // the device must arbitrate on the proposal, never on "done, nothing proposed". A quiet
+    // proposer finishing first must not cancel the device's cycle either; and the device
+    // keeps more proposals than a subscriber may borrow samples.
+    let (t, mut c) = network_at(
+        "steady",
+        0.0,
+        "",
+        &[
+            ("only", 5, 1.0, 0.0),
+            ("b", 1, 2.0, 0.0),
+            ("c", 2, 3.0, 0.0),
+            ("quiet", 9, 4.0, 0.0),
+        ],
+    );
+    c.set_param("quiet", "propose", "false").unwrap();
     wait_channel(&t, &c, "only to win", |v| {
         winner(v).as_deref() == Some("only")
     });
@@ -243,6 +256,50 @@ fn a_proposal_made_in_every_cycle_is_never_missed() {
 }
 
 #[test]
+fn a_quiet_proposer_downstream_of_the_device_does_not_cancel_the_others() {
+    // Proposers that read the device's state, as real controllers do. The quiet one finishes
+    // first without proposing; that is no reason to cancel the device's cycle, nor the other
+    // proposer's run with it.
+    let mut t = TestDomain::new("reactors");
+    let launch = t.launch_file(
+        "[manager]\nperiod_ms = 0\ndeadline_ms = 2000\n\
+         [[process]]\nname = \"dev\"\nbin = \"{bin:mock-device}\"\n\
+         [[process]]\nname = \"steady\"\nbin = \"{bin:reactor}\"\npriority = 5\nparams = { translate = 1.0 }\n\
+         [[process]]\nname = \"quiet\"\nbin = \"{bin:reactor}\"\npriority = 9\nparams = { propose = false }\n",
+    );
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("the network to run", || {
+        ["dev", "steady", "quiet"]
+            .iter()
+            .all(|n| registered(&board, n).is_some_and(|s| s.runs > 3))
+    });
+    let mut c = Client::connect(&t.domain).unwrap();
+    wait_channel(&t, &c, "steady to win", |v| {
+        winner(v).as_deref() == Some("steady")
+    });
+    c.subscribe().unwrap();
+    let from = c.stats().unwrap().cycles;
+    let mut lost = Vec::new();
+    while c.stats().unwrap().cycles < from + 3000 {
+        while let Some(ev) = c.next_event(Duration::from_millis(10)).unwrap() {
+            if let EventKind::ChannelWinner { winner, .. } = ev.kind
+                && winner.as_deref() != Some("steady")
+            {
+                lost.push(ev.cycle);
+            }
+        }
+    }
+    assert!(
+        lost.is_empty(),
+        "cycles where the proposal was missed: {lost:?}"
+    );
+    let s = c.stats().unwrap();
+    let steady = s.skills.iter().find(|k| k.0 == "steady").unwrap();
+    assert_eq!(steady.3, 0, "no failed runs: {steady:?}");
+}
+
+#[test]
 fn ties_go_to_the_name_that_sorts_first_in_every_run() {
     for order in [["beta", "alpha"], ["alpha", "beta"]] {
         let (t, c) = network(
@@ -258,7 +315,11 @@ fn ties_go_to_the_name_that_sorts_first_in_every_run() {
 #[test]
 fn a_second_device_for_a_channel_is_refused() {
     let (t, _c) = network("twodev", "", &[]);
-    let out = t.run("mock-device", &["--name", "dev2"]);
+    // Its own state topic: only the channel is in conflict.
+    let out = t.run(
+        "mock-device",
+        &["--name", "dev2", "--remap", "state=dev2_state"],
+    );
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(

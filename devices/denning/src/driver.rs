@@ -21,7 +21,8 @@ pub const SONARS: usize = 24;
 pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(500);
 /// A link without a valid packet for this long is reconnected.
 pub const LINK_TIMEOUT: Duration = Duration::from_secs(1);
-/// How often the drive command (and so the keep-alive) is sent.
+/// How often an unchanged drive command is sent again (the keep-alive); a changed one is
+/// sent at once.
 pub const RESEND: Duration = Duration::from_millis(100);
 
 /// What the robot reported last.
@@ -190,6 +191,7 @@ fn session(
     let mut origin: Option<(u16, u16)> = None;
     let mut acc = (0i64, 0i64);
     let mut last_sent = Instant::now() - RESEND;
+    let mut last_wire: Option<(i16, i16)> = None;
     let mut last_packet = Instant::now();
     let base = *total;
     while !stop.load(Ordering::Acquire) {
@@ -221,17 +223,21 @@ fn session(
         if now.duration_since(last_packet) > LINK_TIMEOUT {
             return Err(io::Error::new(io::ErrorKind::TimedOut, "no packet for 1 s"));
         }
-        if now.duration_since(last_sent) >= RESEND {
+        // A changed command goes out at once; an unchanged one is repeated as the keep-alive.
+        let cmd = lock(shared).command;
+        let (v, w) = match cmd {
+            Some((vw, at)) if now.duration_since(at) < COMMAND_TIMEOUT => vw,
+            _ => (0.0, 0.0),
+        };
+        let wire = (
+            (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16,
+            (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16,
+        );
+        if Some(wire) != last_wire || now.duration_since(last_sent) >= RESEND {
             last_sent = now;
-            let cmd = lock(shared).command;
-            let (v, w) = match cmd {
-                Some((vw, at)) if now.duration_since(at) < COMMAND_TIMEOUT => vw,
-                _ => (0.0, 0.0),
-            };
-            let mms = (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16;
-            let dds = (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16;
-            t.write_all(&Command::Vel(mms).encode())?;
-            t.write_all(&Command::RVel(dds).encode())?;
+            last_wire = Some(wire);
+            t.write_all(&Command::Vel(wire.0).encode())?;
+            t.write_all(&Command::RVel(wire.1).encode())?;
         }
     }
     Ok(())

@@ -5,8 +5,9 @@ use std::io;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::time::Duration;
 
-/// How long one read waits for bytes.
-pub const READ_TIMEOUT: Duration = Duration::from_millis(20);
+/// How long one read waits for bytes: also the longest a changed drive command waits before
+/// the driver sends it.
+pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
 
 /// A bidirectional byte stream.
 pub trait Transport: Send {

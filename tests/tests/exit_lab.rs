@@ -1,0 +1,176 @@
+//! The exit-lab experiment end to end, in fast time: `skillfab demo exit-lab` starts the
+//! simulator on a pty, the Denning device process, every standard skill and a manager in a
+//! private domain, and its sequencer drives the robot out through the door. A small room
+//! keeps the run short.
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use nix::sys::signal::Signal;
+use skillfab_tests::TestDomain;
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+/// A 7 m × 5 m room with a 1.2 m door in the east wall and the barcode 0.7 m north of it;
+/// the robot starts 4 m away, facing the barcode's wall.
+const ROOM: &str = r#"
+name = "test-doorway"
+start = [3.0, 3.2, 0.0]
+outside = { min = [7.5, -10.0], max = [20.0, 15.0] }
+[[wall]]
+from = [0.0, 0.0]
+to = [7.0, 0.0]
+[[wall]]
+from = [7.0, 0.0]
+to = [7.0, 1.8]
+[[wall]]
+from = [7.0, 3.0]
+to = [7.0, 5.0]
+[[wall]]
+from = [7.0, 5.0]
+to = [0.0, 5.0]
+[[wall]]
+from = [0.0, 5.0]
+to = [0.0, 0.0]
+[[door]]
+from = [7.0, 1.8]
+to = [7.0, 3.0]
+[[barcode]]
+id = 7
+at = [6.95, 3.7]
+"#;
+
+fn world(t: &TestDomain) -> PathBuf {
+    let path = t.dir.join("doorway.toml");
+    std::fs::write(&path, ROOM).unwrap();
+    path
+}
+
+fn demo(t: &TestDomain, args: &[&str]) -> Child {
+    let w = world(t);
+    let mut c = t.command("skillfab");
+    c.args(["demo", "exit-lab", "--world", w.to_str().unwrap()])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    c.spawn().unwrap()
+}
+
+/// Nothing of the demo with process id `pid` is left: no process whose command line names
+/// its domain or directory, no shared-memory file, no iceoryx2 root.
+fn assert_nothing_left(pid: u32) {
+    let tag = format!("demo-{pid}-");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let procs: Vec<String> = std::fs::read_dir("/proc")
+            .unwrap()
+            .flatten()
+            .filter_map(|e| std::fs::read(e.path().join("cmdline")).ok())
+            .map(|c| String::from_utf8_lossy(&c).replace('\0', " "))
+            .filter(|c| c.contains(&tag))
+            .collect();
+        let shm: Vec<String> = std::fs::read_dir("/dev/shm")
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(&tag))
+            .collect();
+        let root = PathBuf::from(format!("/tmp/skillfab/{tag}0"));
+        if procs.is_empty() && shm.is_empty() && !root.exists() {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "left behind: processes {procs:?}, shared memory {shm:?}, root {} exists: {}",
+            root.display(),
+            root.exists()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn the_sequencer_drives_the_robot_out_of_the_room() {
+    let t = TestDomain::new("exitlab");
+    let child = demo(
+        &t,
+        &[
+            "--seed",
+            "1",
+            "--runs",
+            "1",
+            "--time-factor",
+            "2",
+            "--limit-s",
+            "150",
+            "--json",
+        ],
+    );
+    let pid = child.id();
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(summary["runs"], 1);
+    assert_eq!(summary["successes"], 1, "{summary}");
+    let run = &summary["runs_detail"][0];
+    assert_eq!(run["collisions"], 0, "{run}");
+    let t_out = run["time_s"].as_f64().unwrap();
+    assert!(t_out > 5.0 && t_out < 150.0, "{run}");
+    assert_eq!(summary["median_time_s"].as_f64(), Some(t_out));
+    // The paper's sequence, in order, each at a later cycle.
+    let steps: Vec<(String, u64)> = run["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s[0].as_str().unwrap().to_string(), s[1].as_u64().unwrap()))
+        .collect();
+    let at = |what: &str| {
+        steps
+            .iter()
+            .position(|(s, _)| s.starts_with(what))
+            .unwrap_or_else(|| panic!("no step '{what}' in {steps:?}"))
+    };
+    let order = [
+        at("activate wander"),
+        at("barcode seen"),
+        at("door located"),
+        at("outside the lab"),
+    ];
+    assert!(order.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+    assert!(
+        order.windows(2).all(|w| steps[w[0]].1 < steps[w[1]].1),
+        "cycles increase: {steps:?}"
+    );
+    assert_nothing_left(pid);
+}
+
+#[test]
+fn ctrl_c_leaves_no_process_or_shared_memory_behind() {
+    let t = TestDomain::new("exitlabint");
+    let mut child = demo(&t, &["--seed", "2", "--time-factor", "2"]);
+    let pid = child.id();
+    // Interrupt once the sequencer has started.
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let line = lines.next().expect("demo output").unwrap();
+        if line.contains("activate wander") {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the sequencer did not start");
+    }
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGINT).unwrap();
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "an interrupted demo is not a success");
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(err.contains("interrupted"), "{err}");
+    assert_nothing_left(pid);
+}

@@ -407,7 +407,7 @@ impl Manager {
                 let mut paths = Vec::new();
                 for p in expr::paths(&parsed) {
                     let aggregate = !parsed_is_scalar_use(&parsed, p);
-                    let (topic, field) =
+                    let (topic, field, slot) =
                         self.resolve_path(&p.skill, &p.output, &p.field, &p.text)?;
                     check_numeric(&field, aggregate).map_err(|reason| ControlError::BadPath {
                         path: p.text.clone(),
@@ -418,6 +418,7 @@ impl Manager {
                         path: p.clone(),
                         topic,
                         field,
+                        slot,
                     });
                 }
                 let id = self.next_monitor;
@@ -652,7 +653,7 @@ impl Manager {
         output: &str,
         field: &str,
         text: &str,
-    ) -> Result<(String, FieldPath), ControlError> {
+    ) -> Result<(String, FieldPath, Option<u32>), ControlError> {
         let bad = |reason: String| ControlError::BadPath {
             path: text.to_string(),
             reason,
@@ -674,7 +675,9 @@ impl Manager {
                 ))
             })?;
         let f = value::resolve(&port.schema, field).map_err(|err| bad(err.reason))?;
-        Ok((port.topic.clone(), f))
+        // Every proposer publishes on its channel's topic: read this skill's own proposals.
+        let slot = (port.kind == skill_sdk::decl::PortKind::Proposal).then_some(s as u32);
+        Ok((port.topic.clone(), f, slot))
     }
 
     fn open_reader(&mut self, skill: &str, output: &str) -> Result<(), ControlError> {
@@ -796,7 +799,7 @@ impl Manager {
         })?;
         let split = rest.find(['.', '[']).unwrap_or(rest.len());
         let (output, field) = (&rest[..split], &rest[split..]);
-        let (topic, f) = self.resolve_path(skill, output, field, text)?;
+        let (topic, f, slot) = self.resolve_path(skill, output, field, text)?;
         self.open_reader(skill, output)?;
         let reader = self
             .readers
@@ -806,7 +809,7 @@ impl Manager {
             .poll()
             .map_err(|e| ControlError::Refused(e.to_string()))?;
         let (bytes, header) = reader
-            .latest()
+            .latest_of(slot)
             .ok_or_else(|| ControlError::NoValue(text.into()))?;
         let value = f
             .read(bytes)

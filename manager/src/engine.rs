@@ -706,7 +706,7 @@ impl Manager {
         }
         let readers = &self.readers;
         let read = |r: &crate::monitors::Resolved| {
-            let (bytes, _) = readers.get(&r.topic)?.latest()?;
+            let (bytes, _) = readers.get(&r.topic)?.latest_of(r.slot)?;
             r.field.read(bytes)
         };
         for m in &mut self.monitors {
@@ -714,7 +714,12 @@ impl Manager {
                 let stamp_ns = m
                     .paths
                     .iter()
-                    .filter_map(|p| readers.get(&p.topic)?.latest().map(|(_, h)| h.stamp_ns))
+                    .filter_map(|p| {
+                        readers
+                            .get(&p.topic)?
+                            .latest_of(p.slot)
+                            .map(|(_, h)| h.stamp_ns)
+                    })
                     .max()
                     .unwrap_or(0);
                 self.outbox.push(EventKind::MonitorFired {

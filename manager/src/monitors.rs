@@ -15,6 +15,8 @@ pub struct Resolved {
     pub topic: String,
     /// Where in the message.
     pub field: FieldPath,
+    /// On a proposal topic: the proposer's board slot (only its samples count).
+    pub slot: Option<u32>,
 }
 
 /// One installed monitor.
@@ -135,6 +137,7 @@ mod tests {
         let r = Resolved {
             path: p,
             topic: "b".into(),
+            slot: None,
             field: FieldPath {
                 offset: 0,
                 kind: FieldKind::Prim(Prim::F64),

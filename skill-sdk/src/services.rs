@@ -16,6 +16,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::marker::CustomPayloadMarker;
 use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
+use std::collections::HashMap;
 
 /// Publishers per topic: one producer, plus room for a restarted one during cleanup.
 pub const TOPIC_MAX_PUBLISHERS: usize = 4;
@@ -56,8 +57,7 @@ fn topic_qos<P: std::fmt::Debug + IceoryxSend + ?Sized>(
 /// (max publishers, max subscriber buffer) of a topic: channel proposal topics have many
 /// publishers and a buffer for one proposal of each per cycle.
 fn topic_sizes(topic: &str) -> (usize, usize) {
-    let is_proposals = topic.starts_with("channel/") && topic.matches('/').count() == 1;
-    if is_proposals {
+    if is_proposals(topic) {
         (CHANNEL_MAX_PUBLISHERS, CHANNEL_MAX_PUBLISHERS)
     } else {
         (TOPIC_MAX_PUBLISHERS, SUBSCRIBER_BUFFER)
@@ -95,6 +95,11 @@ pub fn publisher<T: Message>(
         .max_loaned_samples(2)
         .create()
         .map_err(|e| transport(format!("publisher on '{topic}'"), e))
+}
+
+/// Whether `topic` is a channel's proposal topic (many publishers, one per proposer).
+fn is_proposals(topic: &str) -> bool {
+    topic.starts_with("channel/") && topic.matches('/').count() == 1
 }
 
 /// Publishers of a channel's proposal topic: every skill that may propose on it.
@@ -192,6 +197,9 @@ pub struct RawReader {
     subscriber: Subscriber<ipc::Service, [CustomPayloadMarker], SampleHeader>,
     latest: Option<iceoryx2::sample::Sample<ipc::Service, [CustomPayloadMarker], SampleHeader>>,
     size: usize,
+    /// On a proposal topic, each proposer's newest sample (copied: held samples would use up
+    /// the few a subscriber may borrow), by its slot.
+    by_slot: Option<HashMap<u32, (Vec<u8>, SampleHeader)>>,
 }
 
 impl RawReader {
@@ -233,14 +241,23 @@ impl RawReader {
             subscriber,
             latest: None,
             size: schema.size as usize,
+            by_slot: is_proposals(topic).then(HashMap::new),
         })
     }
 
-    /// Takes every sample that arrived, keeping the newest.
+    /// Takes every sample that arrived, keeping the newest (and each proposer's newest).
     pub fn poll(&mut self) -> Result<(), SdkError> {
         loop {
             match self.subscriber.receive() {
-                Ok(Some(s)) => self.latest = Some(s),
+                Ok(Some(s)) => {
+                    if let Some(m) = self.by_slot.as_mut() {
+                        let ptr = s.payload().as_ptr().cast::<u8>();
+                        // SAFETY: as in `latest`: one value of `size` bytes, mapped while held.
+                        let bytes = unsafe { std::slice::from_raw_parts(ptr, self.size) };
+                        m.insert(s.user_header().slot, (bytes.to_vec(), *s.user_header()));
+                    }
+                    self.latest = Some(s);
+                }
                 Ok(None) => return Ok(()),
                 Err(e) => return Err(transport("untyped receive".into(), e)),
             }
@@ -255,6 +272,15 @@ impl RawReader {
         // and stays mapped while the sample is held.
         let bytes = unsafe { std::slice::from_raw_parts(ptr, self.size) };
         Some((bytes, *s.user_header()))
+    }
+
+    /// The newest sample published from board slot `slot` (on a proposal topic, where every
+    /// proposer publishes), or the newest of all when `slot` is `None`.
+    pub fn latest_of(&self, slot: Option<u32>) -> Option<(&[u8], SampleHeader)> {
+        match (slot, &self.by_slot) {
+            (Some(s), Some(m)) => m.get(&s).map(|(b, h)| (b.as_slice(), *h)),
+            _ => self.latest(),
+        }
     }
 }
 

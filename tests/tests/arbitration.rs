@@ -105,6 +105,13 @@ fn the_higher_priority_wins_and_a_runtime_priority_change_flips_it_next_cycle() 
         "the winner's proposal reaches the device: {v}"
     );
     assert_eq!(field(&v, "policy"), &Value::Text("priority".into()));
+    // Both publish on the channel's topic; each skill's query shows its own proposal.
+    for (skill, want) in [("lo", 1.0), ("hi", 2.0)] {
+        for _ in 0..20 {
+            let (got, _) = c.query(&format!("{skill}.drive.translate")).unwrap();
+            assert_eq!(got.as_f64(), Some(want), "{skill}.drive");
+        }
+    }
 
     c.subscribe().unwrap();
     c.set_priority("lo", 5).unwrap();

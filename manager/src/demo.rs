@@ -471,13 +471,19 @@ fn svg(world_text: &str, r: &RunOutcome) -> String {
         door: vec![],
         barcode: vec![],
     });
-    let (sx, sy, ox, oy, h) = (50.0, 50.0, 50.0, 50.0, 12.0);
+    // The map's top edge (m) sets the picture's; the steps are listed below the map.
+    let top = w
+        .wall
+        .iter()
+        .flat_map(|s| [s.from[1], s.to[1]])
+        .fold(0.0f64, f64::max);
+    let (sx, sy, ox, oy, h) = (50.0, 50.0, 50.0, 50.0, top + 0.5);
     let px = |x: f64| ox + x * sx;
     let py = |y: f64| oy + (h - y) * sy;
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
         px(14.0),
-        py(-2.0)
+        py(-1.2) + 16.0 * r.steps.len() as f64
     );
     for seg in &w.wall {
         s.push_str(&format!(
@@ -522,7 +528,7 @@ fn svg(world_text: &str, r: &RunOutcome) -> String {
         s.push_str(&format!(
             "<text x=\"{:.1}\" y=\"{:.1}\">{}. t={:.1}s {}</text>\n",
             px(0.0),
-            py(-0.6) + 16.0 * i as f64 - 40.0 + 60.0,
+            py(-0.8) + 16.0 * i as f64,
             i + 1,
             t,
             what.replace('<', "&lt;").replace('>', "&gt;")

@@ -647,11 +647,13 @@ impl Manager {
                     .collect();
                 skill_sdk::actuation::blend_weights(&priorities)
             };
-            let weights = contributors
+            // By name: slots follow the order in which processes happened to register.
+            let mut weights: Vec<(String, f64)> = contributors
                 .iter()
                 .zip(weights)
                 .filter_map(|(&s, w)| name_of(s).map(|n| (n, w)))
                 .collect();
+            weights.sort_by(|a, b| a.0.cmp(&b.0));
             let view = ChannelView {
                 device: name_of(ch.device).unwrap_or_default(),
                 policy: ch.policy,

@@ -1118,6 +1118,20 @@ mod tests {
         [[wall]]\nfrom = [2.0, 1.6]\nto = [2.0, 4.0]\n\
         [[barcode]]\nid = 7\nat = [1.95, -0.4]\n";
 
+    /// The door's barcode at `code`, seen before and out of view now, from pose `od`.
+    fn remembered(code: (f64, f64), od: &Odometry) -> Target {
+        let (dx, dy) = (code.0 - od.x, code.1 - od.y);
+        Target {
+            seen: true,
+            visible: false,
+            id: 7,
+            x: code.0,
+            y: code.1,
+            range: dx.hypot(dy),
+            bearing: wrap(dy.atan2(dx) - od.theta),
+        }
+    }
+
     #[test]
     fn door_locate_finds_the_opening_from_a_pass_along_the_wall() {
         let mut h = Harness::<DoorLocate>::new();
@@ -1127,19 +1141,7 @@ mod tests {
         let mut last = Door::default();
         pass(&mut h, DOOR_WORLD, path, |h, od| {
             h.input("odometry", *od);
-            let (dx, dy) = (code.0 - od.x, code.1 - od.y);
-            h.input(
-                "target",
-                Target {
-                    seen: true,
-                    visible: false,
-                    id: 7,
-                    x: code.0,
-                    y: code.1,
-                    range: dx.hypot(dy),
-                    bearing: wrap(dy.atan2(dx) - od.theta),
-                },
-            );
+            h.input("target", remembered(code, od));
             last = *h.step().unwrap().output::<Door>("door").unwrap();
         });
         assert!(last.found, "{last:?}");
@@ -1159,18 +1161,7 @@ mod tests {
         let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
         pass(&mut h, world, path, |h, od| {
             h.input("odometry", *od);
-            h.input(
-                "target",
-                Target {
-                    seen: true,
-                    visible: false,
-                    id: 7,
-                    x: 1.95,
-                    y: -0.4,
-                    range: (1.95 - od.x).hypot(-0.4 - od.y),
-                    bearing: 0.0,
-                },
-            );
+            h.input("target", remembered((1.95, -0.4), od));
             let d = *h.step().unwrap().output::<Door>("door").unwrap();
             assert!(!d.found, "no opening, no door: {d:?}");
         });

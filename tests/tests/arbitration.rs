@@ -223,6 +223,26 @@ fn nobody_proposing_yields_the_safe_command() {
     });
 }
 
+/// Watches `cycles` cycles of channel events: `winner` must win every one of them.
+fn assert_never_loses(c: &mut Client, winner: &str, cycles: u64) {
+    c.subscribe().unwrap();
+    let from = c.stats().unwrap().cycles;
+    let mut lost = Vec::new();
+    while c.stats().unwrap().cycles < from + cycles {
+        while let Some(ev) = c.next_event(Duration::from_millis(10)).unwrap() {
+            if let EventKind::ChannelWinner { winner: w, .. } = ev.kind
+                && w.as_deref() != Some(winner)
+            {
+                lost.push(ev.cycle);
+            }
+        }
+    }
+    assert!(
+        lost.is_empty(),
+        "cycles where the proposal was missed: {lost:?}"
+    );
+}
+
 #[test]
 fn a_proposal_made_in_every_cycle_is_never_missed() {
     // Back to back, a proposer's proposal and its "done" reach the device in either order;
@@ -244,22 +264,7 @@ fn a_proposal_made_in_every_cycle_is_never_missed() {
     wait_channel(&t, &c, "only to win", |v| {
         winner(v).as_deref() == Some("only")
     });
-    c.subscribe().unwrap();
-    let from = c.stats().unwrap().cycles;
-    let mut lost = Vec::new();
-    while c.stats().unwrap().cycles < from + 3000 {
-        while let Some(ev) = c.next_event(Duration::from_millis(10)).unwrap() {
-            if let EventKind::ChannelWinner { winner, .. } = ev.kind
-                && winner.as_deref() != Some("only")
-            {
-                lost.push(ev.cycle);
-            }
-        }
-    }
-    assert!(
-        lost.is_empty(),
-        "cycles where the proposal was missed: {lost:?}"
-    );
+    assert_never_loses(&mut c, "only", 3000);
 }
 
 #[test]
@@ -285,22 +290,7 @@ fn a_quiet_proposer_downstream_of_the_device_does_not_cancel_the_others() {
     wait_channel(&t, &c, "steady to win", |v| {
         winner(v).as_deref() == Some("steady")
     });
-    c.subscribe().unwrap();
-    let from = c.stats().unwrap().cycles;
-    let mut lost = Vec::new();
-    while c.stats().unwrap().cycles < from + 3000 {
-        while let Some(ev) = c.next_event(Duration::from_millis(10)).unwrap() {
-            if let EventKind::ChannelWinner { winner, .. } = ev.kind
-                && winner.as_deref() != Some("steady")
-            {
-                lost.push(ev.cycle);
-            }
-        }
-    }
-    assert!(
-        lost.is_empty(),
-        "cycles where the proposal was missed: {lost:?}"
-    );
+    assert_never_loses(&mut c, "steady", 3000);
     let s = c.stats().unwrap();
     let steady = s.skills.iter().find(|k| k.0 == "steady").unwrap();
     assert_eq!(steady.3, 0, "no failed runs: {steady:?}");

@@ -35,6 +35,9 @@ use std::thread::JoinHandle;
 
 type Pending = ActiveRequest<ipc::Service, [u8], (), [u8], ()>;
 
+/// Most cycle latencies one `Latencies` answer carries (a console's history).
+const MAX_LATENCIES: usize = 1024;
+
 /// A request handed from the control thread to the engine.
 pub(crate) struct Incoming {
     id: u64,
@@ -457,6 +460,22 @@ impl Manager {
             }
             Request::Step(_) => Ok(Reply::Stepped(self.cycle)),
             Request::Stats => Ok(Reply::Stats(self.stats_info())),
+            Request::Latencies(n) => Ok(Reply::Latencies {
+                cycle: self.cycle,
+                latency_us: self.stats.recent_us((n as usize).min(MAX_LATENCIES)),
+            }),
+            Request::SetIoLog { skill, on } => self.set_io_log(client, &skill, on),
+            Request::Logging => Ok(Reply::Logging {
+                file: self
+                    .recorder
+                    .as_ref()
+                    .map(|r| r.path().display().to_string()),
+                io_skills: {
+                    let mut v: Vec<String> = self.io_log.keys().cloned().collect();
+                    v.sort();
+                    v
+                },
+            }),
             Request::SetPriority { skill, priority } => {
                 let s = self.slot_of(&skill)?;
                 if let Some(e) = self.skills[s].as_mut() {
@@ -466,6 +485,13 @@ impl Manager {
                         // Written to the board at the next cycle start: arbitration changes
                         // from the next cycle.
                         self.dirty = true;
+                        if let Some(r) = &self.recorder {
+                            r.line(
+                                "priority",
+                                Some(self.in_progress()),
+                                serde_json::json!({"skill": skill, "old": old, "new": priority, "by": client}),
+                            );
+                        }
                         self.outbox.push(EventKind::PriorityChanged {
                             skill,
                             old,
@@ -477,6 +503,77 @@ impl Manager {
                 Ok(Reply::Done)
             }
         }
+    }
+
+    /// Starts or stops logging a skill's input and output samples to the fabric log.
+    fn set_io_log(&mut self, client: &str, skill: &str, on: bool) -> Response {
+        let s = self.slot_of(skill)?;
+        let e = self.skills[s]
+            .as_ref()
+            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        if !on {
+            if self.io_log.remove(skill).is_some()
+                && let Some(r) = &self.recorder
+            {
+                r.line(
+                    "iolog",
+                    Some(self.cycle),
+                    serde_json::json!({"skill": skill, "on": false, "by": client}),
+                );
+            }
+            return Ok(Reply::Done);
+        }
+        if self.recorder.is_none() {
+            return Err(ControlError::Refused(
+                "the manager has no fabric log file (see its start-up warning)".into(),
+            ));
+        }
+        let mut ports = Vec::new();
+        let sides = [("in", &e.decl.inputs), ("out", &e.decl.outputs)];
+        for (dir, decls) in sides {
+            for p in decls {
+                let field = value::resolve(&p.schema, "").map_err(|err| ControlError::BadPath {
+                    path: format!("{skill}.{}", p.port),
+                    reason: err.reason,
+                })?;
+                let slot = (dir == "out" && p.kind == skill_sdk::decl::PortKind::Proposal)
+                    .then_some(s as u32);
+                ports.push((
+                    dir,
+                    p.port.clone(),
+                    p.topic.clone(),
+                    p.schema.clone(),
+                    field,
+                    slot,
+                ));
+            }
+        }
+        let mut logged = Vec::new();
+        for (dir, port, topic, schema, field, slot) in ports {
+            if !self.readers.contains_key(&topic) {
+                let reader = RawReader::open(&self.node, &topic, &schema)
+                    .map_err(|e| ControlError::Refused(e.to_string()))?;
+                self.readers.insert(topic.clone(), reader);
+            }
+            logged.push(crate::engine::IoPort {
+                dir,
+                port,
+                topic,
+                type_name: schema.type_name.clone(),
+                field: std::sync::Arc::new(field),
+                slot,
+                last: self.cycle,
+            });
+        }
+        if let Some(r) = &self.recorder {
+            r.line(
+                "iolog",
+                Some(self.cycle),
+                serde_json::json!({"skill": skill, "on": true, "by": client}),
+            );
+        }
+        self.io_log.insert(skill.to_string(), logged);
+        Ok(Reply::Done)
     }
 
     fn list(&self) -> Vec<SkillInfo> {
@@ -636,6 +733,9 @@ impl Manager {
             .write_params(&bytes)
             .map_err(|err| ControlError::Refused(err.to_string()))?;
         tracing::info!(skill, param, %old, new = %value, by = client, cycle = self.cycle, "parameter changed");
+        if let Some(r) = &self.recorder {
+            r.param(self.in_progress(), skill, param, old, value, client);
+        }
         self.outbox.push(EventKind::ParamChanged {
             skill: skill.to_string(),
             param: param.to_string(),

@@ -9,6 +9,7 @@ use serde_json::{Value as Json, json};
 use skill_sdk::client::Client;
 use skill_sdk::control::{Event, EventKind, MonitorMode, SkillInfo};
 use skill_sdk::domain::Domain;
+use skill_sdk::logs::{Level, LogReader};
 use skill_sdk::params::ParamValue;
 use skill_sdk::value::Value;
 use std::time::Duration;
@@ -83,6 +84,32 @@ pub enum CtlCmd {
         #[arg(default_value_t = 1)]
         n: u64,
     },
+    /// Print skills' log lines as they come (the domain's log stream); Ctrl-C ends.
+    Logs {
+        /// Only this skill's lines.
+        skill: Option<String>,
+        /// Least severe level shown: error, warn, info, debug, trace.
+        #[arg(long, default_value = "trace")]
+        level: String,
+    },
+    /// Log a skill's input and output samples to the fabric log (on), or stop (off).
+    Iolog {
+        /// Skill name.
+        skill: String,
+        /// on or off.
+        #[arg(value_parser = ["on", "off"])]
+        state: String,
+    },
+    /// Where the manager's fabric log is, and whose samples it logs.
+    Logging,
+    /// Apply the parameter and priority changes of a fabric log file again, in order.
+    Replay {
+        /// The JSON-lines file (`skillfab up/manager --param-log`).
+        file: std::path::PathBuf,
+        /// Only this skill's changes.
+        #[arg(long)]
+        skill: Option<String>,
+    },
     /// Change a skill's arbitration priority.
     Priority {
         /// Skill name.
@@ -93,7 +120,8 @@ pub enum CtlCmd {
     },
 }
 
-fn param_json(v: &ParamValue) -> Json {
+/// A parameter value as a plain JSON number or bool.
+pub fn param_json(v: &ParamValue) -> Json {
     match *v {
         ParamValue::Bool(b) => json!(b),
         ParamValue::Int(i) => json!(i),
@@ -217,8 +245,94 @@ fn split_dot(s: &str) -> anyhow::Result<(&str, &str)> {
         .with_context(|| format!("expected SKILL.PARAM, got '{s}'"))
 }
 
+fn parse_level(text: &str) -> anyhow::Result<Level> {
+    Ok(match text.to_ascii_lowercase().as_str() {
+        "error" => Level::Error,
+        "warn" | "warning" => Level::Warn,
+        "info" => Level::Info,
+        "debug" => Level::Debug,
+        "trace" => Level::Trace,
+        other => bail!("unknown level '{other}': use error, warn, info, debug or trace"),
+    })
+}
+
+/// `ctl logs`: needs no manager (the stream is there while skills run).
+fn logs(domain: &Domain, json_out: bool, skill: Option<&str>, level: &str) -> anyhow::Result<()> {
+    let level = parse_level(level)?;
+    let reader = LogReader::open(domain, &format!("ctl-logs-{}", std::process::id()))?;
+    loop {
+        for l in reader.poll()? {
+            if l.level > level || skill.is_some_and(|s| s != l.skill) {
+                continue;
+            }
+            if json_out {
+                println!(
+                    "{}",
+                    json!({"skill": l.skill, "pid": l.pid, "level": l.level.to_string(),
+                           "target": l.target, "message": l.message, "time_ns": l.time_ns,
+                           "dropped": l.dropped})
+                );
+            } else {
+                println!("{l}");
+            }
+        }
+        if !reader.wait(Duration::from_millis(50)) {
+            return Ok(());
+        }
+    }
+}
+
+/// One change read back from a fabric log.
+#[derive(Debug, PartialEq)]
+enum Change {
+    Param(String, String, ParamValue),
+    Priority(String, i32),
+}
+
+/// The `param` and `priority` lines of a fabric log, in order (other kinds are skipped).
+fn changes(text: &str, only: Option<&str>) -> anyhow::Result<Vec<Change>> {
+    let mut out = Vec::new();
+    for (n, line) in text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
+        let j: Json = serde_json::from_str(line).with_context(|| format!("line {}", n + 1))?;
+        let skill = j["skill"].as_str().unwrap_or_default().to_string();
+        if only.is_some_and(|s| s != skill) {
+            continue;
+        }
+        let bad = || anyhow::anyhow!("line {}: malformed {} record", n + 1, j["kind"]);
+        match j["kind"].as_str() {
+            Some("param") => {
+                let new = &j["new"];
+                let v = if let Some(b) = new.as_bool() {
+                    ParamValue::Bool(b)
+                } else if let Some(u) = new.as_u64() {
+                    ParamValue::UInt(u)
+                } else if let Some(i) = new.as_i64() {
+                    ParamValue::Int(i)
+                } else {
+                    ParamValue::Float(new.as_f64().ok_or_else(bad)?)
+                };
+                let param = j["param"].as_str().ok_or_else(bad)?.to_string();
+                out.push(Change::Param(skill, param, v));
+            }
+            Some("priority") => {
+                let p = j["new"].as_i64().and_then(|p| i32::try_from(p).ok());
+                out.push(Change::Priority(skill, p.ok_or_else(bad)?));
+            }
+            _ => {}
+        }
+    }
+    Ok(out)
+}
+
 /// Runs one `ctl` command.
 pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
+    if let CtlCmd::Logs { skill, level } = &cmd {
+        return logs(domain, json_out, skill.as_deref(), level);
+    }
     let mut c = Client::connect(domain)?;
     let print = |human: String, j: Json| {
         if json_out {
@@ -388,10 +502,76 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
             let cycle = c.step(n)?;
             print(format!("cycle {cycle}"), json!({"cycle": cycle}));
         }
+        CtlCmd::Logs { .. } => {}
+        CtlCmd::Iolog { skill, state } => {
+            c.set_io_log(&skill, state == "on")?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Logging => {
+            let (file, io) = c.logging()?;
+            print(
+                format!(
+                    "fabric log: {}
+samples logged of: {}",
+                    file.as_deref().unwrap_or("(none)"),
+                    if io.is_empty() {
+                        "-".into()
+                    } else {
+                        io.join(" ")
+                    }
+                ),
+                json!({"file": file, "io_skills": io}),
+            );
+        }
+        CtlCmd::Replay { file, skill } => {
+            let text = std::fs::read_to_string(&file)
+                .with_context(|| format!("reading {}", file.display()))?;
+            let todo = changes(&text, skill.as_deref())?;
+            for ch in &todo {
+                match ch {
+                    Change::Param(s, p, v) => c
+                        .set_param_value(s, p, *v)
+                        .with_context(|| format!("{s}.{p} = {v}"))?,
+                    Change::Priority(s, p) => c
+                        .set_priority(s, *p)
+                        .with_context(|| format!("priority of {s} = {p}"))?,
+                }
+            }
+            print(
+                format!("{} changes applied", todo.len()),
+                json!({"applied": todo.len()}),
+            );
+        }
         CtlCmd::Priority { skill, priority } => {
             c.set_priority(&skill, priority)?;
             print(String::new(), json!({"ok": true}));
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replay_reads_param_and_priority_lines() {
+        let log = r#"{"kind":"start","domain":"d","pid":1,"time_ns":1,"unix_ms":2}
+{"kind":"param","cycle":5,"time_ns":1,"unix_ms":2,"skill":"scale","param":"gain","old":2.0,"new":3.5,"by":"1-0"}
+{"kind":"sample","cycle":6,"skill":"scale","dir":"out","port":"scaled","value":{"value":1.0}}
+{"kind":"param","cycle":7,"time_ns":1,"unix_ms":2,"skill":"wander","param":"seed","old":1,"new":9,"by":"1-0"}
+{"kind":"priority","cycle":8,"time_ns":1,"unix_ms":2,"skill":"avoid","old":8,"new":-2,"by":"1-0"}
+"#;
+        assert_eq!(
+            changes(log, None).unwrap(),
+            vec![
+                Change::Param("scale".into(), "gain".into(), ParamValue::Float(3.5)),
+                Change::Param("wander".into(), "seed".into(), ParamValue::UInt(9)),
+                Change::Priority("avoid".into(), -2),
+            ]
+        );
+        assert_eq!(changes(log, Some("avoid")).unwrap().len(), 1);
+        assert!(changes("{\"kind\":\"param\"}", None).is_err());
+        assert!(changes("not json", None).is_err());
+    }
 }

@@ -16,6 +16,7 @@
 use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
 use crate::monitors::Monitor;
+use crate::recorder::{IoSample, Recorder};
 use crate::stats::{CycleStats, Report, SkillReport};
 use iceoryx2::node::{Node, NodeView};
 use iceoryx2::port::listener::Listener;
@@ -29,8 +30,11 @@ use skill_sdk::domain::Domain;
 use skill_sdk::header::now_ns;
 use skill_sdk::params::ParamValue;
 use skill_sdk::services::RawReader;
+use skill_sdk::value::FieldPath;
 use skill_sdk::{SdkError, names, services};
 use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -68,6 +72,16 @@ pub struct ManagerConfig {
     pub wait_for: Vec<String>,
     /// How long to wait for them.
     pub wait_timeout: Duration,
+    /// The fabric log (parameter changes, I/O samples); `None`: [`default_log_path`].
+    pub param_log: Option<PathBuf>,
+}
+
+/// Where a domain's fabric log goes by default: `params.jsonl` in the domain's root directory
+/// (`/tmp/skillfab/<domain>/`). It lives as long as the domain's other files: the last
+/// process to leave removes them, so a log that must outlast the fabric is given with
+/// `--param-log FILE`.
+pub fn default_log_path(domain: &Domain) -> PathBuf {
+    domain.root_path().join("params.jsonl")
 }
 
 impl ManagerConfig {
@@ -81,6 +95,7 @@ impl ManagerConfig {
             max_cycles: None,
             wait_for: Vec::new(),
             wait_timeout: Duration::from_secs(30),
+            param_log: None,
         }
     }
 
@@ -175,6 +190,23 @@ pub struct Manager {
     pub(crate) events_published: u64,
     /// Last arbitration seen per channel.
     pub(crate) channels: HashMap<String, ChannelView>,
+    /// The fabric log's writer (`None` if its file could not be opened).
+    pub(crate) recorder: Option<Recorder>,
+    /// Skills whose samples are logged, with their ports.
+    pub(crate) io_log: HashMap<String, Vec<IoPort>>,
+}
+
+/// A port whose samples go to the fabric log.
+pub(crate) struct IoPort {
+    pub(crate) dir: &'static str,
+    pub(crate) port: String,
+    pub(crate) topic: String,
+    pub(crate) type_name: String,
+    pub(crate) field: Arc<FieldPath>,
+    /// On a proposal topic, the proposer's slot.
+    pub(crate) slot: Option<u32>,
+    /// The cycle of the last sample logged (each sample once).
+    pub(crate) last: u64,
 }
 
 /// A skill's run counters from the board.
@@ -207,6 +239,24 @@ impl Manager {
         let control = ControlPlane::new(&config.domain, &node)?;
         let board = Board::create(&config.domain.prefix())?;
         let now = Instant::now();
+        let log_path = config
+            .param_log
+            .clone()
+            .unwrap_or_else(|| default_log_path(&config.domain));
+        let recorder = match Recorder::open(&log_path) {
+            Ok(r) => {
+                r.line(
+                    "start",
+                    None,
+                    serde_json::json!({"domain": config.domain.name(), "pid": std::process::id()}),
+                );
+                Some(r)
+            }
+            Err(e) => {
+                tracing::warn!(file = %log_path.display(), error = %e, "no fabric log");
+                None
+            }
+        };
         Ok(Manager {
             paused: config.paused,
             config,
@@ -228,6 +278,8 @@ impl Manager {
             control: Some(control),
             events_published: 0,
             channels: HashMap::new(),
+            recorder,
+            io_log: HashMap::new(),
             started: false,
             created: now,
             stats: CycleStats::default(),
@@ -618,6 +670,47 @@ impl Manager {
         }
         if !self.monitors.is_empty() {
             self.evaluate_monitors();
+        }
+        if !self.io_log.is_empty() {
+            self.log_io();
+        }
+    }
+
+    /// Copies the new samples of the I/O-logged skills to the fabric log (decoded there).
+    fn log_io(&mut self) {
+        let Some(rec) = self.recorder.as_ref() else {
+            return;
+        };
+        let mut polled = HashSet::new();
+        for (skill, ports) in &mut self.io_log {
+            for p in ports.iter_mut() {
+                let Some(reader) = self.readers.get_mut(&p.topic) else {
+                    continue;
+                };
+                if polled.insert(p.topic.clone())
+                    && let Err(e) = reader.poll()
+                {
+                    tracing::warn!(topic = %p.topic, error = %e, "I/O log read failed");
+                }
+                let Some((bytes, h)) = reader.latest_of(p.slot) else {
+                    continue;
+                };
+                if h.cycle <= p.last {
+                    continue;
+                }
+                p.last = h.cycle;
+                rec.sample(IoSample {
+                    cycle: h.cycle,
+                    skill: skill.clone(),
+                    dir: p.dir,
+                    port: p.port.clone(),
+                    topic: p.topic.clone(),
+                    type_name: p.type_name.clone(),
+                    stamp_ns: h.stamp_ns,
+                    field: p.field.clone(),
+                    bytes: bytes.to_vec(),
+                });
+            }
         }
     }
 

@@ -39,6 +39,10 @@ struct PaceArgs {
     /// Print the final report as one JSON object on stdout.
     #[arg(long)]
     json: bool,
+    /// The fabric log: parameter changes and logged samples, as JSON lines
+    /// (default: params.jsonl in the domain's root directory, /tmp/skillfab/<domain>/, removed with the domain's files when the fabric stops).
+    #[arg(long, value_name = "FILE")]
+    param_log: Option<PathBuf>,
 }
 
 impl PaceArgs {
@@ -85,6 +89,8 @@ enum Cmd {
         #[arg(long, default_value_t = 30.0)]
         wait_timeout_s: f64,
     },
+    /// The debugging interface: a terminal UI over a running fabric.
+    Console,
     /// The paper's experiment.
     Demo {
         #[command(subcommand)]
@@ -167,6 +173,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             config.paused = paused;
             config.max_cycles = pace.cycles;
             config.wait_for = wait_for;
+            config.param_log = pace.param_log.clone();
             let mut manager = Manager::new(config).context("starting the manager")?;
             let report = manager.run(&|_| false);
             manager.shutdown();
@@ -184,10 +191,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 cycles: pace.cycles,
                 pace: pace.pace()?,
                 wait_timeout: Duration::from_secs_f64(wait_timeout_s.max(0.0)),
+                param_log: pace.param_log.clone(),
             })?;
             print_report(&report, pace.json)
         }
         Cmd::Ctl { json, cmd } => skillfab::ctl::run(&domain, json, cmd),
+        Cmd::Console => skillfab::console::run(&domain),
         Cmd::Demo {
             which:
                 DemoCmd::ExitLab {
@@ -235,7 +244,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    skill_sdk::runtime::init_tracing();
+    // The console owns the terminal: log lines on stderr would scribble over it.
+    if !matches!(cli.command, Cmd::Console) {
+        skill_sdk::runtime::init_tracing();
+    }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

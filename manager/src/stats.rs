@@ -42,6 +42,16 @@ impl CycleStats {
         self.max_ns = self.max_ns.max(latency_ns);
     }
 
+    /// The latencies of the `n` most recent cycles in µs, oldest first (the console's history).
+    pub fn recent_us(&self, n: usize) -> Vec<f32> {
+        let skip = self.latencies_ns.len().saturating_sub(n);
+        self.latencies_ns
+            .iter()
+            .skip(skip)
+            .map(|&ns| ns as f32 / 1000.0)
+            .collect()
+    }
+
     /// Latency percentiles over the recent window (max over all cycles).
     pub fn latency_us(&self) -> Percentiles {
         let mut v: Vec<u64> = self.latencies_ns.iter().copied().collect();

@@ -39,6 +39,8 @@ pub struct UpOptions {
     pub pace: Option<Pace>,
     /// How long to wait for every skill to register before cycling.
     pub wait_timeout: Duration,
+    /// The fabric log file (`None`: the default, see [`crate::engine::default_log_path`]).
+    pub param_log: Option<std::path::PathBuf>,
 }
 
 struct Supervised {
@@ -255,6 +257,7 @@ pub fn up(opts: UpOptions) -> anyhow::Result<Report> {
     config.deadline = opts.launch.deadline;
     config.max_cycles = opts.cycles;
     config.wait_timeout = opts.wait_timeout;
+    config.param_log = opts.param_log.clone();
     config.wait_for = opts
         .launch
         .processes

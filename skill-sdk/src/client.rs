@@ -305,6 +305,30 @@ impl Client {
         })
     }
 
+    /// The latencies of up to `n` most recent cycles (µs, oldest first) and the last cycle.
+    pub fn latencies(&self, n: u32) -> Result<(u64, Vec<f32>), ClientError> {
+        match self.request(&Request::Latencies(n))? {
+            Reply::Latencies { cycle, latency_us } => Ok((cycle, latency_us)),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Turns the logging of a skill's input and output samples on or off.
+    pub fn set_io_log(&self, skill: &str, on: bool) -> Result<(), ClientError> {
+        self.done(Request::SetIoLog {
+            skill: skill.into(),
+            on,
+        })
+    }
+
+    /// The manager's fabric log file and the skills whose samples it logs.
+    pub fn logging(&self) -> Result<(Option<String>, Vec<String>), ClientError> {
+        match self.request(&Request::Logging)? {
+            Reply::Logging { file, io_skills } => Ok((file, io_skills)),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
     /// Subscribes to the events stream (done by the first [`Client::next_event`] too): every
     /// event published from now on can be read.
     pub fn subscribe(&mut self) -> Result<(), ClientError> {

@@ -103,6 +103,19 @@ pub enum Request {
         /// New priority (higher wins).
         priority: i32,
     },
+    // Variants below were added after version 1 shipped; appending keeps the encoding of
+    // every earlier request unchanged (an older manager answers them `Malformed`).
+    /// The latencies of the most recent cycles (at most this many, capped by the manager).
+    Latencies(u32),
+    /// Turn the logging of a skill's input and output samples on or off.
+    SetIoLog {
+        /// Skill instance.
+        skill: String,
+        /// Log every sample from the next cycle on.
+        on: bool,
+    },
+    /// Where the manager logs, and whose samples.
+    Logging,
 }
 
 /// A skill as listed.
@@ -204,6 +217,20 @@ pub enum Reply {
     Stats(Stats),
     /// Stepping finished at this cycle.
     Stepped(u64),
+    /// Recent cycle latencies, oldest first, in µs.
+    Latencies {
+        /// The last cycle completed.
+        cycle: u64,
+        /// One per cycle, ending with `cycle`'s.
+        latency_us: Vec<f32>,
+    },
+    /// The fabric log.
+    Logging {
+        /// Its file (`None`: the manager could not open one).
+        file: Option<String>,
+        /// Skills whose input and output samples are logged.
+        io_skills: Vec<String>,
+    },
 }
 
 /// Why a request was refused. Every variant names what was wrong.

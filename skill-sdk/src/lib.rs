@@ -8,6 +8,7 @@
 //!   layouts, and the shared message types.
 //! - [`runtime`]: turns a `Skill` into a process (registration, cycles, shutdown); [`main`]
 //!   is a skill binary's whole `main`.
+//! - [`logs`]: each skill's tracing lines, forwarded over the domain's log stream.
 //! - [`harness`]: runs a skill body in-process on scripted inputs, for unit tests.
 //! - [`board`], [`names`], [`services`], [`domain`], [`header`]: the wiring shared with the
 //!   manager (cycle board, service names, iceoryx2 settings, domains, sample header).
@@ -45,6 +46,7 @@ pub mod domain;
 pub mod expr;
 pub mod harness;
 pub mod header;
+pub mod logs;
 pub mod msg;
 pub mod names;
 pub mod params;

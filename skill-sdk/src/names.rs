@@ -48,6 +48,12 @@ pub fn events() -> String {
     "skillfab/events".to_string()
 }
 
+/// Publish-subscribe service of the log stream: every skill's forwarded tracing lines
+/// (postcard [`crate::logs::LogLine`] as byte slices; no event service — readers poll).
+pub fn logs() -> String {
+    "skillfab/logs".to_string()
+}
+
 /// POSIX shared-memory name (for `shm_open`) of the domain's cycle board.
 pub fn board(prefix: &str) -> String {
     format!("/{prefix}board")

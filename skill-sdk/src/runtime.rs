@@ -98,6 +98,11 @@ fn main_unit<U: Unit>() -> ExitCode {
                 .map(|f| f.to_string_lossy().into_owned())
         })
         .unwrap_or_else(|| "skill".to_string());
+    // The skill's log lines go to the domain's log stream too (console, `ctl logs`).
+    let _forward = Domain::new(&args.domain).ok().and_then(|d| {
+        let name = args.name.clone().unwrap_or_else(|| kind.clone());
+        crate::logs::forward(&d, &name)
+    });
     match run::<U>(args, &kind) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -108,15 +113,22 @@ fn main_unit<U: Unit>() -> ExitCode {
 }
 
 /// Installs the tracing subscriber (`RUST_LOG`, default `info`) and quiets iceoryx2's own
-/// logger to errors (`IOX2_LOG_LEVEL` overrides).
+/// logger to errors (`IOX2_LOG_LEVEL` overrides). Events that pass the filter go to stderr
+/// and, once [`crate::logs::forward`] ran (skill processes), to the domain's log stream.
 pub fn init_tracing() {
+    use std::io::IsTerminal;
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    use std::io::IsTerminal;
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_writer(std::io::stderr)
+    let _ = tracing_subscriber::registry()
+        .with(filter)
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_ansi(std::io::stderr().is_terminal())
+                .with_writer(std::io::stderr),
+        )
+        .with(crate::logs::ForwardLayer)
         .try_init();
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
 }

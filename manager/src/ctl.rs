@@ -524,8 +524,7 @@ samples logged of: {}",
             );
         }
         CtlCmd::Replay { file, skill } => {
-            let text = std::fs::read_to_string(&file)
-                .with_context(|| format!("reading {}", file.display()))?;
+            let text = crate::recorder::read_records(&file)?;
             let todo = changes(&text, skill.as_deref())?;
             for ch in &todo {
                 match ch {

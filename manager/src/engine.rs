@@ -76,12 +76,33 @@ pub struct ManagerConfig {
     pub param_log: Option<PathBuf>,
 }
 
-/// Where a domain's fabric log goes by default: `params.jsonl` in the domain's root directory
-/// (`/tmp/skillfab/<domain>/`). It lives as long as the domain's other files: the last
-/// process to leave removes them, so a log that must outlast the fabric is given with
-/// `--param-log FILE`.
+/// Where a manager's fabric log goes by default: `<domain>-<unix seconds>-<pid>.jsonl` in
+/// [`log_dir`]. The file is created with the first record worth keeping (a manager whose
+/// parameters nobody changed leaves no file).
 pub fn default_log_path(domain: &Domain) -> PathBuf {
-    domain.root_path().join("params.jsonl")
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    log_dir(domain).join(format!(
+        "{}-{secs}-{}.jsonl",
+        domain.name(),
+        std::process::id()
+    ))
+}
+
+/// The directory of fabric logs: `$SKILLFAB_LOG_DIR`, else `$XDG_STATE_HOME/skillfab/log`,
+/// else `~/.local/state/skillfab/log` (as `~/.ros/log` for ROS); with none of them set, the
+/// domain's root directory (removed with the domain).
+pub fn log_dir(domain: &Domain) -> PathBuf {
+    let var = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    var("SKILLFAB_LOG_DIR")
+        .or_else(|| var("XDG_STATE_HOME").map(|d| d.join("skillfab/log")))
+        .or_else(|| var("HOME").map(|d| d.join(".local/state/skillfab/log")))
+        .unwrap_or_else(|| domain.root_path())
 }
 
 impl ManagerConfig {

@@ -39,8 +39,10 @@ struct PaceArgs {
     /// Print the final report as one JSON object on stdout.
     #[arg(long)]
     json: bool,
-    /// The fabric log: parameter changes and logged samples, as JSON lines
-    /// (default: params.jsonl in the domain's root directory, /tmp/skillfab/<domain>/, removed with the domain's files when the fabric stops).
+    /// The fabric log: parameter changes and logged samples, as JSON lines, or MCAP for a
+    /// FILE.mcap (default: <domain>-<unix seconds>-<pid>.jsonl in $SKILLFAB_LOG_DIR, else
+    /// $XDG_STATE_HOME/skillfab/log, else ~/.local/state/skillfab/log; created with the first
+    /// change).
     #[arg(long, value_name = "FILE")]
     param_log: Option<PathBuf>,
 }

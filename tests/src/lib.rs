@@ -81,6 +81,7 @@ impl TestDomain {
         c.env_clear()
             .env("PATH", std::env::var_os("PATH").unwrap_or_default())
             .env("SKILLFAB_DOMAIN", self.domain.name())
+            .env("SKILLFAB_LOG_DIR", &self.dir)
             .env("RUST_LOG", "info")
             .stdin(Stdio::null());
         c

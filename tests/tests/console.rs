@@ -276,10 +276,54 @@ fn keys_drive_the_fabric() {
 #[test]
 fn waits_for_the_manager_and_reconnects() {
     let mut t = TestDomain::new("conrec");
-    let con = Console::start(&t, 30, 110);
+    let mut con = Console::start(&t, 30, 110);
     con.wait_for("no manager");
     let up = hello(&mut t, &[]);
     con.wait_for("skills (3)");
+    // A skill is killed: the manager restarts it (`on-failure`), the console follows.
+    let board = t.board();
+    let slot = skillfab_tests::registered(&board, "smooth").unwrap().slot;
+    let pid = board
+        .slot(slot)
+        .pid
+        .load(std::sync::atomic::Ordering::Acquire);
+    // Select smooth (the detail pane's title shows its pid).
+    let order: Vec<String> = Client::connect(&t.domain)
+        .unwrap()
+        .list()
+        .unwrap()
+        .into_iter()
+        .map(|s| s.name)
+        .collect();
+    let at = order.iter().position(|n| n == "smooth").unwrap();
+    con.keys(&vec![b'j'; at]);
+    con.wait_for(&format!(
+        "smooth · async smooth · active · priority 0 · pid {pid} "
+    ));
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    t.wait_until("smooth to be restarted and running", || {
+        skillfab_tests::registered(&board, "smooth").is_some_and(|s| {
+            board
+                .slot(s.slot)
+                .pid
+                .load(std::sync::atomic::Ordering::Acquire)
+                != pid
+                && s.runs > 2
+        })
+    });
+    let new_pid = skillfab_tests::registered(&board, "smooth")
+        .map(|s| {
+            board
+                .slot(s.slot)
+                .pid
+                .load(std::sync::atomic::Ordering::Acquire)
+        })
+        .unwrap();
+    con.wait_for(&format!("pid {new_pid} "));
     // The manager goes away: the console says so and keeps the last view...
     t.signal(up, nix::sys::signal::Signal::SIGTERM);
     t.wait_exit(up);

@@ -135,6 +135,9 @@ pub struct App {
     pub selected: usize,
     /// The selected skill's name (the selection follows it when the list changes).
     pub selected_name: Option<String>,
+    /// A selected skill that left the list (died, restarting): selected again when it comes
+    /// back, unless a key moved the selection meanwhile.
+    pub lost: Option<String>,
     /// Selected parameter of the selected skill.
     pub param: usize,
     /// Recent log lines of every skill, oldest first.
@@ -158,6 +161,7 @@ impl App {
             snap: None,
             selected: 0,
             selected_name: None,
+            lost: None,
             param: 0,
             logs: VecDeque::new(),
             verbose: false,
@@ -235,13 +239,16 @@ impl App {
     /// the selected skill changed.
     fn reselect(&mut self) -> Option<Command> {
         let names: Vec<String> = self.skills().iter().map(|s| s.name.clone()).collect();
-        if let Some(i) = self
-            .selected_name
-            .as_ref()
-            .and_then(|n| names.iter().position(|x| x == n))
-        {
+        let at = |n: &String| names.iter().position(|x| x == n);
+        if let Some(i) = self.lost.as_ref().and_then(at) {
+            self.selected = i;
+            self.lost = None;
+        } else if let Some(i) = self.selected_name.as_ref().and_then(at) {
             self.selected = i;
         } else {
+            if self.lost.is_none() {
+                self.lost = self.selected_name.clone();
+            }
             self.selected = self.selected.min(names.len().saturating_sub(1));
         }
         self.set_selected()
@@ -283,10 +290,12 @@ impl App {
                 None
             }
             KeyCode::Up | KeyCode::Char('k') => {
+                self.lost = None;
                 self.selected = self.selected.saturating_sub(1);
                 self.set_selected()
             }
             KeyCode::Down | KeyCode::Char('j') => {
+                self.lost = None;
                 if self.selected + 1 < n {
                     self.selected += 1;
                 }

@@ -345,6 +345,28 @@ fn keys_make_commands() {
         Some("smooth")
     );
     assert_eq!(app.selected, 1);
+    // The selected skill dies: the selection moves on, and comes back when it is restarted...
+    let mut gone = hello();
+    gone.skills.retain(|s| s.name != "smooth");
+    app.apply(Update::Snapshot(Box::new(gone.clone())));
+    assert_ne!(
+        app.selected_skill().map(|s| s.name.as_str()),
+        Some("smooth")
+    );
+    assert_eq!(
+        app.apply(Update::Snapshot(Box::new(hello()))),
+        Some(Command::Select(Some("smooth".into())))
+    );
+    assert_eq!(
+        app.selected_skill().map(|s| s.name.as_str()),
+        Some("smooth")
+    );
+    // ...unless a key moved it meanwhile.
+    app.apply(Update::Snapshot(Box::new(gone)));
+    app.on_key(key('k'));
+    let chosen = app.selected_skill().map(|s| s.name.clone());
+    app.apply(Update::Snapshot(Box::new(hello())));
+    assert_eq!(app.selected_skill().map(|s| s.name.clone()), chosen);
     app.on_key(key('q'));
     assert!(app.quit);
 }

@@ -232,8 +232,8 @@ impl ClientSide {
             .map_err(|e| transport("control server", e))?;
         let events = services::events_service(&node)?
             .publisher_builder()
-            .initial_max_slice_len(1024)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(services::EVENT_MAX_BYTES)
+            .allocation_strategy(AllocationStrategy::Static)
             .create()
             .map_err(|e| transport("events publisher", e))?;
         Ok(ClientSide {
@@ -337,8 +337,8 @@ impl ClientSide {
 
     fn publish(&mut self, events: &[Event]) {
         for event in events {
-            let sent = control::encode_event(event)
-                .map_err(|e| format!("{e}"))
+            let sent = control::encode_event_within(event, services::EVENT_MAX_BYTES)
+                .ok_or_else(|| format!("larger than {} bytes", services::EVENT_MAX_BYTES))
                 .and_then(|b| {
                     self.events
                         .loan_slice_uninit(b.len())

@@ -466,6 +466,68 @@ pub fn encode_event(event: &Event) -> Result<Vec<u8>, postcard::Error> {
     postcard::to_allocvec(event)
 }
 
+/// Encodes an event in at most `max` bytes. A monitor firing that read large arrays is cut
+/// to fit: the longest array value is halved until it fits (each cut array ends with
+/// `Value::Text("… N more")`), then whole values are replaced by that marker; the monitor's
+/// id, cycle and stamp always arrive. `None` if even that does not fit (an expression text
+/// longer than `max`).
+pub fn encode_event_within(event: &Event, max: usize) -> Option<Vec<u8>> {
+    let bytes = encode_event(event).ok()?;
+    if bytes.len() <= max {
+        return Some(bytes);
+    }
+    let EventKind::MonitorFired { values, .. } = &event.kind else {
+        return None;
+    };
+    let mut cut = event.clone();
+    // Per value: the elements kept of each array (None: not an array).
+    let mut keep: Vec<Option<usize>> = values
+        .iter()
+        .map(|(_, v)| match v {
+            Value::Array(a) => Some(a.len()),
+            _ => None,
+        })
+        .collect();
+    loop {
+        let shown = values
+            .iter()
+            .zip(&keep)
+            .map(|((path, v), k)| {
+                let v = match (v, k) {
+                    (Value::Array(a), Some(k)) if *k < a.len() => {
+                        let mut kept = a[..*k].to_vec();
+                        kept.push(Value::Text(format!("… {} more", a.len() - k)));
+                        Value::Array(kept)
+                    }
+                    (_, Some(0)) => Value::Text("… cut".into()),
+                    _ => v.clone(),
+                };
+                (path.clone(), v)
+            })
+            .collect();
+        if let EventKind::MonitorFired { values: out, .. } = &mut cut.kind {
+            *out = shown;
+        }
+        let bytes = encode_event(&cut).ok()?;
+        if bytes.len() <= max {
+            return Some(bytes);
+        }
+        // Halve the longest array still kept; then drop whole values, last first.
+        let longest = keep
+            .iter()
+            .enumerate()
+            .filter_map(|(i, k)| k.filter(|&k| k > 0).map(|k| (k, i)))
+            .max();
+        match longest {
+            Some((k, i)) => keep[i] = Some(k / 2),
+            None => {
+                let i = keep.iter().rposition(|k| *k != Some(0))?;
+                keep[i] = Some(0);
+            }
+        }
+    }
+}
+
 /// Decodes an event.
 pub fn decode_event(bytes: &[u8]) -> Result<Event, postcard::Error> {
     postcard::from_bytes(bytes)
@@ -474,6 +536,52 @@ pub fn decode_event(bytes: &[u8]) -> Result<Event, postcard::Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_large_monitor_firing_is_cut_to_fit_and_small_events_are_untouched() {
+        let fired = |values: Vec<(String, Value)>| Event {
+            seq: 7,
+            cycle: 9,
+            time_ns: 11,
+            kind: EventKind::MonitorFired {
+                id: 3,
+                client: "1-0".into(),
+                expr: "max(cam.image.data) > 250 and denning.link.fresh".into(),
+                values,
+                stamp_ns: 5,
+            },
+        };
+        let small = fired(vec![("denning.link.fresh".into(), Value::Bool(true))]);
+        assert_eq!(
+            encode_event_within(&small, 2048),
+            Some(encode_event(&small).unwrap())
+        );
+        let image = Value::Array((0..100_000).map(|i| Value::UInt(i % 256)).collect());
+        let big = fired(vec![
+            ("cam.image.data".into(), image),
+            ("denning.link.fresh".into(), Value::Bool(true)),
+        ]);
+        let b = encode_event_within(&big, 2048).unwrap();
+        assert!(b.len() <= 2048, "{}", b.len());
+        let e = decode_event(&b).unwrap();
+        assert_eq!((e.seq, e.cycle), (7, 9));
+        let EventKind::MonitorFired { id, values, .. } = e.kind else {
+            panic!("{e:?}")
+        };
+        assert_eq!(id, 3);
+        assert_eq!(values[1], ("denning.link.fresh".into(), Value::Bool(true)));
+        let Value::Array(kept) = &values[0].1 else {
+            panic!("{values:?}")
+        };
+        assert!(kept.len() > 10, "as much as fits is kept: {}", kept.len());
+        assert_eq!(kept[0], Value::UInt(0));
+        let Some(Value::Text(more)) = kept.last() else {
+            panic!("{kept:?}")
+        };
+        assert_eq!(*more, format!("… {} more", 100_000 - (kept.len() - 1)));
+        // Nothing fits a tiny budget but the id: no event rather than a broken one.
+        assert_eq!(encode_event_within(&big, 16), None);
+    }
 
     #[test]
     fn requests_round_trip_and_versions_are_checked() {

@@ -312,8 +312,15 @@ pub fn control_service(node: &Node<ipc::Service>) -> Result<ControlFactory, SdkE
 
 /// Clients of the control plane at once (sequencers, CLI calls, consoles).
 pub const CONTROL_MAX_CLIENTS: usize = 24;
-/// Events a subscriber may queue: generous, for bursts (a subscriber counts gaps by `seq`).
-pub const EVENT_BUFFER: usize = 4096;
+/// Events a subscriber may queue: for bursts (a subscriber counts gaps by `seq`); 20 s of a
+/// monitor firing every cycle at 100 Hz.
+pub const EVENT_BUFFER: usize = 2048;
+/// Largest encoded event (bytes): the events publisher's fixed sample size. A bigger monitor
+/// firing is cut to fit ([`crate::control::encode_event_within`]). A fixed size matters:
+/// iceoryx2 keeps a reference counter per sample for every segment a growing publisher may
+/// ever allocate (255), which for this service's ~50 000 samples was 160 MB of the manager's
+/// memory.
+pub const EVENT_MAX_BYTES: usize = 2048;
 
 /// Publish-subscribe service of the events stream (byte slices).
 pub fn events_service(node: &Node<ipc::Service>) -> Result<EventsFactory, SdkError> {

@@ -1,3 +1,345 @@
-//! Benchmarks of skillfab: `benches/` holds the criterion benchmarks, each starting real
-//! processes in a private domain (through the tests' `TestDomain` fixture). Build the
+//! Benchmarks of skillfab: `benches/` holds the criterion benchmarks and `latency-report`
+//! (a binary of this package) a short run of all cases with their floors. Every case starts
+//! real processes in a private domain (through the tests' `TestDomain` fixture). Build the
 //! binaries first: `cargo build --release --workspace --bins`.
+//!
+//! - [`Fabric`]: a skillfab network of one [`Case`]; its cycle latencies are the manager's
+//!   own (cycle start → last sync skill done), fetched over the control plane after the
+//!   cycles ran, so measuring adds nothing to a cycle.
+//! - [`floors`]: the same topology without fabric logic — a token passed around a ring (or
+//!   out to a star and back) by raw iceoryx2 publish + event, by pipes, and by threads.
+
+// Benchmark set-up: a failed step should stop the run right there, with its message.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+pub mod floors;
+pub mod report;
+
+use skill_sdk::board::Board;
+use skill_sdk::client::Client;
+use skillfab_tests::TestDomain;
+use std::time::Duration;
+
+/// Period of the paced runs: 100 Hz, cores idle between cycles as on a robot.
+pub const PACE: Duration = Duration::from_millis(10);
+
+/// The payload sizes of the payload cases: label, bytes, binary suffix.
+pub const PAYLOADS: [(&str, usize, &str); 4] = [
+    ("64B", 64, "64"),
+    ("64KiB", 64 << 10, "64K"),
+    ("1MiB", 1 << 20, "1M"),
+    ("4MiB", 4 << 20, "4M"),
+];
+
+/// A network measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Case {
+    /// A sync chain of this depth: `ticker` → `relay` → ... (depth skill processes).
+    Chain(usize),
+    /// This many independent sync skills (`ticker`s), all started by the cycle.
+    Fanout(usize),
+    /// A depth-2 chain carrying a payload of `PAYLOADS[i]`: source → sink.
+    Payload(usize),
+    /// The exit-lab network: simulator, Denning device process, avoid, wander, barcode_track,
+    /// `drive` arbitrated by the device.
+    ExitLab,
+}
+
+impl Case {
+    /// Every case, in report order.
+    pub fn all() -> Vec<Case> {
+        let mut v: Vec<Case> = [1, 2, 4, 8].into_iter().map(Case::Chain).collect();
+        v.extend([1, 2, 4, 8].into_iter().map(Case::Fanout));
+        v.extend((0..PAYLOADS.len()).map(Case::Payload));
+        v.push(Case::ExitLab);
+        v
+    }
+
+    /// Its name in reports: `chain-4`, `fanout-2`, `payload-1MiB`, `exit-lab`.
+    pub fn name(&self) -> String {
+        match self {
+            Case::Chain(d) => format!("chain-{d}"),
+            Case::Fanout(n) => format!("fanout-{n}"),
+            Case::Payload(i) => format!("payload-{}", PAYLOADS[*i].0),
+            Case::ExitLab => "exit-lab".into(),
+        }
+    }
+
+    /// The floor topology of the same shape.
+    pub fn floor(&self) -> floors::Shape {
+        match self {
+            Case::Chain(d) => floors::Shape::Ring(*d),
+            Case::Fanout(n) => floors::Shape::Star(*n),
+            Case::Payload(_) => floors::Shape::Ring(2),
+            // Cycle start → device → the skills reading it → their proposals → device → done:
+            // a ring of depth 3 (4 hops).
+            Case::ExitLab => floors::Shape::Ring(3),
+        }
+    }
+
+    /// The skill processes that register (names).
+    pub fn skills(&self) -> Vec<String> {
+        match self {
+            Case::Chain(d) => (0..*d).map(|i| format!("l{i}")).collect(),
+            Case::Fanout(n) => (0..*n).map(|i| format!("f{i}")).collect(),
+            Case::Payload(_) => vec!["src".into(), "sink".into()],
+            Case::ExitLab => ["denning", "avoid", "wander", "barcode_track"]
+                .map(String::from)
+                .to_vec(),
+        }
+    }
+
+    /// The launch file (with `{bin:x}` placeholders) at `period_ms` (0: back to back).
+    pub fn launch(&self, period_ms: u64) -> String {
+        let mut s = format!("[manager]\nperiod_ms = {period_ms}\ndeadline_ms = 1000\n");
+        let mut proc = |name: &str, bin: &str, extra: &str| {
+            s.push_str(&format!(
+                "[[process]]\nname = \"{name}\"\nbin = \"{{bin:{bin}}}\"\n{extra}"
+            ));
+        };
+        match self {
+            Case::Chain(d) => {
+                proc("l0", "ticker", "remap = { tick = \"c0\" }\n");
+                for i in 1..*d {
+                    let remap = format!("remap = {{ prev = \"c{}\", tick = \"c{i}\" }}\n", i - 1);
+                    proc(&format!("l{i}"), "relay", &remap);
+                }
+            }
+            Case::Fanout(n) => {
+                for i in 0..*n {
+                    proc(
+                        &format!("f{i}"),
+                        "ticker",
+                        &format!("remap = {{ tick = \"f{i}\" }}\n"),
+                    );
+                }
+            }
+            Case::Payload(i) => {
+                let size = PAYLOADS[*i].2;
+                proc("src", &format!("blob-src-{size}"), "");
+                proc("sink", &format!("blob-sink-{size}"), "");
+            }
+            Case::ExitLab => {
+                let world = concat!(
+                    env!("CARGO_MANIFEST_DIR"),
+                    "/../devices/denning-sim/worlds/exit-lab.toml"
+                );
+                proc(
+                    "denning-sim",
+                    "denning-sim",
+                    &format!(
+                        "registers = false\nargs = [\"--world\", {world:?}, \"--link\", \"{{dir}}/robot\"]\n"
+                    ),
+                );
+                proc(
+                    "denning",
+                    "denning",
+                    "args = [\"--port\", \"{dir}/robot\"]\nrestart = \"always\"\n",
+                );
+                for skill in ["avoid", "wander", "barcode_track"] {
+                    proc(skill, skill, "");
+                }
+            }
+        }
+        s
+    }
+}
+
+/// p50 / p99 / max of a set of latencies (µs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Summary {
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Summary {
+    /// The summary of `us` (not empty).
+    pub fn of(us: &[f64]) -> Summary {
+        let mut v = us.to_vec();
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Summary {
+            p50: at(0.5),
+            p99: at(0.99),
+            max: at(1.0),
+        }
+    }
+}
+
+/// A running skillfab network of one case.
+pub struct Fabric {
+    // Fields drop in order: the client and the board before the domain's files go.
+    client: Client,
+    board: Board,
+    /// The `skillfab up` child.
+    up: usize,
+    /// The cycle up to which latencies were taken.
+    taken: u64,
+    /// Its private domain (processes killed and files removed on drop).
+    pub t: TestDomain,
+}
+
+impl Fabric {
+    /// Starts `case` paced at [`PACE`] or back to back; returns once every skill runs.
+    pub fn start(case: Case, paced: bool) -> Fabric {
+        let mut t = TestDomain::new(&case.name());
+        let period = if paced { PACE.as_millis() as u64 } else { 0 };
+        let text = case
+            .launch(period)
+            .replace("{dir}", t.dir.to_str().unwrap());
+        let launch = t.launch_file(&text);
+        let up = t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+        let board = t.board();
+        let names = case.skills();
+        t.wait_until(&format!("{} to run", case.name()), || {
+            names
+                .iter()
+                .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 20))
+        });
+        if case == Case::ExitLab {
+            let c = Client::connect(&t.domain).unwrap();
+            c.activate(&["avoid", "wander", "barcode_track"]).unwrap();
+        }
+        let client = Client::connect(&t.domain).unwrap();
+        let taken = skillfab_tests::cycle(&board);
+        Fabric {
+            t,
+            client,
+            board,
+            up,
+            taken,
+        }
+    }
+
+    /// The latencies (µs) of the next `n` cycles, as the manager measured them. Waits for
+    /// the cycles by reading the board (shared memory: no wake-up of the fabric), then asks
+    /// for them in batches the manager keeps (≤ 1024).
+    pub fn latencies(&mut self, n: usize) -> Vec<f64> {
+        const BATCH: u64 = 1000;
+        let mut out = Vec::with_capacity(n);
+        let mut left = n as u64;
+        while left > 0 {
+            let want = left.min(BATCH);
+            let until = self.taken + want;
+            while skillfab_tests::cycle(&self.board) < until + 1 {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let (cycle, us) = self.client.latencies(1024).unwrap();
+            // `us` ends with the latency of cycle `cycle`; take cycles taken+1 ..= until.
+            let skip_back = (cycle - until) as usize;
+            let end = us.len().saturating_sub(skip_back);
+            let start = end.saturating_sub(want as usize);
+            out.extend(us[start..end].iter().map(|&x| f64::from(x)));
+            self.taken = until;
+            left -= want;
+        }
+        out
+    }
+
+    /// Failed runs of each skill so far (a payload sink fails when it reads another cycle's
+    /// payload).
+    pub fn failures(&self) -> Vec<(String, u64)> {
+        let stats = self.client.stats().unwrap();
+        stats.skills.into_iter().map(|s| (s.0, s.3)).collect()
+    }
+
+    /// Processes of the network: the manager (`skillfab up`) and every skill.
+    pub fn pids(&self) -> (u32, Vec<u32>) {
+        let skills = (0..skill_sdk::board::MAX_SLOTS)
+            .map(|i| self.board.slot(i))
+            .filter(|s| s.state() == skill_sdk::board::SlotState::Ready)
+            .map(|s| s.pid.load(std::sync::atomic::Ordering::Acquire))
+            .collect();
+        (self.t.pid(self.up), skills)
+    }
+}
+
+/// CPU time (user + system) a process used so far.
+pub fn cpu_time(pid: u32) -> Duration {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    // Fields after the command name (which may hold spaces) in parentheses.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<u64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    // SAFETY: sysconf has no preconditions.
+    let hz = unsafe { nix::libc::sysconf(nix::libc::_SC_CLK_TCK) }.max(1) as u64;
+    Duration::from_micros(f.iter().sum::<u64>() * 1_000_000 / hz)
+}
+
+/// Resident memory of a process (MiB).
+pub fn rss_mib(pid: u32) -> f64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .unwrap_or_default()
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use floors::{Shape, Transport};
+
+    #[test]
+    fn summaries_are_order_statistics() {
+        let v: Vec<f64> = (1..=100).rev().map(f64::from).collect();
+        let s = Summary::of(&v);
+        assert_eq!((s.p50, s.p99, s.max), (51.0, 99.0, 100.0));
+        assert_eq!(Summary::of(&[3.0]).p99, 3.0);
+    }
+
+    #[test]
+    fn every_floor_passes_its_token_around() {
+        for shape in [Shape::Ring(3), Shape::Star(3)] {
+            for t in [Transport::Iceoryx2, Transport::Pipe, Transport::Threads] {
+                let v = floors::measure(shape, t, false, 20);
+                assert_eq!(v.len(), 20, "{shape:?} {t:?}");
+                assert!(
+                    v.iter().all(|x| x.is_finite() && *x > 0.0),
+                    "{shape:?} {t:?}: {v:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_fabric_case_gives_the_managers_latency_of_each_cycle() {
+        for case in [Case::Chain(3), Case::Payload(3)] {
+            let mut f = Fabric::start(case, false);
+            let v = f.latencies(50);
+            assert_eq!(v.len(), 50, "{}", case.name());
+            assert!(v.iter().all(|x| *x > 0.0), "{}: {v:?}", case.name());
+            // The sink found the payload of its own cycle in every run, written in place.
+            assert!(
+                f.failures().iter().all(|(_, n)| *n == 0),
+                "{:?}",
+                f.failures()
+            );
+            let (manager, skills) = f.pids();
+            assert!(manager > 0);
+            assert_eq!(skills.len(), case.skills().len());
+            assert!(rss_mib(skills[0]) > 0.0);
+        }
+    }
+
+    #[test]
+    fn launch_files_chain_their_topics() {
+        let l = Case::Chain(3).launch(10);
+        assert!(l.contains("period_ms = 10"));
+        assert!(
+            l.contains("remap = { prev = \"c1\", tick = \"c2\" }"),
+            "{l}"
+        );
+        assert_eq!(Case::all().len(), 13);
+        assert_eq!(Case::Payload(2).name(), "payload-1MiB");
+    }
+}

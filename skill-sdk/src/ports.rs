@@ -232,6 +232,9 @@ pub struct OutputCell<T: Message> {
     publisher: Option<Publisher<ipc::Service, T, SampleHeader>>,
     notifier: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
     pending: Option<Pending<T>>,
+    /// Loaned samples (by address) this cell has initialised once: their bytes are a valid
+    /// T from then on, as only this publisher writes them.
+    initialised: std::collections::HashSet<usize>,
 }
 
 impl<T: Message> OutputCell<T> {
@@ -244,6 +247,7 @@ impl<T: Message> OutputCell<T> {
             publisher: Some(publisher),
             notifier: Some(notifier),
             pending: None,
+            initialised: std::collections::HashSet::new(),
         }
     }
 
@@ -253,18 +257,27 @@ impl<T: Message> OutputCell<T> {
             publisher: None,
             notifier: None,
             pending: None,
+            initialised: std::collections::HashSet::new(),
         }
     }
 
-    fn slot(&mut self) -> &mut T {
+    /// The value of this run, loaned at first access; `clear`: zeroed then, else zeroed only
+    /// the first time this cell gets that sample.
+    fn slot(&mut self, clear: bool) -> &mut T {
         if self.pending.is_none() {
+            let initialised = &mut self.initialised;
             let loaned = self.publisher.as_ref().and_then(|p| match p.loan_uninit() {
                 Ok(mut s) => {
-                    // Outputs start zeroed: every Message is valid when all bytes are zero.
                     let p = s.payload_mut().as_mut_ptr();
-                    // SAFETY: `p` points to one writable, properly aligned T in the loan.
-                    unsafe { std::ptr::write_bytes(p, 0, 1) };
-                    // SAFETY: initialised just above with a valid (zero) bit pattern.
+                    // Outputs start zeroed: every Message is valid when all bytes are zero.
+                    // A sample this cell zeroed before still holds a valid T: only this
+                    // publisher writes its samples.
+                    if clear || initialised.insert(p as usize) {
+                        // SAFETY: `p` points to one writable, properly aligned T in the loan.
+                        unsafe { std::ptr::write_bytes(p, 0, 1) };
+                    }
+                    // SAFETY: the bytes are a valid T: zeroed just above, or zeroed and then
+                    // written only as a T by this cell in an earlier cycle.
                     Some(Pending::Shm(unsafe { s.assume_init() }))
                 }
                 Err(e) => {
@@ -370,11 +383,18 @@ pub struct Output<'a, T: Message> {
 impl<T: Message> Output<'_, T> {
     /// Writes the whole value.
     pub fn set(&mut self, value: T) {
-        *self.cell.slot() = value;
+        *self.cell.slot(true) = value;
     }
     /// The value to fill in place; zeroed at first access in a run.
     pub fn get_mut(&mut self) -> &mut T {
-        self.cell.slot()
+        self.cell.slot(true)
+    }
+    /// The value to fill in place, **not cleared**: fields the body does not write hold what
+    /// this output held in some earlier cycle (zeros the first time). For large messages
+    /// (images, scans) that are overwritten in place: clearing 4 MiB costs more than the rest
+    /// of a cycle, and this makes an output's latency independent of its size.
+    pub fn fill_in_place(&mut self) -> &mut T {
+        self.cell.slot(false)
     }
     /// Whether the body wrote this output in this run.
     pub fn is_written(&self) -> bool {

@@ -27,11 +27,14 @@ pub const WAIT: Duration = Duration::from_secs(30);
 /// A program of the workspace, from `target/<profile>/`.
 pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test> -> target/<profile>/
-    let dir = exe
-        .parent()
-        .and_then(|d| d.parent())
-        .expect("target directory");
+    // target/<profile>/deps/<test> -> target/<profile>/; a binary of the workspace (a
+    // benchmark report) sits in target/<profile>/ itself.
+    let parent = exe.parent().expect("target directory");
+    let dir = if parent.ends_with("deps") {
+        parent.parent().expect("target directory")
+    } else {
+        parent
+    };
     let path = dir.join(name);
     assert!(
         path.is_file(),

@@ -297,3 +297,135 @@ impl Device for MockDevice {
         Ok(())
     }
 }
+
+/// Inputs of [`Relay`].
+#[derive(Inputs)]
+pub struct RelayIn<'a> {
+    /// The previous link's tick.
+    pub prev: Input<'a, Tick>,
+}
+
+/// Outputs of [`Relay`].
+#[derive(Outputs)]
+pub struct RelayOut<'a> {
+    /// The same tick, passed on.
+    pub tick: Output<'a, Tick>,
+}
+
+/// Sync: passes its input tick on (a link of the benchmarks' chains: remap `prev` and `tick`
+/// to chain them).
+#[derive(Default)]
+pub struct Relay;
+
+impl Skill for Relay {
+    type Params = NoParams;
+    type Inputs<'a> = RelayIn<'a>;
+    type Outputs<'a> = RelayOut<'a>;
+    fn compute(&mut self, _: &Ctx<NoParams>, i: RelayIn, o: &mut RelayOut) -> SkillResult {
+        o.tick.set(*i.prev.value());
+        Ok(())
+    }
+}
+
+/// Payload messages of the benchmarks, a source writing one per cycle and a sink reading it.
+/// The source writes only `seq` in place ([`Output::fill_in_place`]): a zero-copy fabric's
+/// latency must not depend on the size.
+macro_rules! blob {
+    ($msg:ident, $type_name:literal, $bytes:expr, $src:ident, $src_out:ident, $sink:ident, $sink_in:ident) => {
+        #[doc = concat!("A ", $type_name, " payload: a sequence number and bytes.")]
+        #[derive(Message, Debug, Clone, Copy)]
+        #[message(type_name = $type_name)]
+        #[repr(C)]
+        pub struct $msg {
+            /// The cycle it was written in.
+            pub seq: u64,
+            /// The payload.
+            pub data: [u8; $bytes - 8],
+        }
+
+        #[doc = concat!("Outputs of [`", stringify!($src), "`].")]
+        #[derive(Outputs)]
+        pub struct $src_out<'a> {
+            /// The payload of this cycle.
+            pub blob: Output<'a, $msg>,
+        }
+
+        #[doc = concat!("Sync, no inputs: writes `seq` of a ", $type_name, " in place.")]
+        #[derive(Default)]
+        pub struct $src;
+
+        impl Skill for $src {
+            type Params = NoParams;
+            type Inputs<'a> = ();
+            type Outputs<'a> = $src_out<'a>;
+            fn compute(&mut self, ctx: &Ctx<NoParams>, _: (), o: &mut $src_out) -> SkillResult {
+                o.blob.fill_in_place().seq = ctx.cycle;
+                Ok(())
+            }
+        }
+
+        #[doc = concat!("Inputs of [`", stringify!($sink), "`].")]
+        #[derive(Inputs)]
+        pub struct $sink_in<'a> {
+            /// The source's payload.
+            pub blob: Input<'a, $msg>,
+        }
+
+        #[doc = concat!("Sync: checks the ", $type_name, " of this cycle arrived.")]
+        #[derive(Default)]
+        pub struct $sink;
+
+        impl Skill for $sink {
+            type Params = NoParams;
+            type Inputs<'a> = $sink_in<'a>;
+            type Outputs<'a> = ();
+            fn compute(&mut self, ctx: &Ctx<NoParams>, i: $sink_in, _: &mut ()) -> SkillResult {
+                if i.blob.value().seq != ctx.cycle {
+                    return Err(SkillError::msg(format!(
+                        "cycle {}: payload of cycle {}",
+                        ctx.cycle,
+                        i.blob.value().seq
+                    )));
+                }
+                Ok(())
+            }
+        }
+    };
+}
+
+blob!(
+    Blob64,
+    "bench.Blob64",
+    64,
+    BlobSrc64,
+    BlobSrc64Out,
+    BlobSink64,
+    BlobSink64In
+);
+blob!(
+    Blob64K,
+    "bench.Blob64K",
+    64 << 10,
+    BlobSrc64K,
+    BlobSrc64KOut,
+    BlobSink64K,
+    BlobSink64KIn
+);
+blob!(
+    Blob1M,
+    "bench.Blob1M",
+    1 << 20,
+    BlobSrc1M,
+    BlobSrc1MOut,
+    BlobSink1M,
+    BlobSink1MIn
+);
+blob!(
+    Blob4M,
+    "bench.Blob4M",
+    4 << 20,
+    BlobSrc4M,
+    BlobSrc4MOut,
+    BlobSink4M,
+    BlobSink4MIn
+);

@@ -1,0 +1,78 @@
+//! `latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]`: every case of the
+//! cycle benchmarks, back to back and paced at 100 Hz, with its floors measured in the same
+//! run; p50 / p99 / max in µs and the ratio skillfab ÷ iceoryx2 ring. Build first:
+//! `cargo build --release --workspace --bins && target/release/latency-report`.
+
+use skillfab_bench::Case;
+use skillfab_bench::report::{self, Row};
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    let mut args = std::env::args().skip(1);
+    let (mut json, mut cycles, mut svg, mut only) = (false, 400usize, None, None);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--json" => json = true,
+            "--cycles" => match args.next().and_then(|n| n.parse().ok()) {
+                Some(n) if n > 0 => cycles = n,
+                _ => return usage("--cycles needs a positive number"),
+            },
+            "--svg" => match args.next() {
+                Some(f) => svg = Some(f),
+                None => return usage("--svg needs a file"),
+            },
+            "--only" => match args.next() {
+                Some(s) => only = Some(s),
+                None => return usage("--only needs a substring of case names"),
+            },
+            "-h" | "--help" => {
+                println!(
+                    "usage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]"
+                );
+                return ExitCode::SUCCESS;
+            }
+            other => return usage(&format!("unknown argument '{other}'")),
+        }
+    }
+    let mut rows: Vec<Row> = Vec::new();
+    for paced in [false, true] {
+        for case in Case::all() {
+            let name = if paced {
+                format!("{}@100Hz", case.name())
+            } else {
+                case.name()
+            };
+            if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
+                continue;
+            }
+            // Paced runs take a period per cycle: fewer of them.
+            let n = if paced { cycles / 2 } else { cycles }.max(10);
+            let r = report::row(case, paced, n);
+            eprintln!(
+                "{name}: skillfab p50 {:.0} µs, iceoryx2 ring p50 {:.0} µs",
+                r.skillfab.p50, r.floors[0].1.p50
+            );
+            rows.push(r);
+        }
+    }
+    let (cpu, rss) = report::idle(5.0);
+    if json {
+        println!("{}", report::to_json(&rows, cpu, rss));
+    } else {
+        print!("{}", report::to_text(&rows, cpu, rss));
+    }
+    if let Some(f) = svg
+        && let Err(e) = std::fs::write(&f, report::to_svg(&rows))
+    {
+        eprintln!("latency-report: writing {f}: {e}");
+        return ExitCode::FAILURE;
+    }
+    ExitCode::SUCCESS
+}
+
+fn usage(why: &str) -> ExitCode {
+    eprintln!(
+        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]"
+    );
+    ExitCode::from(2)
+}

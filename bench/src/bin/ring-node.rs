@@ -1,0 +1,39 @@
+//! A node of the benchmarks' floor rings (`skillfab_bench::floors`):
+//! `ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT` (in `SKILLFAB_DOMAIN`) or
+//! `ring-node pipe`.
+
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args
+        .iter()
+        .map(String::as_str)
+        .collect::<Vec<_>>()
+        .as_slice()
+    {
+        ["pipe"] => skillfab_bench::floors::pipe_node(),
+        ["iox", index, topic, event, out_topic, out_event] => {
+            let Ok(index) = index.parse() else {
+                eprintln!("ring-node: bad index {index}");
+                return ExitCode::FAILURE;
+            };
+            let name = std::env::var("SKILLFAB_DOMAIN").unwrap_or_else(|_| "default".into());
+            let domain = match skill_sdk::domain::Domain::new(&name) {
+                Ok(d) => d,
+                Err(e) => {
+                    eprintln!("ring-node: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
+            skillfab_bench::floors::iox_node(&domain, index, topic, event, out_topic, out_event);
+        }
+        _ => {
+            eprintln!(
+                "usage: ring-node pipe | ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT"
+            );
+            return ExitCode::FAILURE;
+        }
+    }
+    ExitCode::SUCCESS
+}

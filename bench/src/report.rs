@@ -1,0 +1,229 @@
+//! `latency-report`: a short run of every case, back to back and paced at 100 Hz, each next
+//! to its floors measured in the same run (only ratios within one run are comparable on a
+//! shared machine), plus the idle cost of six skill processes.
+
+use crate::floors::{self, Transport};
+use crate::{Case, Fabric, Summary, cpu_time, rss_mib};
+use serde_json::{Value as Json, json};
+use std::time::{Duration, Instant};
+
+/// One case of the report.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// `chain-4`, `payload-1MiB@100Hz`, ...
+    pub name: String,
+    /// skillfab's cycle latency.
+    pub skillfab: Summary,
+    /// Floors: iceoryx2 ring, pipe ring, threads (same topology).
+    pub floors: Vec<(Transport, Summary)>,
+}
+
+impl Row {
+    /// skillfab p50 ÷ the iceoryx2 floor's p50.
+    pub fn ratio_p50(&self) -> f64 {
+        self.floors
+            .iter()
+            .find(|(t, _)| *t == Transport::Iceoryx2)
+            .map_or(f64::NAN, |(_, s)| self.skillfab.p50 / s.p50)
+    }
+}
+
+fn summary_json(s: &Summary) -> Json {
+    let r = |x: f64| (x * 10.0).round() / 10.0;
+    json!({"p50": r(s.p50), "p99": r(s.p99), "max": r(s.max)})
+}
+
+/// Measures `case`: `n` cycles of skillfab and `n` round trips of each floor.
+pub fn row(case: Case, paced: bool, n: usize) -> Row {
+    let mut f = Fabric::start(case, paced);
+    let skillfab = Summary::of(&f.latencies(n));
+    drop(f);
+    let floors = [Transport::Iceoryx2, Transport::Pipe, Transport::Threads]
+        .into_iter()
+        .map(|t| (t, floors::summary(case.floor(), t, paced, n)))
+        .collect();
+    Row {
+        name: if paced {
+            format!("{}@100Hz", case.name())
+        } else {
+            case.name()
+        },
+        skillfab,
+        floors,
+    }
+}
+
+/// Idle cost: a chain of six skill processes cycling at 100 Hz for `secs`: total CPU of the
+/// manager and the skills (% of one core) and resident memory per skill process (MiB).
+pub fn idle(secs: f64) -> (f64, f64) {
+    let f = Fabric::start(Case::Chain(6), true);
+    let (manager, skills) = f.pids();
+    let all: Vec<u32> = std::iter::once(manager)
+        .chain(skills.iter().copied())
+        .collect();
+    let cpu = |pids: &[u32]| pids.iter().map(|&p| cpu_time(p)).sum::<Duration>();
+    let (c0, t0) = (cpu(&all), Instant::now());
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    let (c1, t1) = (cpu(&all), Instant::now());
+    let percent = (c1 - c0).as_secs_f64() / (t1 - t0).as_secs_f64() * 100.0;
+    let rss = skills.iter().map(|&p| rss_mib(p)).sum::<f64>() / skills.len().max(1) as f64;
+    (percent, rss)
+}
+
+/// The report as one JSON object.
+pub fn to_json(rows: &[Row], idle_cpu_percent: f64, rss_mib_per_skill: f64) -> Json {
+    let cases: Vec<Json> = rows
+        .iter()
+        .map(|r| {
+            let mut o = json!({"name": r.name, "skillfab": summary_json(&r.skillfab)});
+            for (t, s) in &r.floors {
+                o[t.key()] = summary_json(s);
+            }
+            o["ratio_p50"] = json!((r.ratio_p50() * 100.0).round() / 100.0);
+            o
+        })
+        .collect();
+    json!({
+        "cases": cases,
+        "idle_cpu_percent": (idle_cpu_percent * 100.0).round() / 100.0,
+        "rss_mib_per_skill": (rss_mib_per_skill * 100.0).round() / 100.0,
+    })
+}
+
+/// The report as a table for people.
+pub fn to_text(rows: &[Row], idle_cpu_percent: f64, rss_mib_per_skill: f64) -> String {
+    let mut s = format!(
+        "{:<22} {:>28} {:>28} {:>28} {:>28} {:>7}\n",
+        "case (µs p50/p99/max)", "skillfab", "iceoryx2 ring", "pipe ring", "threads", "÷iox"
+    );
+    let cell = |x: &Summary| format!("{:.0} / {:.0} / {:.0}", x.p50, x.p99, x.max);
+    for r in rows {
+        s.push_str(&format!("{:<22} {:>28}", r.name, cell(&r.skillfab)));
+        for (_, f) in &r.floors {
+            s.push_str(&format!(" {:>28}", cell(f)));
+        }
+        s.push_str(&format!(" {:>7.2}\n", r.ratio_p50()));
+    }
+    s.push_str(&format!(
+        "idle: 6 skill processes at 100 Hz use {idle_cpu_percent:.2} % of one core (manager included); {rss_mib_per_skill:.1} MiB resident per skill process\n"
+    ));
+    s
+}
+
+/// An SVG of p50 latency against chain depth and against payload size (back to back and
+/// paced), skillfab next to its floors.
+pub fn to_svg(rows: &[Row]) -> String {
+    let series = |prefix: &str, suffix: &str, xs: &[&str]| -> Vec<(String, Vec<f64>)> {
+        let get = |x: &str| {
+            rows.iter()
+                .find(|r| r.name == format!("{prefix}{x}{suffix}"))
+        };
+        let mut out = vec![(
+            "skillfab".to_string(),
+            xs.iter()
+                .map(|x| get(x).map_or(f64::NAN, |r| r.skillfab.p50))
+                .collect(),
+        )];
+        for t in [Transport::Iceoryx2, Transport::Pipe, Transport::Threads] {
+            out.push((
+                t.key().to_string(),
+                xs.iter()
+                    .map(|x| {
+                        get(x)
+                            .and_then(|r| r.floors.iter().find(|(k, _)| *k == t))
+                            .map_or(f64::NAN, |(_, s)| s.p50)
+                    })
+                    .collect(),
+            ));
+        }
+        out
+    };
+    let colours = ["#d62728", "#1f77b4", "#2ca02c", "#7f7f7f"];
+    let (w, h) = (360.0, 240.0);
+    let mut svg = format!(
+        "<svg xmlns='http://www.w3.org/2000/svg' width='{}' height='{}' font-family='sans-serif' font-size='11'>\n<rect width='100%' height='100%' fill='white'/>\n",
+        2.0 * w + 40.0,
+        2.0 * h + 60.0
+    );
+    let panels = [
+        (
+            "p50 vs chain depth, back to back",
+            "chain-",
+            "",
+            vec!["1", "2", "4", "8"],
+        ),
+        (
+            "p50 vs chain depth, 100 Hz",
+            "chain-",
+            "@100Hz",
+            vec!["1", "2", "4", "8"],
+        ),
+        (
+            "p50 vs payload (depth 2), back to back",
+            "payload-",
+            "",
+            vec!["64B", "64KiB", "1MiB", "4MiB"],
+        ),
+        (
+            "p50 vs payload (depth 2), 100 Hz",
+            "payload-",
+            "@100Hz",
+            vec!["64B", "64KiB", "1MiB", "4MiB"],
+        ),
+    ];
+    for (k, (title, prefix, suffix, xs)) in panels.iter().enumerate() {
+        let (ox, oy) = (
+            20.0 + (k % 2) as f64 * (w + 10.0),
+            20.0 + (k / 2) as f64 * (h + 20.0),
+        );
+        let data = series(prefix, suffix, xs);
+        let top = data
+            .iter()
+            .flat_map(|(_, v)| v.iter().copied())
+            .filter(|v| v.is_finite())
+            .fold(1.0f64, f64::max)
+            * 1.1;
+        let (px, py, pw, ph) = (ox + 45.0, oy + 20.0, w - 60.0, h - 60.0);
+        svg.push_str(&format!(
+            "<text x='{}' y='{}' font-weight='bold'>{title}</text>\n<rect x='{px}' y='{py}' width='{pw}' height='{ph}' fill='none' stroke='#999'/>\n",
+            ox + 5.0,
+            oy + 12.0
+        ));
+        for g in 0..=4 {
+            let v = top * f64::from(g) / 4.0;
+            let y = py + ph - ph * f64::from(g) / 4.0;
+            svg.push_str(&format!(
+                "<text x='{}' y='{}' text-anchor='end'>{v:.0} µs</text><line x1='{px}' x2='{}' y1='{y}' y2='{y}' stroke='#eee'/>\n",
+                px - 3.0,
+                y + 4.0,
+                px + pw
+            ));
+        }
+        let xat = |i: usize| px + pw * (i as f64 + 0.5) / xs.len() as f64;
+        for (i, x) in xs.iter().enumerate() {
+            svg.push_str(&format!(
+                "<text x='{}' y='{}' text-anchor='middle'>{x}</text>\n",
+                xat(i),
+                py + ph + 14.0
+            ));
+        }
+        for (s, (label, v)) in data.iter().enumerate() {
+            let pts: Vec<String> = v
+                .iter()
+                .enumerate()
+                .filter(|(_, y)| y.is_finite())
+                .map(|(i, y)| format!("{:.1},{:.1}", xat(i), py + ph - ph * y / top))
+                .collect();
+            svg.push_str(&format!(
+                "<polyline points='{}' fill='none' stroke='{}' stroke-width='2'/>\n<text x='{}' y='{}' fill='{}'>{label}</text>\n",
+                pts.join(" "),
+                colours[s],
+                px + 72.0 * s as f64,
+                py + ph + 30.0,
+                colours[s]
+            ));
+        }
+    }
+    svg.push_str("</svg>\n");
+    svg
+}

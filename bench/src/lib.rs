@@ -215,9 +215,9 @@ impl Fabric {
         }
     }
 
-    /// The latencies (µs) of the next `n` cycles, as the manager measured them. Waits for
-    /// the cycles by reading the board (shared memory: no wake-up of the fabric), then asks
-    /// for them in batches the manager keeps (≤ 1024).
+    /// The latencies (µs) of `n` cycles after the previous call, as the manager measured
+    /// them. Waits for the cycles by reading the board (shared memory: no wake-up of the
+    /// fabric), then asks for the most recent ones in batches the manager keeps (≤ 1024).
     pub fn latencies(&mut self, n: usize) -> Vec<f64> {
         const BATCH: u64 = 1000;
         let mut out = Vec::with_capacity(n);
@@ -228,14 +228,12 @@ impl Fabric {
             while skillfab_tests::cycle(&self.board) < until + 1 {
                 std::thread::sleep(Duration::from_millis(20));
             }
-            let (cycle, us) = self.client.latencies(1024).unwrap();
-            // `us` ends with the latency of cycle `cycle`; take cycles taken+1 ..= until.
-            let skip_back = (cycle - until) as usize;
-            let end = us.len().saturating_sub(skip_back);
-            let start = end.saturating_sub(want as usize);
-            out.extend(us[start..end].iter().map(|&x| f64::from(x)));
-            self.taken = until;
-            left -= want;
+            // The most recent `want` cycles, all after the previous batch (back to back, the
+            // manager may be far ahead by the time it answers).
+            let (cycle, us) = self.client.latencies(want as u32).unwrap();
+            out.extend(us.iter().map(|&x| f64::from(x)));
+            self.taken = cycle;
+            left -= us.len().min(want as usize) as u64;
         }
         out
     }

@@ -70,8 +70,30 @@ pub fn idle(secs: f64) -> (f64, f64) {
     (percent, rss)
 }
 
+/// The manager's own work per cycle (µs of its thread's CPU time between waits) for `case`
+/// at 100 Hz over `cycles` cycles, from `skillfab up --json`.
+pub fn manager_work(case: Case, cycles: usize) -> Summary {
+    let t = skillfab_tests::TestDomain::new("mwork");
+    let text = case
+        .launch(crate::PACE.as_millis() as u64)
+        .replace("{dir}", t.dir.to_str().unwrap());
+    let r = t.up_json(&text, &["--cycles", &cycles.to_string()]);
+    let w = &r["manager_work_us"];
+    let f = |k: &str| w[k].as_f64().unwrap_or(f64::NAN);
+    Summary {
+        p50: f("p50"),
+        p99: f("p99"),
+        max: f("max"),
+    }
+}
+
 /// The report as one JSON object.
-pub fn to_json(rows: &[Row], idle_cpu_percent: f64, rss_mib_per_skill: f64) -> Json {
+pub fn to_json(
+    rows: &[Row],
+    idle_cpu_percent: f64,
+    rss_mib_per_skill: f64,
+    manager_work: &[(String, Summary)],
+) -> Json {
     let cases: Vec<Json> = rows
         .iter()
         .map(|r| {
@@ -87,11 +109,45 @@ pub fn to_json(rows: &[Row], idle_cpu_percent: f64, rss_mib_per_skill: f64) -> J
         "cases": cases,
         "idle_cpu_percent": (idle_cpu_percent * 100.0).round() / 100.0,
         "rss_mib_per_skill": (rss_mib_per_skill * 100.0).round() / 100.0,
+        "manager_work_us": manager_work
+            .iter()
+            .map(|(n, s)| (n.clone(), summary_json(s)))
+            .collect::<serde_json::Map<String, Json>>(),
     })
 }
 
+/// The rows of a report printed with `--json` (to redraw its plot).
+pub fn rows_from_json(j: &Json) -> Option<Vec<Row>> {
+    let summary = |s: &Json| {
+        Some(Summary {
+            p50: s["p50"].as_f64()?,
+            p99: s["p99"].as_f64()?,
+            max: s["max"].as_f64()?,
+        })
+    };
+    j["cases"]
+        .as_array()?
+        .iter()
+        .map(|c| {
+            Some(Row {
+                name: c["name"].as_str()?.to_string(),
+                skillfab: summary(&c["skillfab"])?,
+                floors: [Transport::Iceoryx2, Transport::Pipe, Transport::Threads]
+                    .into_iter()
+                    .map(|t| Some((t, summary(&c[t.key()])?)))
+                    .collect::<Option<Vec<_>>>()?,
+            })
+        })
+        .collect()
+}
+
 /// The report as a table for people.
-pub fn to_text(rows: &[Row], idle_cpu_percent: f64, rss_mib_per_skill: f64) -> String {
+pub fn to_text(
+    rows: &[Row],
+    idle_cpu_percent: f64,
+    rss_mib_per_skill: f64,
+    manager_work: &[(String, Summary)],
+) -> String {
     let mut s = format!(
         "{:<22} {:>28} {:>28} {:>28} {:>28} {:>7}\n",
         "case (µs p50/p99/max)", "skillfab", "iceoryx2 ring", "pipe ring", "threads", "÷iox"
@@ -107,6 +163,12 @@ pub fn to_text(rows: &[Row], idle_cpu_percent: f64, rss_mib_per_skill: f64) -> S
     s.push_str(&format!(
         "idle: 6 skill processes at 100 Hz use {idle_cpu_percent:.2} % of one core (manager included); {rss_mib_per_skill:.1} MiB resident per skill process\n"
     ));
+    for (n, w) in manager_work {
+        s.push_str(&format!(
+            "manager work per cycle, {n}: p50 {:.1} µs, p99 {:.1} µs (CPU time of its thread)\n",
+            w.p50, w.p99
+        ));
+    }
     s
 }
 
@@ -207,6 +269,7 @@ pub fn to_svg(rows: &[Row]) -> String {
                 py + ph + 14.0
             ));
         }
+        let mut legend_x = px;
         for (s, (label, v)) in data.iter().enumerate() {
             let pts: Vec<String> = v
                 .iter()
@@ -218,10 +281,11 @@ pub fn to_svg(rows: &[Row]) -> String {
                 "<polyline points='{}' fill='none' stroke='{}' stroke-width='2'/>\n<text x='{}' y='{}' fill='{}'>{label}</text>\n",
                 pts.join(" "),
                 colours[s],
-                px + 72.0 * s as f64,
+                legend_x,
                 py + ph + 30.0,
                 colours[s]
             ));
+            legend_x += 6.5 * label.len() as f64 + 14.0;
         }
     }
     svg.push_str("</svg>\n");

@@ -355,6 +355,7 @@ impl Manager {
             {
                 break;
             }
+            let awake = thread_cpu_ns();
             let _ = wake.try_wait(|_| {});
             self.service_registry();
             if self.last_liveness.elapsed() >= LIVENESS_TICK {
@@ -364,6 +365,7 @@ impl Manager {
             control.serve(self);
             self.advance()?;
             control.flush(self);
+            self.stats.add_work(thread_cpu_ns().saturating_sub(awake));
             if self.running.is_none() && self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
                 break;
             }
@@ -1085,6 +1087,7 @@ impl Manager {
             cycles: self.stats.cycles,
             overruns: self.stats.overruns,
             latency_us: self.stats.latency_us(),
+            manager_work_us: self.stats.work_us(),
             skills,
             deaths: self.deaths,
         }
@@ -1096,4 +1099,12 @@ fn is_device(d: &SkillDecl) -> bool {
     d.inputs
         .iter()
         .any(|p| matches!(p.kind, skill_sdk::decl::PortKind::Channel(_)))
+}
+
+/// CPU time of the calling thread (ns): the manager's own work, not the time other
+/// processes held the core while it was awake.
+fn thread_cpu_ns() -> u64 {
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).map_or(0, |t| {
+        t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64
+    })
 }

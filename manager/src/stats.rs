@@ -15,6 +15,11 @@ pub struct CycleStats {
     pub overruns: u64,
     latencies_ns: VecDeque<u64>,
     max_ns: u64,
+    /// The manager's own work (ns of its thread's CPU time) per cycle, between waits.
+    work_ns: VecDeque<u64>,
+    work_max_ns: u64,
+    /// Work since the last recorded cycle.
+    work_pending: u64,
 }
 
 /// Percentiles in microseconds.
@@ -40,6 +45,23 @@ impl CycleStats {
         }
         self.latencies_ns.push_back(latency_ns);
         self.max_ns = self.max_ns.max(latency_ns);
+        if self.work_ns.len() == WINDOW {
+            self.work_ns.pop_front();
+        }
+        self.work_ns.push_back(self.work_pending);
+        self.work_max_ns = self.work_max_ns.max(self.work_pending);
+        self.work_pending = 0;
+    }
+
+    /// Adds time the manager spent awake (handling a wake-up) to the cycle in progress.
+    pub fn add_work(&mut self, ns: u64) {
+        self.work_pending += ns;
+    }
+
+    /// The manager's own work per cycle (readiness, arbitration reads, monitors, events,
+    /// control requests; everything between two of its waits), percentiles in µs.
+    pub fn work_us(&self) -> Percentiles {
+        percentiles(&self.work_ns, self.work_max_ns)
     }
 
     /// The latencies of the `n` most recent cycles in µs, oldest first (the console's history).
@@ -54,20 +76,25 @@ impl CycleStats {
 
     /// Latency percentiles over the recent window (max over all cycles).
     pub fn latency_us(&self) -> Percentiles {
-        let mut v: Vec<u64> = self.latencies_ns.iter().copied().collect();
-        if v.is_empty() {
-            return Percentiles::default();
-        }
-        v.sort_unstable();
-        let at = |q: f64| {
-            let i = ((v.len() as f64 - 1.0) * q).round() as usize;
-            v[i.min(v.len() - 1)] as f64 / 1000.0
-        };
-        Percentiles {
-            p50: at(0.50),
-            p99: at(0.99),
-            max: self.max_ns as f64 / 1000.0,
-        }
+        percentiles(&self.latencies_ns, self.max_ns)
+    }
+}
+
+/// Percentiles (µs) of a window of nanoseconds; `max_ns` is the all-time largest.
+fn percentiles(window: &VecDeque<u64>, max_ns: u64) -> Percentiles {
+    let mut v: Vec<u64> = window.iter().copied().collect();
+    if v.is_empty() {
+        return Percentiles::default();
+    }
+    v.sort_unstable();
+    let at = |q: f64| {
+        let i = ((v.len() as f64 - 1.0) * q).round() as usize;
+        v[i.min(v.len() - 1)] as f64 / 1000.0
+    };
+    Percentiles {
+        p50: at(0.50),
+        p99: at(0.99),
+        max: max_ns as f64 / 1000.0,
     }
 }
 
@@ -113,6 +140,8 @@ pub struct Report {
     pub overruns: u64,
     /// Cycle latency: start to last expected run done.
     pub latency_us: Percentiles,
+    /// The manager's own work per cycle (its thread's CPU time between waits).
+    pub manager_work_us: Percentiles,
     /// Per skill, in registration order.
     pub skills: Vec<SkillReport>,
     /// Skills that died while the fabric ran.

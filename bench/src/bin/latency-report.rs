@@ -21,13 +21,39 @@ fn main() -> ExitCode {
                 Some(f) => svg = Some(f),
                 None => return usage("--svg needs a file"),
             },
+            "--svg-from" => match args.next() {
+                // Redraws the plot of an earlier `--json` report: latency-report --svg-from
+                // docs/latency.json --svg docs/latency.svg
+                Some(f) => {
+                    let rows = std::fs::read_to_string(&f)
+                        .ok()
+                        .and_then(|t| serde_json::from_str(&t).ok())
+                        .and_then(|j| report::rows_from_json(&j));
+                    let Some(rows) = rows else {
+                        return usage(&format!("{f} is not a latency-report --json output"));
+                    };
+                    let Some(out) = svg.clone().or_else(|| {
+                        args.next()
+                            .filter(|a| a == "--svg")
+                            .and_then(|_| args.next())
+                    }) else {
+                        return usage("--svg-from needs --svg FILE before it or after it");
+                    };
+                    if let Err(e) = std::fs::write(&out, report::to_svg(&rows)) {
+                        eprintln!("latency-report: writing {out}: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                    return ExitCode::SUCCESS;
+                }
+                None => return usage("--svg-from needs a file"),
+            },
             "--only" => match args.next() {
                 Some(s) => only = Some(s),
                 None => return usage("--only needs a substring of case names"),
             },
             "-h" | "--help" => {
                 println!(
-                    "usage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]"
+                    "usage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
                 );
                 return ExitCode::SUCCESS;
             }
@@ -56,10 +82,19 @@ fn main() -> ExitCode {
         }
     }
     let (cpu, rss) = report::idle(5.0);
+    let work: Vec<_> = [Case::ExitLab, Case::Chain(6)]
+        .into_iter()
+        .map(|c| {
+            (
+                format!("{}@100Hz", c.name()),
+                report::manager_work(c, cycles.max(100)),
+            )
+        })
+        .collect();
     if json {
-        println!("{}", report::to_json(&rows, cpu, rss));
+        println!("{}", report::to_json(&rows, cpu, rss, &work));
     } else {
-        print!("{}", report::to_text(&rows, cpu, rss));
+        print!("{}", report::to_text(&rows, cpu, rss, &work));
     }
     if let Some(f) = svg
         && let Err(e) = std::fs::write(&f, report::to_svg(&rows))
@@ -72,7 +107,7 @@ fn main() -> ExitCode {
 
 fn usage(why: &str) -> ExitCode {
     eprintln!(
-        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]"
+        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
     );
     ExitCode::from(2)
 }

@@ -107,6 +107,8 @@ pub struct Iox {
     >,
     listener: iceoryx2::port::listener::Listener<iceoryx2::service::ipc::Service>,
     seq: u64,
+    /// Spin (poll the samples) this long before blocking on the listener.
+    spin: Duration,
     // Last: its drop kills the nodes and removes the domain's files after the ports went.
     _t: TestDomain,
 }
@@ -114,6 +116,12 @@ pub struct Iox {
 impl Iox {
     /// Starts the nodes and waits until each is ready.
     pub fn start(shape: Shape) -> Iox {
+        Iox::start_spinning(shape, Duration::ZERO)
+    }
+
+    /// [`Iox::start`] with every participant polling for its sample for up to `spin` before
+    /// it blocks (the spin-then-block strategy).
+    pub fn start_spinning(shape: Shape, spin: Duration) -> Iox {
         let mut t = TestDomain::new("iox");
         let node = services::node(&t.domain, "bench-driver").unwrap();
         let listener = services::listener(&node, &event_name(0)).unwrap();
@@ -151,6 +159,7 @@ impl Iox {
                     &event_name(i),
                     &out_topic,
                     &event_name(next),
+                    &spin.as_micros().to_string(),
                 ],
             );
         }
@@ -189,6 +198,7 @@ impl Iox {
             inbox,
             listener,
             seq: 0,
+            spin,
             _t: t,
         }
     }
@@ -208,8 +218,13 @@ impl Iox {
             Shape::Star(n) => n,
         };
         let mut got = 0;
+        let spin_until = start + self.spin;
         while got < want {
-            self.listener.blocking_wait(|_| {}).unwrap();
+            if Instant::now() >= spin_until {
+                self.listener.blocking_wait(|_| {}).unwrap();
+            } else {
+                std::hint::spin_loop();
+            }
             for sub in &self.inbox {
                 while let Some(s) = sub.receive().unwrap() {
                     if s.payload().value == self.seq {
@@ -219,6 +234,15 @@ impl Iox {
             }
         }
         start.elapsed()
+    }
+
+    /// Process ids of the nodes.
+    pub fn node_pids(&self) -> Vec<u32> {
+        let n = match self.shape {
+            Shape::Ring(d) => d,
+            Shape::Star(n) => n,
+        };
+        (0..n).map(|i| self._t.pid(i)).collect()
     }
 
     /// `n` round trips (µs).
@@ -413,6 +437,7 @@ pub fn iox_node(
     event: &str,
     out_topic: &str,
     out_event: &str,
+    spin: Duration,
 ) {
     let node = services::node(domain, &format!("bench-node-{index}")).unwrap();
     let sub = services::subscriber::<Tick>(&node, topic).unwrap();
@@ -423,9 +448,20 @@ pub fn iox_node(
     ready
         .notify_with_custom_event_id(iceoryx2::prelude::EventId::new(index))
         .unwrap();
-    // Ends on SIGTERM (the fixture's clean-up): the wait then fails or returns nothing new.
-    while listener.blocking_wait(|_| {}).is_ok() {
+    // Ends on SIGTERM (the fixture's clean-up): the wait then fails.
+    let mut last = Instant::now();
+    loop {
+        // Poll for up to `spin` after the last sample, then block.
+        if last.elapsed() >= spin {
+            if listener.blocking_wait(|_| {}).is_err() {
+                break;
+            }
+        } else {
+            std::hint::spin_loop();
+            let _ = listener.try_wait(|_| {});
+        }
         while let Some(s) = sub.receive().unwrap() {
+            last = Instant::now();
             let mut out = publisher.loan_uninit().unwrap().write_payload(*s.payload());
             *out.user_header_mut() = *s.user_header();
             out.send().unwrap();

@@ -70,6 +70,37 @@ pub fn idle(secs: f64) -> (f64, f64) {
     (percent, rss)
 }
 
+/// The wake-up strategy on the transport floor: iceoryx2 rings of depth 1, 2, 4 whose
+/// participants poll for their sample for 0 (pure blocking), 20 or 100 µs before they block;
+/// back to back and at 100 Hz; p50 / p99 and the CPU the ring used (% of one core).
+pub fn spin_experiment(n: usize) -> String {
+    let mut s =
+        String::from("ring  spin     back to back p50/p99 (cpu)      100 Hz p50/p99 (cpu)\n");
+    for depth in [1usize, 2, 4] {
+        for spin_us in [0u64, 20, 100] {
+            s.push_str(&format!("{depth:>4}  {spin_us:>3} µs"));
+            for paced in [false, true] {
+                let mut ring = floors::Iox::start_spinning(
+                    floors::Shape::Ring(depth),
+                    Duration::from_micros(spin_us),
+                );
+                let mut pids = ring.node_pids();
+                pids.push(std::process::id());
+                let cpu = |p: &[u32]| p.iter().map(|&p| cpu_time(p)).sum::<Duration>();
+                let (c0, t0) = (cpu(&pids), Instant::now());
+                let v = Summary::of(&ring.rounds(n, paced));
+                let used = (cpu(&pids) - c0).as_secs_f64() / t0.elapsed().as_secs_f64() * 100.0;
+                s.push_str(&format!(
+                    "   {:>6.0} / {:>6.0} µs ({used:>5.1} %)",
+                    v.p50, v.p99
+                ));
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
+
 /// The manager's own work per cycle (µs of its thread's CPU time between waits) for `case`
 /// at 100 Hz over `cycles` cycles, from `skillfab up --json`.
 pub fn manager_work(case: Case, cycles: usize) -> Summary {

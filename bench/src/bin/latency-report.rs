@@ -47,6 +47,10 @@ fn main() -> ExitCode {
                 }
                 None => return usage("--svg-from needs a file"),
             },
+            "--spin-experiment" => {
+                print!("{}", report::spin_experiment(cycles));
+                return ExitCode::SUCCESS;
+            }
             "--only" => match args.next() {
                 Some(s) => only = Some(s),
                 None => return usage("--only needs a substring of case names"),

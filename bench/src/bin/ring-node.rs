@@ -1,5 +1,5 @@
 //! A node of the benchmarks' floor rings (`skillfab_bench::floors`):
-//! `ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT` (in `SKILLFAB_DOMAIN`) or
+//! `ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT SPIN_US` (in `SKILLFAB_DOMAIN`) or
 //! `ring-node pipe`.
 
 use std::process::ExitCode;
@@ -13,7 +13,11 @@ fn main() -> ExitCode {
         .as_slice()
     {
         ["pipe"] => skillfab_bench::floors::pipe_node(),
-        ["iox", index, topic, event, out_topic, out_event] => {
+        ["iox", index, topic, event, out_topic, out_event, spin_us] => {
+            let Ok(spin_us) = spin_us.parse::<u64>() else {
+                eprintln!("ring-node: bad spin {spin_us}");
+                return ExitCode::FAILURE;
+            };
             let Ok(index) = index.parse() else {
                 eprintln!("ring-node: bad index {index}");
                 return ExitCode::FAILURE;
@@ -26,11 +30,14 @@ fn main() -> ExitCode {
                     return ExitCode::FAILURE;
                 }
             };
-            skillfab_bench::floors::iox_node(&domain, index, topic, event, out_topic, out_event);
+            let spin = std::time::Duration::from_micros(spin_us);
+            skillfab_bench::floors::iox_node(
+                &domain, index, topic, event, out_topic, out_event, spin,
+            );
         }
         _ => {
             eprintln!(
-                "usage: ring-node pipe | ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT"
+                "usage: ring-node pipe | ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT SPIN_US"
             );
             return ExitCode::FAILURE;
         }

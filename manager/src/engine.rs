@@ -38,8 +38,10 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-/// How often the manager checks that registered processes are alive.
-pub const LIVENESS_TICK: Duration = Duration::from_millis(50);
+/// How often the manager checks that registered processes are alive (and its longest sleep).
+/// A sync skill that dies mid-cycle is also found when the cycle's deadline passes; each
+/// check reads `/proc` for every skill, so it is not done every cycle.
+pub const LIVENESS_TICK: Duration = Duration::from_millis(200);
 /// How often the manager removes what dead processes of the domain left behind.
 const NODE_SWEEP: Duration = Duration::from_secs(1);
 /// Shortest cycle period in free-running mode while no skill is expected (avoids a busy loop).
@@ -380,6 +382,11 @@ impl Manager {
         self.service_registry();
         self.check_liveness();
         self.board.close();
+        // Wake every skill: it finds the board closed and leaves now, not at its next
+        // liveness tick.
+        for e in self.skills.iter().flatten() {
+            let _ = e.trigger.notify();
+        }
         let cleaned = self.node.try_cleanup_dead_nodes();
         // The control thread's node is ours too: close it before looking for others.
         drop(self.control.take());

@@ -23,8 +23,9 @@ use std::time::{Duration, Instant};
 
 /// How long children get to exit after SIGTERM before SIGKILL.
 const GRACE: Duration = Duration::from_secs(5);
-/// How often the supervisor looks at its children.
-const POLL: Duration = Duration::from_millis(20);
+/// How often the supervisor looks at its children (a wake-up of `skillfab up` each time; a
+/// restart waits at least this long, plus its back-off).
+const POLL: Duration = Duration::from_millis(100);
 
 /// Options of `skillfab up`.
 #[derive(Debug, Clone)]

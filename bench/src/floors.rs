@@ -72,6 +72,23 @@ fn pace(next: &mut Instant) {
     *next += PACE;
 }
 
+/// `n` round trips (µs) of `round` (given the round's sequence number) after 10 unmeasured
+/// ones, back to back or paced at [`PACE`].
+fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Duration) -> Vec<f64> {
+    for seq in 0..10 {
+        round(seq);
+    }
+    let mut next = Instant::now();
+    (0..n as u64)
+        .map(|seq| {
+            if paced {
+                pace(&mut next);
+            }
+            round(seq).as_secs_f64() * 1e6
+        })
+        .collect()
+}
+
 /// Round trips (µs) of `n` tokens through `shape` by `transport`, back to back or paced.
 pub fn measure(shape: Shape, transport: Transport, paced: bool, n: usize) -> Vec<f64> {
     match transport {
@@ -247,18 +264,7 @@ impl Iox {
 
     /// `n` round trips (µs).
     pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<f64> {
-        let mut next = Instant::now();
-        for _ in 0..10 {
-            self.round();
-        }
-        (0..n)
-            .map(|_| {
-                if paced {
-                    pace(&mut next);
-                }
-                self.round().as_secs_f64() * 1e6
-            })
-            .collect()
+        rounds(n, paced, |_| self.round())
     }
 }
 
@@ -330,18 +336,7 @@ impl Pipes {
 
     /// `n` round trips (µs).
     pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<f64> {
-        let mut next = Instant::now();
-        for _ in 0..10 {
-            self.round();
-        }
-        (0..n)
-            .map(|_| {
-                if paced {
-                    pace(&mut next);
-                }
-                self.round().as_secs_f64() * 1e6
-            })
-            .collect()
+        rounds(n, paced, |_| self.round())
     }
 }
 
@@ -413,18 +408,7 @@ impl Threads {
 
     /// `n` round trips (µs).
     pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<f64> {
-        let mut next = Instant::now();
-        for i in 0..10 {
-            self.round(i);
-        }
-        (0..n)
-            .map(|i| {
-                if paced {
-                    pace(&mut next);
-                }
-                self.round(i as u64).as_secs_f64() * 1e6
-            })
-            .collect()
+        rounds(n, paced, |seq| self.round(seq))
     }
 }
 

@@ -436,10 +436,28 @@ fn write_loop(path: &Path, rx: &Receiver<Record>) {
 mod tests {
     use super::*;
 
+    /// A fresh scratch directory of this test process, removed when dropped (even on failure).
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(tag: &str) -> Scratch {
+            let dir =
+                std::env::temp_dir().join(format!("sf-recorder-{tag}-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            Scratch(dir)
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
     #[test]
     fn a_log_with_nothing_but_its_start_leaves_no_file() {
-        let dir = std::env::temp_dir().join(format!("sf-recorder-empty-{}", std::process::id()));
-        let path = dir.join("log.jsonl");
+        let dir = Scratch::new("empty");
+        let path = dir.0.join("log.jsonl");
         {
             let r = Recorder::open(&path).unwrap();
             r.line("start", None, json!({"domain": "d"}));
@@ -460,14 +478,12 @@ mod tests {
             .map(|l| serde_json::from_str::<Json>(l).unwrap()["kind"].to_string())
             .collect();
         assert_eq!(kinds, ["\"start\"", "\"priority\""]);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn lines_are_json_with_common_fields() {
-        let dir = std::env::temp_dir().join(format!("sf-recorder-{}", std::process::id()));
-        let path = dir.join("log.jsonl");
-        let _ = std::fs::remove_file(&path);
+        let dir = Scratch::new("lines");
+        let path = dir.0.join("log.jsonl");
         {
             let r = Recorder::open(&path).unwrap();
             r.param(
@@ -497,7 +513,6 @@ mod tests {
         assert_eq!(lines[0]["by"], "1-0");
         assert!(lines[0]["unix_ms"].as_u64().unwrap() > 0);
         assert_eq!(lines[1]["kind"], "priority");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     fn scaled_sample(cycle: u64, value: f64) -> IoSample {
@@ -528,8 +543,8 @@ mod tests {
 
     #[test]
     fn an_mcap_log_holds_the_same_records_on_channels_with_schemas() {
-        let dir = std::env::temp_dir().join(format!("sf-recorder-mcap-{}", std::process::id()));
-        let path = dir.join("log.mcap");
+        let dir = Scratch::new("mcap");
+        let path = dir.0.join("log.mcap");
         {
             let r = Recorder::open(&path).unwrap();
             r.param(
@@ -585,12 +600,11 @@ mod tests {
         assert_eq!(lines[2]["value"]["value"], 9.0);
 
         // Cut short as if the manager had been killed: the records before the cut are read.
-        let cut = dir.join("cut.mcap");
+        let cut = dir.0.join("cut.mcap");
         std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).unwrap();
         let text = read_records(&cut).unwrap();
         assert!(text.lines().count() >= 2, "{text}");
         std::fs::write(&cut, b"not an mcap file").unwrap();
         assert!(read_records(&cut).is_err());
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

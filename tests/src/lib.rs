@@ -44,6 +44,9 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// The hello network as a launch file for [`TestDomain::launch_file`].
+pub const HELLO: &str = "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n";
+
 /// One test's private fabric.
 pub struct TestDomain {
     /// The domain.
@@ -166,6 +169,34 @@ impl TestDomain {
                 String::from_utf8_lossy(&out.stdout)
             )
         })
+    }
+
+    /// Starts the hello network (ticker → scale → smooth, 5 ms period) under `skillfab up`
+    /// with `extra` arguments and waits until all three skills run; returns the child's index.
+    pub fn hello(&mut self, extra: &[&str]) -> usize {
+        let launch = self.launch_file(HELLO);
+        let up = self.spawn(
+            "skillfab",
+            &[&["up", launch.to_str().expect("utf-8 path")], extra].concat(),
+        );
+        let board = self.board();
+        self.wait_until("the hello network to run", || {
+            ["ticker", "scale", "smooth"]
+                .iter()
+                .all(|n| registered(&board, n).is_some_and(|s| s.runs > 2))
+        });
+        up
+    }
+
+    /// Runs `skillfab ctl ARGS`, asserts it succeeded and returns its standard output.
+    pub fn ctl(&self, args: &[&str]) -> String {
+        let out = self.run("skillfab", &[&["ctl"], args].concat());
+        assert!(
+            out.status.success(),
+            "ctl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
     }
 
     /// The domain's board, once the manager has created it.

@@ -18,24 +18,6 @@ use std::process::{Child, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-const HELLO: &str = "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n";
-
-/// Starts the hello network under `skillfab up` and waits until all three skills run.
-fn hello(t: &mut TestDomain, extra: &[&str]) -> usize {
-    let launch = t.launch_file(HELLO);
-    let up = t.spawn(
-        "skillfab",
-        &[&["up", launch.to_str().unwrap()], extra].concat(),
-    );
-    let board = t.board();
-    t.wait_until("the hello network to run", || {
-        ["ticker", "scale", "smooth"]
-            .iter()
-            .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 2))
-    });
-    up
-}
-
 fn size(rows: u16, cols: u16) -> Winsize {
     Winsize {
         ws_row: rows,
@@ -160,21 +142,11 @@ impl Drop for Console {
     }
 }
 
-fn ctl(t: &TestDomain, args: &[&str]) -> String {
-    let out = t.run("skillfab", &[&["ctl"], args].concat());
-    assert!(
-        out.status.success(),
-        "ctl {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
 #[test]
 fn keys_drive_the_fabric() {
     let mut t = TestDomain::new("console");
     let log = t.dir.join("params.jsonl");
-    hello(&mut t, &["--param-log", log.to_str().unwrap()]);
+    t.hello(&["--param-log", log.to_str().unwrap()]);
     let client = Client::connect(&t.domain).unwrap();
     let order: Vec<String> = client.list().unwrap().into_iter().map(|s| s.name).collect();
     let scale = order.iter().position(|n| n == "scale").unwrap();
@@ -216,7 +188,7 @@ fn keys_drive_the_fabric() {
     t.wait_until("gain = 5", || {
         client.get_param("scale", "gain").unwrap() == ParamValue::Float(5.0)
     });
-    assert_eq!(ctl(&t, &["get", "scale.gain"]).trim(), "5");
+    assert_eq!(t.ctl(&["get", "scale.gain"]).trim(), "5");
     // The change is in the fabric log: who, when, old and new.
     let changes = std::fs::read_to_string(&log).unwrap();
     let change: serde_json::Value = changes
@@ -278,7 +250,7 @@ fn waits_for_the_manager_and_reconnects() {
     let mut t = TestDomain::new("conrec");
     let mut con = Console::start(&t, 30, 110);
     con.wait_for("no manager");
-    let up = hello(&mut t, &[]);
+    let up = t.hello(&[]);
     con.wait_for("skills (3)");
     // A skill is killed: the manager restarts it (`on-failure`), the console follows.
     let board = t.board();
@@ -329,7 +301,7 @@ fn waits_for_the_manager_and_reconnects() {
     t.wait_exit(up);
     con.wait_for("last known");
     // ...and picks the fabric up again when it is back.
-    hello(&mut t, &[]);
+    t.hello(&[]);
     con.wait_for("skills (3)");
 }
 
@@ -337,7 +309,7 @@ fn waits_for_the_manager_and_reconnects() {
 fn ctl_logs_prints_skill_lines() {
     use std::io::BufRead;
     let mut t = TestDomain::new("ctllogs");
-    hello(&mut t, &[]);
+    t.hello(&[]);
     let mut logs = t
         .command("skillfab")
         .args(["ctl", "logs", "scale"])
@@ -367,7 +339,7 @@ fn ctl_logs_prints_skill_lines() {
         }
     };
     wait_line("INFO  scale: registered");
-    ctl(&t, &["set", "scale.gain=7"]);
+    t.ctl(&["set", "scale.gain=7"]);
     wait_line("scale: parameter set param=gain value=7");
     assert!(seen.iter().all(|l| l.contains("scale:")), "{seen:?}");
     let _ = logs.kill();

@@ -11,19 +11,10 @@ use skill_sdk::params::ParamValue;
 use skillfab_tests::TestDomain;
 use std::time::Duration;
 
-const HELLO: &str = "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n";
-
 /// Starts the hello network under `skillfab up` and waits until all three skills run.
 fn hello(tag: &str) -> TestDomain {
     let mut t = TestDomain::new(tag);
-    let launch = t.launch_file(HELLO);
-    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
-    let board = t.board();
-    t.wait_until("the hello network to run", || {
-        ["ticker", "scale", "smooth"]
-            .iter()
-            .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 2))
-    });
+    t.hello(&[]);
     t
 }
 
@@ -37,14 +28,8 @@ fn ctl(t: &TestDomain, args: &[&str]) -> (bool, String, String) {
     )
 }
 
-fn ok(t: &TestDomain, args: &[&str]) -> String {
-    let (success, out, err) = ctl(t, args);
-    assert!(success, "ctl {args:?} failed: {err}");
-    out
-}
-
 fn json(t: &TestDomain, args: &[&str]) -> serde_json::Value {
-    let out = ok(t, &[&["--json"], args].concat());
+    let out = t.ctl(&[&["--json"], args].concat());
     serde_json::from_str(&out).unwrap_or_else(|e| panic!("ctl {args:?}: not JSON ({e}): {out}"))
 }
 
@@ -62,7 +47,7 @@ fn runs_of(stats: &serde_json::Value, name: &str) -> u64 {
 #[test]
 fn ls_set_get_query() {
     let t = hello("lsset");
-    let ls = ok(&t, &["ls"]);
+    let ls = t.ctl(&["ls"]);
     for name in ["ticker", "scale", "smooth"] {
         assert!(ls.contains(name), "{ls}");
     }
@@ -78,8 +63,8 @@ fn ls_set_get_query() {
     assert_eq!(scale["params"][0]["min"], -1e6);
     assert_eq!(scale["mode"], "sync");
 
-    ok(&t, &["set", "scale.gain=3"]);
-    assert_eq!(ok(&t, &["get", "scale.gain"]).trim(), "3");
+    t.ctl(&["set", "scale.gain=3"]);
+    assert_eq!(t.ctl(&["get", "scale.gain"]).trim(), "3");
     // Applied from the next cycle: soon every new sample is 3 × its tick (= its cycle).
     t.wait_until("scaled = 3 × tick", || {
         let q = json(&t, &["query", "scale.scaled.value"]);
@@ -134,7 +119,7 @@ fn bad_requests_get_clear_errors_and_nothing_breaks() {
     t.wait_until("cycles to go on", || {
         json(&t, &["stats"])["cycles"].as_u64() > before["cycles"].as_u64()
     });
-    assert_eq!(ok(&t, &["get", "scale.gain"]).trim(), "2");
+    assert_eq!(t.ctl(&["get", "scale.gain"]).trim(), "2");
 }
 
 #[test]
@@ -142,7 +127,7 @@ fn a_once_monitor_prints_one_event_in_the_cycle_it_became_true() {
     let t = hello("monitor");
     // The ticker's value is the cycle number: the condition first holds in cycle 51 (or, if
     // the network is already past it, in the cycle the monitor was installed in).
-    let out = ok(&t, &["monitor", "ticker.tick.value > 50", "--once"]);
+    let out = t.ctl(&["monitor", "ticker.tick.value > 50", "--once"]);
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines.len(), 1, "{out}");
     let ev: serde_json::Value = serde_json::from_str(lines[0]).unwrap();
@@ -161,7 +146,7 @@ fn a_once_monitor_prints_one_event_in_the_cycle_it_became_true() {
 #[test]
 fn deactivate_stops_runs_activate_resumes_and_step_counts_exactly() {
     let t = hello("activation");
-    ok(&t, &["deactivate", "scale"]);
+    t.ctl(&["deactivate", "scale"]);
     let a = json(&t, &["stats"]);
     t.wait_until("cycles without scale", || {
         json(&t, &["stats"])["cycles"].as_u64().unwrap() > a["cycles"].as_u64().unwrap() + 20
@@ -182,12 +167,12 @@ fn deactivate_stops_runs_activate_resumes_and_step_counts_exactly() {
             .any(|s| s["name"] == "scale" && s["state"] == "inactive")
     );
 
-    ok(&t, &["activate", "scale"]);
+    t.ctl(&["activate", "scale"]);
     t.wait_until("scale to run again", || {
         runs_of(&json(&t, &["stats"]), "scale") > runs_of(&b, "scale") + 5
     });
 
-    ok(&t, &["stop"]);
+    t.ctl(&["stop"]);
     let stopped = json(&t, &["stats"]);
     assert_eq!(stopped["running"], false);
     let c0 = stopped["cycles"].as_u64().unwrap();
@@ -201,7 +186,7 @@ fn deactivate_stops_runs_activate_resumes_and_step_counts_exactly() {
     );
     assert_eq!(after["running"], false);
     assert_eq!(runs_of(&after, "ticker"), runs_of(&stopped, "ticker") + 5);
-    ok(&t, &["run"]);
+    t.ctl(&["run"]);
     t.wait_until("cycling again", || {
         json(&t, &["stats"])["cycles"].as_u64().unwrap() > c0 + 10
     });

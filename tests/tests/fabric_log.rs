@@ -10,34 +10,6 @@ use skill_sdk::client::Client;
 use skill_sdk::params::ParamValue;
 use skillfab_tests::TestDomain;
 
-const HELLO: &str = "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n";
-
-/// Starts the hello network under `skillfab up` with `extra` arguments; waits until it cycles.
-fn hello(t: &mut TestDomain, extra: &[&str]) -> usize {
-    let launch = t.launch_file(HELLO);
-    let up = t.spawn(
-        "skillfab",
-        &[&["up", launch.to_str().unwrap()], extra].concat(),
-    );
-    let board = t.board();
-    t.wait_until("the hello network to run", || {
-        ["ticker", "scale", "smooth"]
-            .iter()
-            .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 2))
-    });
-    up
-}
-
-fn ctl(t: &TestDomain, args: &[&str]) -> String {
-    let out = t.run("skillfab", &[&["ctl"], args].concat());
-    assert!(
-        out.status.success(),
-        "ctl {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
 /// Stops `skillfab up` with SIGINT, as Ctrl-C would.
 fn stop(t: &mut TestDomain, up: usize) {
     t.signal(up, nix::sys::signal::Signal::SIGINT);
@@ -48,16 +20,16 @@ fn stop(t: &mut TestDomain, up: usize) {
 fn an_mcap_log_holds_changes_and_samples_and_replays() {
     let mut t = TestDomain::new("mcaplog");
     let file = t.dir.join("run.mcap");
-    let up = hello(&mut t, &["--param-log", file.to_str().unwrap()]);
+    let up = t.hello(&["--param-log", file.to_str().unwrap()]);
     let client = Client::connect(&t.domain).unwrap();
-    ctl(&t, &["set", "scale.gain=4"]);
-    ctl(&t, &["iolog", "scale", "on"]);
-    assert!(ctl(&t, &["logging"]).contains("run.mcap"));
+    t.ctl(&["set", "scale.gain=4"]);
+    t.ctl(&["iolog", "scale", "on"]);
+    assert!(t.ctl(&["logging"]).contains("run.mcap"));
     let from = client.stats().unwrap().cycles;
     t.wait_until("50 logged cycles", || {
         client.stats().unwrap().cycles > from + 50
     });
-    ctl(&t, &["iolog", "scale", "off"]);
+    t.ctl(&["iolog", "scale", "off"]);
     drop(client);
     stop(&mut t, up);
 
@@ -113,13 +85,13 @@ fn an_mcap_log_holds_changes_and_samples_and_replays() {
 
     // A fresh fabric gets the recorded change back through the same validated requests.
     let mut t2 = TestDomain::new("mcapreplay");
-    let up2 = hello(&mut t2, &[]);
+    let up2 = t2.hello(&[]);
     let client = Client::connect(&t2.domain).unwrap();
     assert_eq!(
         client.get_param("scale", "gain").unwrap(),
         ParamValue::Float(2.0)
     );
-    ctl(&t2, &["replay", file.to_str().unwrap()]);
+    t2.ctl(&["replay", file.to_str().unwrap()]);
     assert_eq!(
         client.get_param("scale", "gain").unwrap(),
         ParamValue::Float(4.0)
@@ -147,7 +119,7 @@ fn an_mcap_log_holds_changes_and_samples_and_replays() {
 #[test]
 fn a_fabric_nobody_changed_leaves_no_log_file() {
     let mut t = TestDomain::new("nolog");
-    let up = hello(&mut t, &[]);
+    let up = t.hello(&[]);
     stop(&mut t, up);
     let logs: Vec<_> = std::fs::read_dir(&t.dir)
         .unwrap()

@@ -93,6 +93,15 @@ enum Cmd {
     },
     /// The debugging interface: a terminal UI over a running fabric.
     Console,
+    /// The shared message types: their schemas as JSON, or as C or Python declarations.
+    Schema {
+        /// Print the C header (skill-sdk/capi/include/skillfab_msgs.h).
+        #[arg(long, conflicts_with = "python")]
+        c: bool,
+        /// Print the Python ctypes module (python/skillfab/msgs.py).
+        #[arg(long)]
+        python: bool,
+    },
     /// The paper's experiment.
     Demo {
         #[command(subcommand)]
@@ -199,6 +208,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Cmd::Ctl { json, cmd } => skillfab::ctl::run(&domain, json, cmd),
         Cmd::Console => skillfab::console::run(&domain),
+        Cmd::Schema { c, python } => {
+            use skill_sdk::codegen;
+            let schemas = codegen::shared_schemas();
+            if c {
+                print!("{}", codegen::c_header(&schemas));
+            } else if python {
+                print!("{}", codegen::python_module(&schemas));
+            } else {
+                println!("{}", serde_json::to_string_pretty(&schemas)?);
+            }
+            Ok(())
+        }
         Cmd::Demo {
             which:
                 DemoCmd::ExitLab {

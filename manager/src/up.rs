@@ -64,6 +64,14 @@ fn spawn(spec: &ProcessSpec, domain: &Domain) -> std::io::Result<Child> {
     cmd.args(&spec.args)
         .env(DOMAIN_ENV, domain.name())
         .stdin(Stdio::null());
+    // Skills in other languages find libskillfab next to this program (Python's skillfab
+    // package looks there).
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(std::path::Path::to_path_buf))
+    {
+        cmd.env("SKILLFAB_BIN_DIR", dir);
+    }
     if spec.registers {
         cmd.arg("--domain").arg(domain.name());
     }

@@ -197,3 +197,58 @@ pub struct Door {
     /// Width of the opening (m).
     pub width: f64,
 }
+
+/// A boxed runtime input port.
+pub type ErasedInputBox = Box<dyn crate::ports::ErasedInput>;
+
+/// What the runtime needs to use a shared message type chosen by name at run time (a skill
+/// declared in C or Python).
+pub struct MessageType {
+    /// The type name.
+    pub type_name: &'static str,
+    /// Its layout.
+    pub schema: fn() -> crate::schema::MessageSchema,
+    /// Builds the runtime input port of input `idx`.
+    pub input: fn(&crate::ports::PortMaker<'_>, usize) -> Result<ErasedInputBox, crate::SdkError>,
+    /// Builds the runtime output cell of output `idx`.
+    pub output: fn(
+        &crate::ports::PortMaker<'_>,
+        usize,
+    ) -> Result<crate::ports::ErasedOutput, crate::SdkError>,
+    /// The bytes of a value of this type held as `&dyn Any`.
+    pub bytes: fn(&dyn std::any::Any) -> Option<&[u8]>,
+}
+
+fn bytes_of<T: Message>(any: &dyn std::any::Any) -> Option<&[u8]> {
+    let value = any.downcast_ref::<T>()?;
+    // SAFETY: a Message is plain old data; the slice covers exactly the borrowed value.
+    Some(unsafe {
+        std::slice::from_raw_parts((value as *const T).cast::<u8>(), std::mem::size_of::<T>())
+    })
+}
+
+macro_rules! registry {
+    ($($t:ty),* $(,)?) => {
+        /// Every shared message type, in the order the generated C header and Python module
+        /// list them.
+        pub fn registry() -> &'static [MessageType] {
+            &[$(MessageType {
+                type_name: <$t as Message>::TYPE_NAME,
+                schema: <$t as Message>::schema,
+                input: <crate::ports::Input<'static, $t> as crate::ports::InputField<'static>>::make,
+                output: <crate::ports::Output<'static, $t> as crate::ports::OutputField<'static>>::make,
+                bytes: bytes_of::<$t>,
+            }),*]
+        }
+    };
+}
+
+registry!(
+    Tick, Scaled, Smoothed, Scalar, Blob64K, Drive, Sonar, Odometry, Bumpers, Battery, Barcodes,
+    Link, Target, Door,
+);
+
+/// The shared message type called `type_name`.
+pub fn find(type_name: &str) -> Option<&'static MessageType> {
+    registry().iter().find(|t| t.type_name == type_name)
+}

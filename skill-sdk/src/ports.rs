@@ -314,6 +314,10 @@ pub trait ErasedOutputCell {
     /// Wakes the topic's listeners without sending (a proposer that did not propose tells
     /// the device so).
     fn wake(&self);
+    /// The value of this run as bytes, loaned at first access (see [`Output::get_mut`] and,
+    /// for `clear` false, [`Output::fill_in_place`]); marks the output written. For bodies
+    /// in other languages, which write the message's `#[repr(C)]` layout.
+    fn bytes_mut(&mut self, clear: bool) -> &mut [u8];
 }
 
 impl<T: Message> ErasedOutputCell for OutputCell<T> {
@@ -359,6 +363,14 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
         if let Some(n) = &self.notifier {
             let _ = n.notify();
         }
+    }
+    fn bytes_mut(&mut self, clear: bool) -> &mut [u8] {
+        let value: *mut T = self.slot(clear);
+        // SAFETY: `value` is one valid, exclusively borrowed T (borrowed from `self` for the
+        // returned lifetime); a Message is plain old data, so its bytes may be viewed and
+        // written as bytes (bool fields are normalised by the foreign runtime before the
+        // value is sent).
+        unsafe { std::slice::from_raw_parts_mut(value.cast::<u8>(), std::mem::size_of::<T>()) }
     }
     fn take_memory(&mut self) -> Option<Box<dyn Any>> {
         match self.pending.take() {

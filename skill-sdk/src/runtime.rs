@@ -142,9 +142,9 @@ pub trait Unit: 'static {
     /// Parameters.
     type Params: Params;
     /// Scheduling mode.
-    const MODE: Mode;
+    fn mode() -> Mode;
     /// Default priority.
-    const PRIORITY: i32;
+    fn priority() -> i32;
     /// A fresh instance.
     fn create() -> Self;
     /// Input ports (for a device: its channels).
@@ -250,8 +250,8 @@ pub fn declare<U: Unit>(args: &SkillArgs, kind: &str) -> Result<(SkillDecl, U::P
     let decl = SkillDecl {
         name,
         kind: kind.to_string(),
-        mode: U::MODE,
-        priority: args.priority.unwrap_or(U::PRIORITY),
+        mode: U::mode(),
+        priority: args.priority.unwrap_or(U::priority()),
         start_active: !args.inactive,
         pid: std::process::id(),
         inputs,
@@ -560,7 +560,7 @@ fn apply_params<P: Params>(params: &mut P, bytes: &[u8]) {
 }
 
 /// Outcome of running a body once (error or panic logged).
-fn guarded(cycle: u64, body: impl FnOnce() -> SkillResult) -> RunStatus {
+pub(crate) fn guarded(cycle: u64, body: impl FnOnce() -> SkillResult) -> RunStatus {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
         Ok(Ok(())) => RunStatus::Ok,
         Ok(Err(e)) => {
@@ -646,8 +646,12 @@ fn finish_run(link: &Link<'_>, r: RunRecord) {
 
 impl<S: Skill> Unit for SkillUnit<S> {
     type Params = S::Params;
-    const MODE: Mode = S::MODE;
-    const PRIORITY: i32 = S::PRIORITY;
+    fn mode() -> Mode {
+        S::MODE
+    }
+    fn priority() -> i32 {
+        S::PRIORITY
+    }
     fn create() -> Self {
         SkillUnit(S::default())
     }
@@ -664,83 +668,101 @@ impl<S: Skill> Unit for SkillUnit<S> {
         <S::Outputs<'static> as OutputSet<'static>>::make(m)
     }
 
-    /// A sync skill runs when the manager expects it in cycle k and every same-cycle input
-    /// carries cycle k; an async one when an input changed (or once per cycle without inputs).
     fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<S::Params>) {
-        let board = link.board;
-        let slot = board.slot(link.idx);
-        let k = board.header().cycle.load(Ordering::Acquire);
-        let inputs = &mut io.inputs;
-        let due = match S::MODE {
-            Mode::Sync => {
-                let fresh = slot.fresh_mask.load(Ordering::Acquire);
-                k > common.last_cycle
-                    && slot.expected_cycle.load(Ordering::Acquire) == k
-                    && inputs.iter().enumerate().all(|(i, p)| {
-                        fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
-                    })
-            }
-            Mode::Async if inputs.is_empty() => k > common.last_cycle,
-            Mode::Async => inputs.iter().any(|p| p.is_fresh()),
-        };
-        if !due {
-            return;
-        }
-        let start = now_ns();
-        slot.last_start_ns.store(start, Ordering::Relaxed);
-        let status = {
-            let src = RuntimeInputs { inputs, cycle: k };
-            match <S::Inputs<'_> as InputSet<'_>>::fetch(&src) {
+        let skill = &mut self.0;
+        step_skill(link, io, common, S::MODE, |src, outputs, ctx| {
+            match <S::Inputs<'_> as InputSet<'_>>::fetch(src) {
                 None => RunStatus::Skipped,
                 Some(input) => {
-                    let mut out = <S::Outputs<'_> as OutputSet<'_>>::bind(&mut io.outputs);
-                    let ctx = Ctx {
-                        params: &common.params,
-                        cycle: k,
-                        name: &common.name,
-                    };
-                    let skill = &mut self.0;
-                    guarded(k, || skill.compute(&ctx, input, &mut out))
+                    let mut out = <S::Outputs<'_> as OutputSet<'_>>::bind(outputs);
+                    guarded(ctx.cycle, || skill.compute(ctx, input, &mut out))
                 }
             }
-        };
-        let end = now_ns();
-        let header = SampleHeader {
-            cycle: k,
-            stamp_ns: end,
-            slot: link.idx as u32,
-            reserved: 0,
-        };
-        let mask = commit_outputs(&mut io.outputs, status, header);
-        for i in io.inputs.iter_mut() {
-            i.consume();
+        });
+    }
+}
+
+/// One run of a skill, if one is due: a sync skill runs when the manager expects it in cycle
+/// k and every same-cycle input carries cycle k; an async one when an input changed (or once
+/// per cycle without inputs). `run` runs the body on the inputs and outputs; the outputs of a
+/// successful run are sent, the run stamped, and proposals not made are announced.
+pub(crate) fn step_skill<P: Params>(
+    link: &Link<'_>,
+    io: &mut Io,
+    common: &mut Common<P>,
+    mode: Mode,
+    run: impl FnOnce(&dyn InputSource, &mut [ErasedOutput], &Ctx<'_, P>) -> RunStatus,
+) {
+    let board = link.board;
+    let slot = board.slot(link.idx);
+    let k = board.header().cycle.load(Ordering::Acquire);
+    let inputs = &mut io.inputs;
+    let due = match mode {
+        Mode::Sync => {
+            let fresh = slot.fresh_mask.load(Ordering::Acquire);
+            k > common.last_cycle
+                && slot.expected_cycle.load(Ordering::Acquire) == k
+                && inputs.iter().enumerate().all(|(i, p)| {
+                    fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
+                })
         }
-        common.last_cycle = k;
-        finish_run(
-            link,
-            RunRecord {
-                k,
-                status,
-                mask,
-                outputs: io.outputs.len(),
-                start,
-                end,
-                sync: S::MODE == Mode::Sync,
-            },
-        );
-        // A proposal not made: the device waiting for it learns from the board, once woken.
-        for &i in &io.proposals {
-            if mask & (1 << i) == 0 {
-                io.outputs[i].wake();
-            }
+        Mode::Async if inputs.is_empty() => k > common.last_cycle,
+        Mode::Async => inputs.iter().any(|p| p.is_fresh()),
+    };
+    if !due {
+        return;
+    }
+    let start = now_ns();
+    slot.last_start_ns.store(start, Ordering::Relaxed);
+    let status = {
+        let src = RuntimeInputs { inputs, cycle: k };
+        let ctx = Ctx {
+            params: &common.params,
+            cycle: k,
+            name: &common.name,
+        };
+        run(&src, &mut io.outputs, &ctx)
+    };
+    let end = now_ns();
+    let header = SampleHeader {
+        cycle: k,
+        stamp_ns: end,
+        slot: link.idx as u32,
+        reserved: 0,
+    };
+    let mask = commit_outputs(&mut io.outputs, status, header);
+    for i in io.inputs.iter_mut() {
+        i.consume();
+    }
+    common.last_cycle = k;
+    finish_run(
+        link,
+        RunRecord {
+            k,
+            status,
+            mask,
+            outputs: io.outputs.len(),
+            start,
+            end,
+            sync: mode == Mode::Sync,
+        },
+    );
+    // A proposal not made: the device waiting for it learns from the board, once woken.
+    for &i in &io.proposals {
+        if mask & (1 << i) == 0 {
+            io.outputs[i].wake();
         }
     }
 }
 
 impl<D: Device> Unit for DeviceUnit<D> {
     type Params = D::Params;
-    const MODE: Mode = Mode::Sync;
-    const PRIORITY: i32 = 0;
+    fn mode() -> Mode {
+        Mode::Sync
+    }
+    fn priority() -> i32 {
+        0
+    }
     fn init(&mut self, args: &SkillArgs) -> Result<(), SdkError> {
         let options = crate::device::DeviceOptions {
             port: args.port.clone(),

@@ -1,6 +1,6 @@
 //! The hello network: `ticker` → `scale` → `smooth` (see `skills/launch/hello.toml`).
 
-use skill_sdk::msg::{Scaled, Smoothed, Tick};
+use skill_sdk::msg::{Scalar, Scaled, Smoothed, Tick};
 use skill_sdk::prelude::*;
 
 /// Outputs of [`Ticker`].
@@ -109,10 +109,120 @@ impl Skill for Smooth {
     }
 }
 
+/// Parameters of [`CheckChain`].
+#[derive(Params, Debug, Clone)]
+pub struct CheckParams {
+    /// The gain the scale stages use.
+    #[param(default = 2.0, min = -1e6, max = 1e6)]
+    pub gain: f64,
+    /// The alpha the smooth stages use.
+    #[param(default = 0.1, min = 0.0, max = 1.0)]
+    pub alpha: f64,
+    /// Largest difference from the reference that still passes.
+    #[param(default = 1e-9, min = 0.0, max = 1e6)]
+    pub tolerance: f64,
+}
+/// Inputs of [`CheckChain`].
+#[derive(Inputs)]
+pub struct CheckIn<'a> {
+    /// The tick of this cycle.
+    pub tick: Input<'a, Tick>,
+    /// One implementation's smoothed value of this cycle.
+    pub a: Input<'a, Smoothed>,
+    /// Another implementation's smoothed value of this cycle.
+    pub b: Input<'a, Smoothed>,
+}
+/// Outputs of [`CheckChain`].
+#[derive(Outputs)]
+pub struct CheckOut<'a> {
+    /// The larger difference of `a` and `b` from the reference (0 when both agree).
+    pub error: Output<'a, Scalar>,
+}
+
+/// Sync: a reference model of scale → smooth (`gain` × tick, moving average, one sample per
+/// cycle) that fails every run in which `a` or `b` differs from it. Two implementations of
+/// the chain — in other languages, say — run side by side; `failures` counts the cycles they
+/// were wrong in.
+#[derive(Default)]
+pub struct CheckChain {
+    reference: Option<Smoothed>,
+}
+
+impl Skill for CheckChain {
+    type Params = CheckParams;
+    type Inputs<'a> = CheckIn<'a>;
+    type Outputs<'a> = CheckOut<'a>;
+    fn compute(&mut self, ctx: &Ctx<CheckParams>, i: CheckIn, o: &mut CheckOut) -> SkillResult {
+        let p = ctx.params;
+        let x = p.gain * i.tick.value as f64;
+        let r = match self.reference {
+            None => Smoothed {
+                value: x,
+                samples: 1,
+            },
+            Some(s) => Smoothed {
+                value: p.alpha * x + (1.0 - p.alpha) * s.value,
+                samples: s.samples + 1,
+            },
+        };
+        self.reference = Some(r);
+        let error = (i.a.value - r.value).abs().max((i.b.value - r.value).abs());
+        o.error.set(Scalar {
+            value: error,
+            ..Scalar::default()
+        });
+        if error > p.tolerance || i.a.samples != r.samples || i.b.samples != r.samples {
+            return Err(SkillError::msg(format!(
+                "cycle {}: reference {:?}, a {:?}, b {:?}",
+                ctx.cycle,
+                r,
+                i.a.value(),
+                i.b.value()
+            )));
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use skill_sdk::harness::Harness;
+
+    #[test]
+    fn check_chain_passes_the_reference_and_fails_a_difference() {
+        let mut h = Harness::<CheckChain>::new();
+        let mut ema = Smoothed::default();
+        for k in 1..=3u64 {
+            let x = 2.0 * k as f64;
+            ema = if k == 1 {
+                Smoothed {
+                    value: x,
+                    samples: 1,
+                }
+            } else {
+                Smoothed {
+                    value: 0.1 * x + 0.9 * ema.value,
+                    samples: k,
+                }
+            };
+            h.input("tick", Tick { value: k });
+            h.input("a", ema);
+            h.input("b", ema);
+            let step = h.step().unwrap();
+            assert_eq!(step.output::<Scalar>("error").unwrap().value, 0.0);
+        }
+        h.input("tick", Tick { value: 4 });
+        h.input(
+            "a",
+            Smoothed {
+                value: 1.0,
+                samples: 4,
+            },
+        );
+        let e = h.step().err().expect("a wrong value fails the run");
+        assert!(e.to_string().contains("cycle 4"), "{e}");
+    }
 
     #[test]
     fn ticker_publishes_the_cycle() {

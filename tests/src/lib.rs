@@ -16,7 +16,7 @@ pub mod skills;
 use skill_sdk::board::{Board, MAX_SLOTS, SlotState};
 use skill_sdk::decl::SkillDecl;
 use skill_sdk::domain::Domain;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -38,10 +38,53 @@ pub fn bin(name: &str) -> PathBuf {
     let path = dir.join(name);
     assert!(
         path.is_file(),
-        "{} is missing: build the workspace binaries first (cargo build --workspace --bins)",
+        "{} is missing: build the workspace binaries first (cargo build --workspace)",
         path.display()
     );
     path
+}
+
+/// The repository's root directory.
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the tests crate is in the repository")
+        .to_path_buf()
+}
+
+/// Builds the C and C++ example skills and sequencer (`make -C skills`, gcc and g++) next to
+/// the workspace's programs, once per test process; they link to `libskillfab.so` there.
+pub fn build_foreign_examples() {
+    static BUILT: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+    let result = BUILT.get_or_init(|| {
+        let out = bin("skillfab")
+            .parent()
+            .expect("target directory")
+            .to_path_buf();
+        if !out.join("libskillfab.so").is_file() {
+            return Err(format!(
+                "{}/libskillfab.so is missing: build the workspace first (cargo build --workspace)",
+                out.display()
+            ));
+        }
+        let r = Command::new("make")
+            .arg("-C")
+            .arg(repo_root().join("skills"))
+            .arg(format!("OUT={}", out.display()))
+            .output()
+            .map_err(|e| format!("make: {e}"))?;
+        if !r.status.success() {
+            return Err(format!(
+                "make -C skills failed:\n{}{}",
+                String::from_utf8_lossy(&r.stdout),
+                String::from_utf8_lossy(&r.stderr)
+            ));
+        }
+        Ok(())
+    });
+    if let Err(e) = result {
+        panic!("{e}");
+    }
 }
 
 /// The hello network as a launch file for [`TestDomain::launch_file`].
@@ -83,7 +126,12 @@ impl TestDomain {
 
     /// A command for `program` in this domain, with a scrubbed environment.
     pub fn command(&self, program: &str) -> Command {
-        let mut c = Command::new(bin(program));
+        self.command_at(&bin(program))
+    }
+
+    /// A command for the program at `path` (a script, a compiled example) in this domain.
+    pub fn command_at(&self, path: &Path) -> Command {
+        let mut c = Command::new(path);
         c.env_clear()
             .env("PATH", std::env::var_os("PATH").unwrap_or_default())
             .env("SKILLFAB_DOMAIN", self.domain.name())

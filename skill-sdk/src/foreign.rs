@@ -1,0 +1,615 @@
+//! Skills declared at run time, for other languages: the C ABI (`skill-sdk/capi`) and, through
+//! it, Python build a [`ForeignSkill`] — ports by message type name, parameters from specs, a
+//! boxed body over raw message bytes — and [`run`] runs it through the same runtime as a Rust
+//! skill (registration, cycles, parameter updates, shutdown).
+//!
+//! Message types are looked up by type name in [`crate::msg::registry`]: a foreign skill can
+//! use every shared message type, and its bytes have exactly the Rust layout (the generated C
+//! header and Python classes are checked against it).
+//!
+//! A process runs one skill, so the declaration lives in a process-wide cell that the
+//! runtime's static hooks read; [`run`] may be called once per process.
+
+use crate::SdkError;
+use crate::decl::{Mode, PortDecl, PortKind};
+use crate::msg::MessageType;
+use crate::params::{ParamError, ParamSpec, ParamValue, Params, check_bounds};
+use crate::ports::{ErasedInput, ErasedOutput, InputMeta, InputSource, PortMaker};
+use crate::runtime::{Common, Io, Link, SkillArgs, Unit, guarded, step_skill};
+use crate::schema::{FieldKind, MessageSchema, Prim};
+use crate::skill::{Ctx, SkillError, SkillResult};
+use std::sync::{Mutex, OnceLock};
+
+/// A skill body over raw message bytes.
+pub type Body = Box<dyn FnMut(&mut ForeignRun<'_>) -> SkillResult + Send>;
+
+/// Why a declaration was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DeclError {
+    /// No shared message type of that name.
+    #[error("unknown message type '{type_name}' (see skill_sdk::msg::registry)")]
+    UnknownType {
+        /// The name given.
+        type_name: String,
+    },
+    /// A port, channel or parameter name that is not allowed or used twice.
+    #[error("bad {what} name '{name}': {reason}")]
+    BadName {
+        /// Port, channel or parameter.
+        what: &'static str,
+        /// The name given.
+        name: String,
+        /// Why.
+        reason: String,
+    },
+    /// A parameter whose default lies outside its bounds, or whose bounds are reversed.
+    #[error("parameter '{name}': {reason}")]
+    BadParam {
+        /// Parameter name.
+        name: String,
+        /// Why.
+        reason: String,
+    },
+    /// More ports than the board can track (64 inputs, 64 outputs).
+    #[error("too many {what} (at most 64)")]
+    TooMany {
+        /// Inputs or outputs.
+        what: &'static str,
+    },
+}
+
+/// A skill declared at run time.
+pub struct ForeignSkill {
+    /// What kind of skill this is (the default instance name).
+    pub kind: String,
+    mode: Mode,
+    priority: i32,
+    inputs: Vec<PortDecl>,
+    outputs: Vec<PortDecl>,
+    params: Vec<ParamSpec>,
+    body: Option<Body>,
+}
+
+impl std::fmt::Debug for ForeignSkill {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ForeignSkill")
+            .field("kind", &self.kind)
+            .field("mode", &self.mode)
+            .field("inputs", &self.inputs.len())
+            .field("outputs", &self.outputs.len())
+            .field("params", &self.params.len())
+            .finish()
+    }
+}
+
+fn message_type(type_name: &str) -> Result<&'static MessageType, DeclError> {
+    crate::msg::find(type_name).ok_or_else(|| DeclError::UnknownType {
+        type_name: type_name.to_string(),
+    })
+}
+
+fn check_port_name(what: &'static str, name: &str, taken: &[PortDecl]) -> Result<(), DeclError> {
+    let bad = |reason: String| DeclError::BadName {
+        what,
+        name: name.to_string(),
+        reason,
+    };
+    crate::names::check_name(what, name, false).map_err(|e| bad(e.to_string()))?;
+    if taken.iter().any(|p| p.port == name) {
+        return Err(bad("declared twice".into()));
+    }
+    Ok(())
+}
+
+impl ForeignSkill {
+    /// A skill of `kind` with no ports, parameters or body yet.
+    pub fn new(kind: &str, mode: Mode) -> Result<ForeignSkill, DeclError> {
+        crate::names::check_name("skill", kind, false).map_err(|e| DeclError::BadName {
+            what: "skill",
+            name: kind.to_string(),
+            reason: e.to_string(),
+        })?;
+        Ok(ForeignSkill {
+            kind: kind.to_string(),
+            mode,
+            priority: 0,
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            params: Vec::new(),
+            body: None,
+        })
+    }
+
+    /// Declares input `port` of message type `type_name`; returns its index.
+    pub fn input(&mut self, port: &str, type_name: &str) -> Result<usize, DeclError> {
+        let t = message_type(type_name)?;
+        check_port_name("input", port, &self.inputs)?;
+        if self.inputs.len() >= 64 {
+            return Err(DeclError::TooMany { what: "inputs" });
+        }
+        self.inputs.push(PortDecl {
+            port: port.to_string(),
+            topic: port.to_string(),
+            schema: (t.schema)(),
+            kind: PortKind::Data,
+        });
+        Ok(self.inputs.len() - 1)
+    }
+
+    /// Declares output `port` of message type `type_name`; returns its index.
+    pub fn output(&mut self, port: &str, type_name: &str) -> Result<usize, DeclError> {
+        self.add_output(port, type_name, PortKind::Data)
+    }
+
+    /// Declares a proposal on actuator channel `channel`; returns its output index.
+    pub fn proposal(&mut self, channel: &str, type_name: &str) -> Result<usize, DeclError> {
+        self.add_output(channel, type_name, PortKind::Proposal)
+    }
+
+    fn add_output(
+        &mut self,
+        port: &str,
+        type_name: &str,
+        kind: PortKind,
+    ) -> Result<usize, DeclError> {
+        let t = message_type(type_name)?;
+        check_port_name("output", port, &self.outputs)?;
+        if self.outputs.len() >= 64 {
+            return Err(DeclError::TooMany { what: "outputs" });
+        }
+        let topic = match kind {
+            PortKind::Data => port.to_string(),
+            _ => crate::names::channel_topic(port),
+        };
+        self.outputs.push(PortDecl {
+            port: port.to_string(),
+            topic,
+            schema: (t.schema)(),
+            kind,
+        });
+        Ok(self.outputs.len() - 1)
+    }
+
+    /// Declares a parameter; returns its index. The default must lie within the bounds.
+    pub fn param(&mut self, spec: ParamSpec) -> Result<usize, DeclError> {
+        let bad = |reason: String| DeclError::BadParam {
+            name: spec.name.clone(),
+            reason,
+        };
+        crate::names::check_name("parameter", &spec.name, false).map_err(|e| bad(e.to_string()))?;
+        if self.params.iter().any(|p| p.name == spec.name) {
+            return Err(bad("declared twice".into()));
+        }
+        let kind_of = |v: &ParamValue| match v {
+            ParamValue::Bool(_) => crate::params::ParamKind::Bool,
+            ParamValue::Int(_) => crate::params::ParamKind::Int,
+            ParamValue::UInt(_) => crate::params::ParamKind::UInt,
+            ParamValue::Float(_) => crate::params::ParamKind::Float,
+        };
+        for v in std::iter::once(&spec.default)
+            .chain(&spec.min)
+            .chain(&spec.max)
+        {
+            if kind_of(v) != spec.kind {
+                return Err(bad(format!("{v} is not a {}", spec.kind)));
+            }
+            if v.as_f64().is_nan() {
+                return Err(bad("NaN is not a value".into()));
+            }
+        }
+        if let (Some(lo), Some(hi)) = (spec.min, spec.max)
+            && lo.as_f64() > hi.as_f64()
+        {
+            return Err(bad(format!("min {lo} > max {hi}")));
+        }
+        check_bounds(&spec, spec.default).map_err(|e| bad(e.to_string()))?;
+        self.params.push(spec);
+        Ok(self.params.len() - 1)
+    }
+
+    /// Sets the default arbitration priority (`--priority` overrides it).
+    pub fn set_priority(&mut self, priority: i32) {
+        self.priority = priority;
+    }
+
+    /// Sets the body.
+    pub fn compute(&mut self, body: Body) {
+        self.body = Some(body);
+    }
+
+    /// The declared inputs.
+    pub fn inputs(&self) -> &[PortDecl] {
+        &self.inputs
+    }
+
+    /// The declared outputs.
+    pub fn outputs(&self) -> &[PortDecl] {
+        &self.outputs
+    }
+
+    /// The declared parameters.
+    pub fn params(&self) -> &[ParamSpec] {
+        &self.params
+    }
+}
+
+/// Why [`run`] could not start.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// The skill has no body.
+    #[error("skill '{kind}' has no compute body")]
+    NoBody {
+        /// Its kind.
+        kind: String,
+    },
+    /// A skill already ran in this process.
+    #[error("a skill already ran in this process (one skill per process)")]
+    AlreadyRan,
+    /// Bad command-line arguments (the message is clap's, with usage).
+    #[error("{0}")]
+    Args(String),
+    /// The runtime failed.
+    #[error(transparent)]
+    Sdk(#[from] SdkError),
+}
+
+/// What the runtime's static hooks read: the declaration without its body.
+struct Declared {
+    mode: Mode,
+    priority: i32,
+    inputs: Vec<PortDecl>,
+    outputs: Vec<PortDecl>,
+    params: Vec<ParamSpec>,
+    /// Which message type each input and output is.
+    input_types: Vec<&'static MessageType>,
+    output_types: Vec<&'static MessageType>,
+}
+
+static DECLARED: OnceLock<Declared> = OnceLock::new();
+static BODY: Mutex<Option<Body>> = Mutex::new(None);
+
+fn declared() -> &'static Declared {
+    // `run` fills the cell before the runtime calls any hook.
+    #[allow(clippy::expect_used)]
+    DECLARED
+        .get()
+        .expect("foreign skill declared before the runtime starts")
+}
+
+/// Runs `skill` as this process's skill with command-line `args` (the program name first,
+/// then the usual skill options: `--name`, `--domain`, `--param`, …) until SIGINT/SIGTERM.
+pub fn run(mut skill: ForeignSkill, args: Vec<String>) -> Result<(), RunError> {
+    let body = skill.body.take().ok_or_else(|| RunError::NoBody {
+        kind: skill.kind.clone(),
+    })?;
+    let types = |ports: &[PortDecl]| {
+        ports
+            .iter()
+            .filter_map(|p| crate::msg::find(&p.schema.type_name))
+            .collect::<Vec<_>>()
+    };
+    let declared = Declared {
+        mode: skill.mode,
+        priority: skill.priority,
+        input_types: types(&skill.inputs),
+        output_types: types(&skill.outputs),
+        inputs: skill.inputs,
+        outputs: skill.outputs,
+        params: skill.params,
+    };
+    DECLARED.set(declared).map_err(|_| RunError::AlreadyRan)?;
+    *BODY.lock().unwrap_or_else(|e| e.into_inner()) = Some(body);
+    let args = <SkillArgs as clap::Parser>::try_parse_from(args)
+        .map_err(|e| RunError::Args(e.render().to_string()))?;
+    crate::runtime::init_tracing();
+    let _forward = crate::domain::Domain::new(&args.domain).ok().and_then(|d| {
+        let name = args.name.clone().unwrap_or_else(|| skill.kind.clone());
+        crate::logs::forward(&d, &name)
+    });
+    crate::runtime::run::<ForeignUnit>(args, &skill.kind)?;
+    Ok(())
+}
+
+/// Parameter values of a foreign skill, in declaration order.
+#[derive(Debug, Clone)]
+pub struct ForeignParams {
+    values: Vec<ParamValue>,
+}
+
+impl Default for ForeignParams {
+    /// The declared defaults.
+    fn default() -> Self {
+        ForeignParams {
+            values: Self::specs().iter().map(|s| s.default).collect(),
+        }
+    }
+}
+
+impl ForeignParams {
+    /// The value of parameter `idx`.
+    pub fn at(&self, idx: usize) -> Option<ParamValue> {
+        self.values.get(idx).copied()
+    }
+}
+
+impl Params for ForeignParams {
+    fn specs() -> Vec<ParamSpec> {
+        DECLARED.get().map(|d| d.params.clone()).unwrap_or_default()
+    }
+    fn get(&self, name: &str) -> Option<ParamValue> {
+        let i = DECLARED.get()?.params.iter().position(|s| s.name == name)?;
+        self.at(i)
+    }
+    fn set_unchecked(&mut self, name: &str, value: ParamValue) -> Result<(), ParamError> {
+        let specs = &declared().params;
+        let i = specs
+            .iter()
+            .position(|s| s.name == name)
+            .ok_or_else(|| ParamError::Unknown {
+                param: name.to_string(),
+            })?;
+        let spec = &specs[i];
+        // Integers may come in as the other integer kind, and floats as integers.
+        let coerced = match (spec.kind, value) {
+            (crate::params::ParamKind::Float, v) if !matches!(v, ParamValue::Bool(_)) => {
+                Some(ParamValue::Float(v.as_f64()))
+            }
+            (crate::params::ParamKind::Int, ParamValue::UInt(u)) => {
+                i64::try_from(u).ok().map(ParamValue::Int)
+            }
+            (crate::params::ParamKind::UInt, ParamValue::Int(i)) => {
+                u64::try_from(i).ok().map(ParamValue::UInt)
+            }
+            (k, v) if k == kind_of(&v) => Some(v),
+            _ => None,
+        };
+        self.values[i] = coerced.ok_or_else(|| ParamError::WrongType {
+            param: name.to_string(),
+            expected: spec.kind,
+            got: value,
+        })?;
+        Ok(())
+    }
+}
+
+fn kind_of(v: &ParamValue) -> crate::params::ParamKind {
+    match v {
+        ParamValue::Bool(_) => crate::params::ParamKind::Bool,
+        ParamValue::Int(_) => crate::params::ParamKind::Int,
+        ParamValue::UInt(_) => crate::params::ParamKind::UInt,
+        ParamValue::Float(_) => crate::params::ParamKind::Float,
+    }
+}
+
+/// What a foreign body sees in one run.
+pub struct ForeignRun<'a> {
+    /// The cycle of this run.
+    pub cycle: u64,
+    /// The instance name.
+    pub name: &'a str,
+    params: &'a ForeignParams,
+    inputs: &'a dyn InputSource,
+    outputs: &'a mut [ErasedOutput],
+    error: Option<String>,
+}
+
+impl<'a> ForeignRun<'a> {
+    /// The bytes and cycle bookkeeping of input `idx` (`None`: no sample yet, or no such input).
+    pub fn input(&self, idx: usize) -> Option<(&'a [u8], InputMeta)> {
+        let d = declared();
+        let (any, meta) = self.inputs.get(idx)?;
+        let bytes = (d.input_types.get(idx)?.bytes)(any)?;
+        Some((bytes, meta))
+    }
+
+    /// The bytes of output `idx` to write, zeroed at the first access in a run (`clear` false:
+    /// not cleared, see [`crate::ports::Output::fill_in_place`]); marks it written.
+    pub fn output(&mut self, idx: usize, clear: bool) -> Option<&mut [u8]> {
+        Some(self.outputs.get_mut(idx)?.bytes_mut(clear))
+    }
+
+    /// The value of parameter `idx` (declaration order).
+    pub fn param(&self, idx: usize) -> Option<ParamValue> {
+        self.params.at(idx)
+    }
+
+    /// The index of parameter `name`.
+    pub fn param_index(&self, name: &str) -> Option<usize> {
+        declared().params.iter().position(|s| s.name == name)
+    }
+
+    /// Fails this run with `reason` (the body's return value decides as well).
+    pub fn fail(&mut self, reason: &str) {
+        self.error = Some(reason.to_string());
+    }
+}
+
+/// Replaces every bool byte that is not 0 or 1 with 1: C may store any non-zero value in a
+/// `bool`, Rust readers of the message may not see one.
+pub fn sanitize_bools(kind: &FieldKind, bytes: &mut [u8]) {
+    match kind {
+        FieldKind::Prim(Prim::Bool) => {
+            if let Some(b) = bytes.first_mut()
+                && *b > 1
+            {
+                *b = 1;
+            }
+        }
+        FieldKind::Prim(_) => {}
+        FieldKind::Array { elem, len } => {
+            let size = crate::value::kind_size(elem);
+            if !contains_bool(elem) || size == 0 {
+                return;
+            }
+            for i in 0..*len as usize {
+                if let Some(chunk) = bytes.get_mut(i * size..(i + 1) * size) {
+                    sanitize_bools(elem, chunk);
+                }
+            }
+        }
+        FieldKind::Struct(s) => sanitize_message(s, bytes),
+    }
+}
+
+/// [`sanitize_bools`] over a whole message.
+pub fn sanitize_message(schema: &MessageSchema, bytes: &mut [u8]) {
+    for f in &schema.fields {
+        if let Some(rest) = bytes.get_mut(f.offset as usize..) {
+            sanitize_bools(&f.ty, rest);
+        }
+    }
+}
+
+fn contains_bool(kind: &FieldKind) -> bool {
+    match kind {
+        FieldKind::Prim(p) => *p == Prim::Bool,
+        FieldKind::Array { elem, .. } => contains_bool(elem),
+        FieldKind::Struct(s) => s.fields.iter().any(|f| contains_bool(&f.ty)),
+    }
+}
+
+/// The runtime's view of the process's foreign skill.
+struct ForeignUnit {
+    body: Option<Body>,
+}
+
+impl Unit for ForeignUnit {
+    type Params = ForeignParams;
+    fn mode() -> Mode {
+        declared().mode
+    }
+    fn priority() -> i32 {
+        declared().priority
+    }
+    fn create() -> Self {
+        ForeignUnit {
+            body: BODY.lock().unwrap_or_else(|e| e.into_inner()).take(),
+        }
+    }
+    fn input_ports() -> Vec<PortDecl> {
+        declared().inputs.clone()
+    }
+    fn output_ports() -> Vec<PortDecl> {
+        declared().outputs.clone()
+    }
+    fn make_inputs(m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        let d = declared();
+        (0..d.inputs.len())
+            .map(|i| (d.input_types[i].input)(m, i))
+            .collect()
+    }
+    fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
+        let d = declared();
+        (0..d.outputs.len())
+            .map(|i| (d.output_types[i].output)(m, i))
+            .collect()
+    }
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<ForeignParams>) {
+        let Some(body) = self.body.as_mut() else {
+            return;
+        };
+        let d = declared();
+        step_skill(
+            link,
+            io,
+            common,
+            d.mode,
+            |src, outputs, ctx: &Ctx<'_, ForeignParams>| {
+                // As for a Rust skill, a run needs a sample on every input.
+                if (0..d.inputs.len()).any(|i| src.get(i).is_none()) {
+                    return crate::board::RunStatus::Skipped;
+                }
+                guarded(ctx.cycle, || {
+                    let mut run = ForeignRun {
+                        cycle: ctx.cycle,
+                        name: ctx.name,
+                        params: ctx.params,
+                        inputs: src,
+                        outputs: &mut *outputs,
+                        error: None,
+                    };
+                    let result = body(&mut run);
+                    let error = run.error.take();
+                    result?;
+                    if let Some(e) = error {
+                        return Err(SkillError::msg(e));
+                    }
+                    for (o, decl) in outputs.iter_mut().zip(&d.outputs) {
+                        if o.is_written() {
+                            sanitize_message(&decl.schema, o.bytes_mut(false));
+                        }
+                    }
+                    Ok(())
+                })
+            },
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn float(name: &str, default: f64, min: f64, max: f64) -> ParamSpec {
+        ParamSpec {
+            name: name.into(),
+            kind: crate::params::ParamKind::Float,
+            default: ParamValue::Float(default),
+            min: Some(ParamValue::Float(min)),
+            max: Some(ParamValue::Float(max)),
+            doc: String::new(),
+        }
+    }
+
+    #[test]
+    fn declarations_are_checked() {
+        let mut s = ForeignSkill::new("c_scale", Mode::Sync).unwrap();
+        assert_eq!(s.input("tick", "skillfab.Tick"), Ok(0));
+        assert_eq!(s.output("scaled", "skillfab.Scaled"), Ok(0));
+        assert_eq!(s.proposal("drive", "skillfab.Drive"), Ok(1));
+        assert_eq!(s.outputs()[1].topic, "channel/drive");
+        assert!(matches!(
+            s.input("x", "skillfab.Nope"),
+            Err(DeclError::UnknownType { .. })
+        ));
+        assert!(matches!(
+            s.input("tick", "skillfab.Tick"),
+            Err(DeclError::BadName { .. })
+        ));
+        assert!(matches!(
+            s.output("bad name", "skillfab.Tick"),
+            Err(DeclError::BadName { .. })
+        ));
+        assert_eq!(s.param(float("gain", 2.0, -10.0, 10.0)), Ok(0));
+        assert!(matches!(
+            s.param(float("gain", 2.0, -10.0, 10.0)),
+            Err(DeclError::BadParam { .. })
+        ));
+        assert!(matches!(
+            s.param(float("g2", 20.0, -10.0, 10.0)),
+            Err(DeclError::BadParam { .. })
+        ));
+        assert!(matches!(
+            s.param(float("g3", 0.0, 10.0, -10.0)),
+            Err(DeclError::BadParam { .. })
+        ));
+        let mut wrong = float("g4", 0.0, -1.0, 1.0);
+        wrong.default = ParamValue::Int(0);
+        assert!(matches!(s.param(wrong), Err(DeclError::BadParam { .. })));
+        assert!(ForeignSkill::new("", Mode::Sync).is_err());
+    }
+
+    #[test]
+    fn bools_written_by_c_are_made_valid() {
+        let schema = <crate::msg::Bumpers as crate::Message>::schema();
+        let mut bytes = vec![0u8; schema.size as usize];
+        let stall = schema.fields[1].offset as usize;
+        bytes[stall] = 7;
+        bytes[0] = 9; // the u32 `hit` is left alone
+        sanitize_message(&schema, &mut bytes);
+        assert_eq!(bytes[stall], 1);
+        assert_eq!(bytes[0], 9);
+    }
+}

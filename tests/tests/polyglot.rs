@@ -1,0 +1,236 @@
+//! Skills and sequencers in C, C++ and Python through libskillfab's C ABI: the generated
+//! message declarations agree with Rust on every size and offset, the example skills (built
+//! here with gcc and g++) take part in one cycle with Rust skills and compute the right
+//! values, and the C and Python sequencers drive the hello network.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use serde_json::Value as Json;
+use skill_sdk::codegen;
+use skillfab_tests::{TestDomain, bin, build_foreign_examples, repo_root, skill};
+use std::process::Command;
+
+/// Compares one language's layout lines (`{"type", "size", "align", "offsets"}`) with Rust's.
+fn assert_layouts_match(language: &str, lines: &str) {
+    let schemas = codegen::shared_schemas();
+    let seen: Vec<Json> = lines
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{language}: {e}: {l}")))
+        .collect();
+    assert_eq!(seen.len(), schemas.len(), "{language}: one line per type");
+    for s in &schemas {
+        let got = seen
+            .iter()
+            .find(|j| j["type"] == s.type_name.as_str())
+            .unwrap_or_else(|| panic!("{language} lacks {}", s.type_name));
+        assert_eq!(got["size"], s.size, "{language} size of {}", s.type_name);
+        assert_eq!(
+            got["align"], s.align,
+            "{language} alignment of {}",
+            s.type_name
+        );
+        for f in &s.fields {
+            assert_eq!(
+                got["offsets"][&f.name], f.offset,
+                "{language} offset of {}.{}",
+                s.type_name, f.name
+            );
+        }
+    }
+}
+
+fn python() -> Command {
+    let mut c = Command::new("python3");
+    c.env("PYTHONPATH", repo_root().join("python"))
+        .env("SKILLFAB_LIB", lib_path());
+    c
+}
+
+fn lib_path() -> std::path::PathBuf {
+    bin("skillfab").with_file_name("libskillfab.so")
+}
+
+#[test]
+fn generated_c_and_python_layouts_agree_with_rust() {
+    let t = TestDomain::new("layout");
+    // The committed Python module is what the generator writes (the C header is checked by
+    // the capi crate's own test).
+    let committed = std::fs::read_to_string(repo_root().join("python/skillfab/msgs.py")).unwrap();
+    assert!(
+        committed == codegen::python_module(&codegen::shared_schemas()),
+        "python/skillfab/msgs.py is out of date: target/debug/skillfab schema --python > python/skillfab/msgs.py"
+    );
+
+    // C: the compiler's own sizeof/alignof/offsetof of the committed header.
+    let probe = t.dir.join("probe.c");
+    std::fs::write(&probe, codegen::c_layout_probe(&codegen::shared_schemas())).unwrap();
+    let exe = t.dir.join("probe");
+    let cc = Command::new("gcc")
+        .args(["-std=c11", "-Wall", "-Werror", "-I"])
+        .arg(repo_root().join("skill-sdk/capi/include"))
+        .arg(&probe)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .expect("gcc");
+    assert!(
+        cc.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cc.stderr)
+    );
+    let out = Command::new(&exe).output().unwrap();
+    assert_layouts_match("C", &String::from_utf8_lossy(&out.stdout));
+
+    // Python: ctypes' own view of the generated classes.
+    let script = r#"
+import ctypes, json
+from skillfab import msgs
+for cls in msgs.BY_TYPE_NAME.values():
+    print(json.dumps({"type": cls.TYPE_NAME, "size": ctypes.sizeof(cls),
+                      "align": ctypes.alignment(cls),
+                      "offsets": {f: getattr(cls, f).offset for f, _ in cls._fields_}}))
+"#;
+    let out = python().args(["-c", script]).output().expect("python3");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_layouts_match("Python", &String::from_utf8_lossy(&out.stdout));
+}
+
+/// The polyglot launch file with its Python script at an absolute path and `extra` appended
+/// to the process named `name` (TOML keys).
+fn polyglot(edit: Option<(&str, &str)>) -> String {
+    let text = std::fs::read_to_string(repo_root().join("skills/launch/polyglot.toml")).unwrap();
+    let script = repo_root().join("skills/python/smooth_py.py");
+    let mut text = text.replace(
+        "bin = \"../python/smooth_py.py\"",
+        &format!("bin = \"{}\"", script.display()),
+    );
+    if let Some((from, to)) = edit {
+        assert!(text.contains(from));
+        text = text.replace(from, to);
+    }
+    // A loaded test machine may be slow; a late run must not be cut off by the deadline.
+    text.replace("period_ms = 10", "period_ms = 5\ndeadline_ms = 5000")
+}
+
+#[test]
+fn c_cpp_python_and_rust_skills_share_a_cycle_with_the_right_values() {
+    build_foreign_examples();
+    let t = TestDomain::new("polyglot");
+    let report = t.up_json(&polyglot(None), &["--cycles", "100"]);
+    assert_eq!(report["cycles"], 100);
+    assert_eq!(report["overruns"], 0);
+    for name in [
+        "ticker",
+        "scale_c",
+        "smooth_py",
+        "scale",
+        "smooth_cpp",
+        "check_chain",
+    ] {
+        let s = skill(&report, name);
+        assert_eq!(s["runs"], 100, "{name}: {s}");
+        assert_eq!(s["failures"], 0, "{name}: {s}");
+        assert_eq!(s["skips"], 0, "{name}: {s}");
+    }
+    assert_eq!(skill(&report, "scale_c")["kind"], "scale_c");
+
+    // The check is real: a Python stage with another alpha is caught in every cycle but the
+    // first (the first sample is the average whatever alpha is).
+    let t = TestDomain::new("polyglotbad");
+    let report = t.up_json(
+        &polyglot(Some((
+            "params = { alpha = 0.1 }\nremap = { scaled = \"scaled_c\"",
+            "params = { alpha = 0.3 }\nremap = { scaled = \"scaled_c\"",
+        ))),
+        &["--cycles", "50"],
+    );
+    let check = skill(&report, "check_chain");
+    assert_eq!(check["failures"], 49, "{check}");
+    assert_eq!(check["runs"], 1, "{check}");
+}
+
+#[test]
+fn sequencers_in_c_and_python_drive_the_hello_network() {
+    build_foreign_examples();
+    let mut t = TestDomain::new("sequencers");
+    t.hello(&[]);
+    let domain = t.domain.name().to_string();
+
+    let out = t
+        .command("sequencer_c")
+        .arg(&domain)
+        .output()
+        .expect("sequencer_c");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("scale.gain = 3"), "{stdout}");
+    assert!(stdout.contains("refused: "), "{stdout}");
+    assert!(stdout.contains("\"event\":\"monitor_fired\""), "{stdout}");
+    assert!(stdout.trim_end().ends_with("ok"), "{stdout}");
+
+    let out = python()
+        .arg(repo_root().join("skills/python/sequencer_py.py"))
+        .arg(&domain)
+        .output()
+        .expect("python3");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("skills: "), "{stdout}");
+    assert!(stdout.contains("refused: "), "{stdout}");
+    assert!(stdout.contains("'event': 'monitor_fired'"), "{stdout}");
+    assert!(stdout.trim_end().ends_with("ok"), "{stdout}");
+    assert_eq!(t.ctl(&["get", "scale.gain"]).trim(), "3");
+}
+
+#[test]
+fn a_python_skill_that_raises_fails_its_run_and_keeps_serving() {
+    use std::os::unix::fs::PermissionsExt;
+    let t = TestDomain::new("pyraise");
+    let script = t.dir.join("flaky.py");
+    std::fs::write(
+        &script,
+        format!(
+            r#"#!/usr/bin/env python3
+import sys
+sys.path.insert(0, "{}")
+import skillfab
+from skillfab.msgs import Tick, Scalar
+
+class Flaky(skillfab.Skill):
+    inputs = {{"tick": Tick}}
+    outputs = {{"out": Scalar}}
+    def compute(self, run, i, o):
+        if i.tick.value % 2 == 0:
+            raise ValueError("even tick")
+        o.out.value = i.tick.value
+
+skillfab.main(Flaky)
+"#,
+            repo_root().join("python").display()
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    // libskillfab is found next to `skillfab` (SKILLFAB_BIN_DIR, set by `skillfab up`).
+    let launch = format!(
+        "[manager]\nperiod_ms = 2\n[[process]]\nname = \"ticker\"\nbin = \"{{bin:ticker}}\"\n\
+         [[process]]\nname = \"flaky\"\nbin = \"{}\"\n",
+        script.display()
+    );
+    let report = t.up_json(&launch, &["--cycles", "40"]);
+    let s = skill(&report, "flaky");
+    assert_eq!(s["failures"], 20, "{s}");
+    assert_eq!(s["runs"], 20, "{s}");
+}

@@ -43,6 +43,20 @@ pub enum Case {
     /// The exit-lab network: simulator, Denning device process, avoid, wander, barcode_track,
     /// `drive` arbitrated by the device.
     ExitLab,
+    /// `ticker` → `scale` with `scale` written in another language (the same work: gain ×
+    /// tick): what a skill in C or Python costs per cycle next to a Rust one.
+    Lang(Lang),
+}
+
+/// The language of [`Case::Lang`]'s `scale`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lang {
+    /// `skills/src/bin/scale.rs`.
+    Rust,
+    /// `skills/c/scale_c.c` through libskillfab.
+    C,
+    /// `skills/python/scale_py.py`: ctypes over libskillfab.
+    Python,
 }
 
 impl Case {
@@ -52,6 +66,7 @@ impl Case {
         v.extend([1, 2, 4, 8].into_iter().map(Case::Fanout));
         v.extend((0..PAYLOADS.len()).map(Case::Payload));
         v.push(Case::ExitLab);
+        v.extend([Lang::Rust, Lang::C, Lang::Python].map(Case::Lang));
         v
     }
 
@@ -62,6 +77,7 @@ impl Case {
             Case::Fanout(n) => format!("fanout-{n}"),
             Case::Payload(i) => format!("payload-{}", PAYLOADS[*i].0),
             Case::ExitLab => "exit-lab".into(),
+            Case::Lang(l) => format!("lang-{}", format!("{l:?}").to_lowercase()),
         }
     }
 
@@ -74,6 +90,7 @@ impl Case {
             // Cycle start → device → the skills reading it → their proposals → device → done:
             // a ring of depth 3 (4 hops).
             Case::ExitLab => floors::Shape::Ring(3),
+            Case::Lang(_) => floors::Shape::Ring(2),
         }
     }
 
@@ -86,6 +103,7 @@ impl Case {
             Case::ExitLab => ["denning", "avoid", "wander", "barcode_track"]
                 .map(String::from)
                 .to_vec(),
+            Case::Lang(_) => vec!["ticker".into(), "scale".into()],
         }
     }
 
@@ -140,6 +158,17 @@ impl Case {
                     proc(skill, skill, "");
                 }
             }
+            Case::Lang(l) => {
+                proc("ticker", "ticker", "");
+                match l {
+                    Lang::Rust => proc("scale", "scale", ""),
+                    Lang::C => proc("scale", "scale_c", ""),
+                    Lang::Python => s.push_str(&format!(
+                        "[[process]]\nname = \"scale\"\nbin = {:?}\n",
+                        concat!(env!("CARGO_MANIFEST_DIR"), "/../skills/python/scale_py.py")
+                    )),
+                }
+            }
         }
         s
     }
@@ -186,6 +215,9 @@ pub struct Fabric {
 impl Fabric {
     /// Starts `case` paced at [`PACE`] or back to back; returns once every skill runs.
     pub fn start(case: Case, paced: bool) -> Fabric {
+        if matches!(case, Case::Lang(_)) {
+            skillfab_tests::build_foreign_examples();
+        }
         let mut t = TestDomain::new(&case.name());
         let period = if paced { PACE.as_millis() as u64 } else { 0 };
         let text = case
@@ -243,6 +275,13 @@ impl Fabric {
     pub fn failures(&self) -> Vec<(String, u64)> {
         let stats = self.client.stats().unwrap();
         stats.skills.into_iter().map(|s| (s.0, s.3)).collect()
+    }
+
+    /// Mean compute time of a run of each skill so far (µs; for a skill in another language:
+    /// its body and the crossing into it).
+    pub fn compute_us(&self) -> Vec<(String, f64)> {
+        let stats = self.client.stats().unwrap();
+        stats.skills.into_iter().map(|s| (s.0, s.4)).collect()
     }
 
     /// Processes of the network: the manager (`skillfab up`) and every skill.
@@ -310,7 +349,7 @@ mod tests {
 
     #[test]
     fn a_fabric_case_gives_the_managers_latency_of_each_cycle() {
-        for case in [Case::Chain(3), Case::Payload(3)] {
+        for case in [Case::Chain(3), Case::Payload(3), Case::Lang(Lang::Python)] {
             let mut f = Fabric::start(case, false);
             let v = f.latencies(50);
             assert_eq!(v.len(), 50, "{}", case.name());
@@ -336,7 +375,11 @@ mod tests {
             l.contains("remap = { prev = \"c1\", tick = \"c2\" }"),
             "{l}"
         );
-        assert_eq!(Case::all().len(), 13);
+        assert_eq!(Case::all().len(), 16);
         assert_eq!(Case::Payload(2).name(), "payload-1MiB");
+        assert_eq!(Case::Lang(Lang::Python).name(), "lang-python");
+        let py = Case::Lang(Lang::Python).launch(0);
+        assert!(py.contains("skills/python/scale_py.py\""), "{py}");
+        assert!(Case::Lang(Lang::C).launch(0).contains("{bin:scale_c}"));
     }
 }

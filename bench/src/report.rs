@@ -16,6 +16,8 @@ pub struct Row {
     pub skillfab: Summary,
     /// Floors: iceoryx2 ring, pipe ring, threads (same topology).
     pub floors: Vec<(Transport, Summary)>,
+    /// Mean compute time of a run per skill (µs), for the language cases.
+    pub compute_us: Vec<(String, f64)>,
 }
 
 impl Row {
@@ -37,6 +39,11 @@ fn summary_json(s: &Summary) -> Json {
 pub fn row(case: Case, paced: bool, n: usize) -> Row {
     let mut f = Fabric::start(case, paced);
     let skillfab = Summary::of(&f.latencies(n));
+    let compute_us = if matches!(case, Case::Lang(_)) {
+        f.compute_us()
+    } else {
+        Vec::new()
+    };
     drop(f);
     let floors = [Transport::Iceoryx2, Transport::Pipe, Transport::Threads]
         .into_iter()
@@ -50,6 +57,7 @@ pub fn row(case: Case, paced: bool, n: usize) -> Row {
         },
         skillfab,
         floors,
+        compute_us,
     }
 }
 
@@ -133,6 +141,14 @@ pub fn to_json(
                 o[t.key()] = summary_json(s);
             }
             o["ratio_p50"] = json!((r.ratio_p50() * 100.0).round() / 100.0);
+            if !r.compute_us.is_empty() {
+                o["compute_us_per_run"] = r
+                    .compute_us
+                    .iter()
+                    .map(|(n, us)| (n.clone(), json!((us * 100.0).round() / 100.0)))
+                    .collect::<serde_json::Map<String, Json>>()
+                    .into();
+            }
             o
         })
         .collect();
@@ -167,6 +183,14 @@ pub fn rows_from_json(j: &Json) -> Option<Vec<Row>> {
                     .into_iter()
                     .map(|t| Some((t, summary(&c[t.key()])?)))
                     .collect::<Option<Vec<_>>>()?,
+                compute_us: c["compute_us_per_run"]
+                    .as_object()
+                    .map(|m| {
+                        m.iter()
+                            .filter_map(|(k, v)| Some((k.clone(), v.as_f64()?)))
+                            .collect()
+                    })
+                    .unwrap_or_default(),
             })
         })
         .collect()
@@ -190,6 +214,18 @@ pub fn to_text(
             s.push_str(&format!(" {:>28}", cell(f)));
         }
         s.push_str(&format!(" {:>7.2}\n", r.ratio_p50()));
+    }
+    for r in rows.iter().filter(|r| !r.compute_us.is_empty()) {
+        let runs: Vec<String> = r
+            .compute_us
+            .iter()
+            .map(|(n, us)| format!("{n} {us:.1} µs"))
+            .collect();
+        s.push_str(&format!(
+            "{}: compute per run: {}\n",
+            r.name,
+            runs.join(", ")
+        ));
     }
     s.push_str(&format!(
         "idle: 6 skill processes at 100 Hz use {idle_cpu_percent:.2} % of one core (manager included); {rss_mib_per_skill:.1} MiB resident per skill process\n"

@@ -225,7 +225,7 @@ skillfab.main(Flaky)
     std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
     // libskillfab is found next to `skillfab` (SKILLFAB_BIN_DIR, set by `skillfab up`).
     let launch = format!(
-        "[manager]\nperiod_ms = 2\n[[process]]\nname = \"ticker\"\nbin = \"{{bin:ticker}}\"\n\
+        "[manager]\nperiod_ms = 5\ndeadline_ms = 5000\n[[process]]\nname = \"ticker\"\nbin = \"{{bin:ticker}}\"\n\
          [[process]]\nname = \"flaky\"\nbin = \"{}\"\n",
         script.display()
     );
@@ -233,4 +233,61 @@ skillfab.main(Flaky)
     let s = skill(&report, "flaky");
     assert_eq!(s["failures"], 20, "{s}");
     assert_eq!(s["runs"], 20, "{s}");
+}
+
+#[test]
+fn the_c_avoid_routine_turns_away_from_an_obstacle() {
+    use std::os::unix::fs::PermissionsExt;
+    build_foreign_examples();
+    let mut t = TestDomain::new("avoidc");
+    // A sonar ring with one echo 0.3 m away, 15° to the left of the heading.
+    let script = t.dir.join("sonar_script.py");
+    std::fs::write(
+        &script,
+        format!(
+            r#"#!/usr/bin/env python3
+import sys
+sys.path.insert(0, "{}")
+import skillfab
+from skillfab.msgs import Tick, Sonar
+
+class Script(skillfab.Skill):
+    inputs = {{"tick": Tick}}
+    outputs = {{"sonar": Sonar}}
+    def compute(self, run, i, o):
+        for k in range(24):
+            o.sonar.range[k] = float("inf")
+        o.sonar.range[1] = 0.3
+
+skillfab.main(Script)
+"#,
+            repo_root().join("python").display()
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let launch = t.launch_file(&format!(
+        "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{{bin:ticker}}\"\n\
+         [[process]]\nname = \"sonar\"\nbin = \"{}\"\n\
+         [[process]]\nname = \"avoid_c\"\nbin = \"{{bin:avoid_c}}\"\n",
+        script.display()
+    ));
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("avoid_c to run", || {
+        skillfab_tests::registered(&board, "avoid_c").is_some_and(|s| s.runs > 3)
+    });
+    let number = |path: &str| -> f64 {
+        let out = t.ctl(&["--json", "query", path]);
+        let j: Json = serde_json::from_str(&out).unwrap();
+        j["value"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{path}: {out}"))
+    };
+    // Backs off and turns right, away from the echo on the left.
+    assert!(number("avoid_c.drive.translate") < 0.0);
+    assert!(number("avoid_c.drive.rotate") < 0.0);
+    let s = skillfab_tests::registered(&board, "avoid_c").unwrap();
+    assert_eq!(s.failures, 0);
+    assert_eq!(s.decl.priority, 10);
 }

@@ -154,6 +154,36 @@ fn c_cpp_python_and_rust_skills_share_a_cycle_with_the_right_values() {
 }
 
 #[test]
+fn a_c_skill_links_statically_too() {
+    let t = TestDomain::new("static");
+    let lib = bin("skillfab").with_file_name("libskillfab.a");
+    assert!(
+        lib.is_file(),
+        "{} is missing: cargo build --workspace",
+        lib.display()
+    );
+    let exe = t.dir.join("scale_c_static");
+    let cc = Command::new("gcc")
+        .arg("-I")
+        .arg(repo_root().join("skill-sdk/capi/include"))
+        .arg(repo_root().join("skills/c/scale_c.c"))
+        .arg(&lib)
+        .args(["-lpthread", "-ldl", "-lm", "-lrt", "-o"])
+        .arg(&exe)
+        .output()
+        .expect("gcc");
+    assert!(
+        cc.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cc.stderr)
+    );
+    // It runs without libskillfab.so: a bad option gets the SDK's usage and exit code 2.
+    let out = t.command_at(&exe).arg("--no-such-option").output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unexpected argument"));
+}
+
+#[test]
 fn sequencers_in_c_and_python_drive_the_hello_network() {
     build_foreign_examples();
     let mut t = TestDomain::new("sequencers");
@@ -284,9 +314,16 @@ skillfab.main(Script)
             .as_f64()
             .unwrap_or_else(|| panic!("{path}: {out}"))
     };
-    // Backs off and turns right, away from the echo on the left.
-    assert!(number("avoid_c.drive.translate") < 0.0);
+    // Backs off and turns right, away from the echo on the left: push (0.6 - 0.3) / 0.6 =
+    // 0.5 from 15° left, translate = speed × (-0.5 cos 15°).
+    let push_x = -0.5 * 15f64.to_radians().cos();
+    assert!((number("avoid_c.drive.translate") - 0.3 * push_x).abs() < 1e-9);
     assert!(number("avoid_c.drive.rotate") < 0.0);
+    // A parameter set at run time reaches the C body.
+    t.ctl(&["set", "avoid_c.speed=0.1"]);
+    t.wait_until("the new speed in avoid_c's proposal", || {
+        (number("avoid_c.drive.translate") - 0.1 * push_x).abs() < 1e-9
+    });
     let s = skillfab_tests::registered(&board, "avoid_c").unwrap();
     assert_eq!(s.failures, 0);
     assert_eq!(s.decl.priority, 10);

@@ -350,11 +350,14 @@ impl Manager {
             let result = waitset
                 .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout)
                 .map_err(|e| wait_err(&e))?;
-            if matches!(
-                result,
-                WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest
-            ) || stop(self.cycle)
-            {
+            // A wait cut short by a signal other than SIGINT/SIGTERM (a debugger attaching,
+            // SIGSTOP/SIGCONT) goes on.
+            let interrupted = match result {
+                WaitSetRunResult::TerminationRequest => true,
+                WaitSetRunResult::Interrupt => services::termination_requested(&self.node),
+                _ => false,
+            };
+            if interrupted || stop(self.cycle) {
                 break;
             }
             let awake = thread_cpu_ns();

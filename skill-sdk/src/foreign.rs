@@ -494,16 +494,21 @@ impl Unit for ForeignUnit {
     fn output_ports() -> Vec<PortDecl> {
         declared().outputs.clone()
     }
+    // One type per port: `ForeignSkill::input`/`output` accepted only registered types.
     fn make_inputs(m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
         let d = declared();
-        (0..d.inputs.len())
-            .map(|i| (d.input_types[i].input)(m, i))
+        d.input_types
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.input)(m, i))
             .collect()
     }
     fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
         let d = declared();
-        (0..d.outputs.len())
-            .map(|i| (d.output_types[i].output)(m, i))
+        d.output_types
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.output)(m, i))
             .collect()
     }
     fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<ForeignParams>) {

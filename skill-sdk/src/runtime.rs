@@ -332,6 +332,7 @@ pub fn run<U: Unit>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
         common.last_cycle = 0;
         common.param_gen = 0;
         let link = Link {
+            node: &node,
             board: &board,
             idx,
             trigger: &trigger,
@@ -357,6 +358,7 @@ pub fn run<U: Unit>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
 
 /// What a registered unit uses to talk to its manager.
 pub struct Link<'a> {
+    node: &'a Node<ipc::Service>,
     board: &'a Board,
     idx: usize,
     trigger: &'a Listener<ipc::Service>,
@@ -376,7 +378,7 @@ enum End {
 }
 
 fn terminated(node: &Node<ipc::Service>) -> bool {
-    node.wait(Duration::ZERO).is_err()
+    services::termination_requested(node)
 }
 
 fn wait_for_board(node: &Node<ipc::Service>, domain: &Domain) -> Result<Option<Board>, SdkError> {
@@ -511,11 +513,12 @@ fn serve<U: Unit>(
                 CallbackProgression::Continue
             })
             .map_err(|e| transport("wait", &e))?;
-        if matches!(
-            result,
-            WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest
-        ) {
-            return Ok(End::Terminated);
+        match result {
+            WaitSetRunResult::TerminationRequest => return Ok(End::Terminated),
+            // A wait cut short by a signal: only SIGINT/SIGTERM end the skill.
+            WaitSetRunResult::Interrupt if terminated(link.node) => return Ok(End::Terminated),
+            WaitSetRunResult::Interrupt => continue,
+            _ => {}
         }
         let _ = trigger.try_wait(|_| {});
         for l in listeners {

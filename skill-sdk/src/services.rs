@@ -189,6 +189,14 @@ pub fn node(domain: &crate::domain::Domain, name: &str) -> Result<Node<ipc::Serv
         .map_err(|e| transport(format!("create node '{name}' in domain '{domain}'"), e))
 }
 
+/// Whether SIGINT or SIGTERM reached this process since the last check (which this clears):
+/// what a WaitSet's `Interrupt` result means only sometimes, since iceoryx2 reports every
+/// interrupted wait so — a debugger or `strace` attaching, SIGSTOP/SIGCONT — and those must not
+/// end a skill or the manager.
+pub fn termination_requested(node: &Node<ipc::Service>) -> bool {
+    node.wait(std::time::Duration::ZERO).is_err()
+}
+
 /// Reads a topic without knowing its Rust type: the bytes of the newest sample, laid out as
 /// its [`MessageSchema`](crate::schema::MessageSchema) says. Used by the manager (queries,
 /// monitors) and by tools; it relies on iceoryx2's type-details override, the mechanism

@@ -175,6 +175,31 @@ fn a_killed_skill_is_dropped_and_rejoins_when_restarted() {
     });
 }
 
+/// A stopped and continued process (Ctrl-Z and `fg`, a debugger attaching) sees its wait end
+/// with EINTR, which iceoryx2 reports as an interrupt: only SIGINT/SIGTERM may end it.
+#[test]
+fn a_stopped_and_continued_skill_or_manager_goes_on() {
+    let mut t = TestDomain::new("stopcont");
+    let manager = t.spawn("skillfab", &["manager", "--period-ms", "2"]);
+    let board = t.board();
+    let ticker = t.spawn("ticker", &[]);
+    let scale = t.spawn("scale", &[]);
+    t.wait_until("scale to run", || {
+        registered(&board, "scale").is_some_and(|s| s.runs > 5)
+    });
+    for who in [scale, ticker, manager] {
+        t.signal(who, Signal::SIGSTOP);
+        t.signal(who, Signal::SIGCONT);
+        let runs = registered(&board, "scale").unwrap().runs;
+        t.wait_until("cycles to go on after SIGSTOP/SIGCONT", || {
+            registered(&board, "scale").is_some_and(|s| s.runs > runs + 20)
+        });
+    }
+    let s = registered(&board, "scale").unwrap();
+    assert_eq!(s.decl.pid, t.pid(scale));
+    assert!(board.manager_alive());
+}
+
 fn sorted(mut v: Vec<std::path::PathBuf>) -> Vec<std::path::PathBuf> {
     v.sort();
     v

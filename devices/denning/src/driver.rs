@@ -1,14 +1,16 @@
 //! The driver thread: owns the transport, keeps the latest sample, sends the latest command.
 //!
-//! It never blocks the fabric: the device process reads the latest sample and hands over the
-//! latest command through a mutex held for microseconds. The thread does the handshake,
-//! decodes the status stream (resynchronising after garbage), unwraps odometry, re-sends the
-//! drive command every 100 ms (which also feeds the robot's 2 s watchdog), stops the drive on
-//! its own when the fabric's commands stop (500 ms), and reconnects when the link goes quiet
-//! for 1 s or the port vanishes.
+//! It never blocks the fabric: the device process reads the latest sample through a mutex held
+//! for microseconds, and a changed command is written to the port at once by the device
+//! process itself (a second handle on the port, under the same mutex), so the thread sleeps
+//! until bytes come or its 50 ms read timeout. The thread does the handshake, decodes the
+//! status stream (resynchronising after garbage), unwraps odometry, re-sends the drive command
+//! every 100 ms (which also feeds the robot's 2 s watchdog), stops the drive on its own when
+//! the fabric's commands stop (500 ms), and reconnects when the link goes quiet for 1 s or the
+//! port vanishes.
 
 use crate::codec::{Command, DecodeStats, Decoder, Packet, Sighting, Status, wrap_delta};
-use crate::transport::Transport;
+use crate::transport::{Transport, Writer};
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -53,6 +55,40 @@ pub struct Sample {
 struct Shared {
     sample: Sample,
     command: Option<((f64, f64), Instant)>,
+    /// The connected port's writing half and what went out on it last.
+    link: Option<Link>,
+}
+
+struct Link {
+    writer: Box<dyn Writer>,
+    /// The last velocities sent (wire units) and when.
+    last_wire: Option<(i16, i16)>,
+    last_sent: Instant,
+}
+
+impl Shared {
+    /// Sends the drive command if it changed or the keep-alive is due: the fabric's command,
+    /// or stop once it is older than [`COMMAND_TIMEOUT`].
+    fn send_command(&mut self, now: Instant) -> io::Result<()> {
+        let Some(link) = self.link.as_mut() else {
+            return Ok(());
+        };
+        let (v, w) = match self.command {
+            Some((vw, at)) if now.duration_since(at) < COMMAND_TIMEOUT => vw,
+            _ => (0.0, 0.0),
+        };
+        let wire = (
+            (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16,
+            (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16,
+        );
+        if Some(wire) != link.last_wire || now.duration_since(link.last_sent) >= RESEND {
+            link.last_sent = now;
+            link.last_wire = Some(wire);
+            link.writer.write_all(&Command::Vel(wire.0).encode())?;
+            link.writer.write_all(&Command::RVel(wire.1).encode())?;
+        }
+        Ok(())
+    }
 }
 
 /// The running driver.
@@ -77,6 +113,7 @@ impl Driver {
         let shared = Arc::new(Mutex::new(Shared {
             sample: Sample::default(),
             command: None,
+            link: None,
         }));
         let stop = Arc::new(AtomicBool::new(false));
         let (s, st) = (shared.clone(), stop.clone());
@@ -98,7 +135,13 @@ impl Driver {
 
     /// Sets the drive command (m/s, rad/s).
     pub fn command(&self, translate: f64, rotate: f64) {
-        lock(&self.shared).command = Some(((translate, rotate), Instant::now()));
+        let now = Instant::now();
+        let mut s = lock(&self.shared);
+        s.command = Some(((translate, rotate), now));
+        // A changed command goes out now; a broken link is the driver thread's to notice.
+        if let Err(e) = s.send_command(now) {
+            tracing::debug!(error = %e, "command not written");
+        }
     }
 }
 
@@ -188,10 +231,27 @@ fn session(
         s.sample.connects += 1;
         s.sample.received = Some(Instant::now());
     }
+    let writer = t.writer()?;
+    lock(shared).link = Some(Link {
+        writer,
+        last_wire: None,
+        last_sent: Instant::now() - RESEND,
+    });
+    let result = serve_link(t, d, shared, stop, total);
+    lock(shared).link = None;
+    result
+}
+
+/// The session's loop: read and apply packets, send the keep-alive, watch the timeouts.
+fn serve_link(
+    t: &mut dyn Transport,
+    mut d: Decoder,
+    shared: &Mutex<Shared>,
+    stop: &AtomicBool,
+    total: &mut DecodeStats,
+) -> io::Result<()> {
     let mut origin: Option<(u16, u16)> = None;
     let mut acc = (0i64, 0i64);
-    let mut last_sent = Instant::now() - RESEND;
-    let mut last_wire: Option<(i16, i16)> = None;
     let mut last_packet = Instant::now();
     let base = *total;
     while !stop.load(Ordering::Acquire) {
@@ -223,22 +283,8 @@ fn session(
         if now.duration_since(last_packet) > LINK_TIMEOUT {
             return Err(io::Error::new(io::ErrorKind::TimedOut, "no packet for 1 s"));
         }
-        // A changed command goes out at once; an unchanged one is repeated as the keep-alive.
-        let cmd = lock(shared).command;
-        let (v, w) = match cmd {
-            Some((vw, at)) if now.duration_since(at) < COMMAND_TIMEOUT => vw,
-            _ => (0.0, 0.0),
-        };
-        let wire = (
-            (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16,
-            (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16,
-        );
-        if Some(wire) != last_wire || now.duration_since(last_sent) >= RESEND {
-            last_sent = now;
-            last_wire = Some(wire);
-            t.write_all(&Command::Vel(wire.0).encode())?;
-            t.write_all(&Command::RVel(wire.1).encode())?;
-        }
+        // The keep-alive, and stop once the fabric's commands are stale.
+        lock(shared).send_command(now)?;
     }
     Ok(())
 }

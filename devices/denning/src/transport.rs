@@ -5,9 +5,10 @@ use std::io;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::time::Duration;
 
-/// How long one read waits for bytes: also the longest a changed drive command waits before
-/// the driver sends it.
-pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
+/// How long one read waits for bytes: how often a silent link's driver thread wakes to send
+/// the keep-alive and check its timeouts. (Commands do not wait for it: the device process
+/// writes a changed command itself, through [`Transport::writer`].)
+pub const READ_TIMEOUT: Duration = Duration::from_millis(50);
 
 /// A bidirectional byte stream.
 pub trait Transport: Send {
@@ -15,6 +16,28 @@ pub trait Transport: Send {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize>;
     /// Writes all bytes.
     fn write_all(&mut self, bytes: &[u8]) -> io::Result<()>;
+    /// A second handle that writes to the same stream, for another thread.
+    fn writer(&self) -> io::Result<Box<dyn Writer>>;
+}
+
+/// The writing half of a [`Transport`].
+pub trait Writer: Send {
+    /// Writes all bytes.
+    fn write_all(&mut self, bytes: &[u8]) -> io::Result<()>;
+}
+
+impl Writer for serialport::TTYPort {
+    fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
+        io::Write::write_all(self, bytes)?;
+        io::Write::flush(self)
+    }
+}
+
+impl Writer for Sender<Vec<u8>> {
+    fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.send(bytes.to_vec())
+            .map_err(|_| io::Error::new(io::ErrorKind::BrokenPipe, "peer gone"))
+    }
 }
 
 /// A serial port, opened exclusively.
@@ -48,8 +71,12 @@ impl Transport for Serial {
         }
     }
     fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
-        io::Write::write_all(&mut self.port, bytes)?;
-        io::Write::flush(&mut self.port)
+        Writer::write_all(&mut self.port, bytes)
+    }
+    fn writer(&self) -> io::Result<Box<dyn Writer>> {
+        Ok(Box::new(
+            self.port.try_clone_native().map_err(io::Error::from)?,
+        ))
     }
 }
 
@@ -95,8 +122,9 @@ impl Transport for Memory {
         Ok(n)
     }
     fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.tx
-            .send(bytes.to_vec())
-            .map_err(|_| io::Error::new(io::ErrorKind::BrokenPipe, "peer gone"))
+        Writer::write_all(&mut self.tx, bytes)
+    }
+    fn writer(&self) -> io::Result<Box<dyn Writer>> {
+        Ok(Box::new(self.tx.clone()))
     }
 }

@@ -487,7 +487,7 @@ fn serve<U: Unit>(
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
         .map_err(|e| transport("create waitset", &e))?;
-    let _trigger_guard = waitset
+    let trigger_guard = waitset
         .attach_notification(trigger)
         .map_err(|e| transport("attach trigger", &e))?;
     let mut input_guards = Vec::new();
@@ -505,10 +505,18 @@ fn serve<U: Unit>(
     let me = std::process::id();
     loop {
         let mut ticked = false;
+        // Which listeners fired: only those are drained (each drain is a system call that
+        // ends in EAGAIN; a skill is usually woken by one of them).
+        let mut triggered = false;
+        let mut fired = 0u64;
         let result = waitset
             .wait_and_process_once(|id| {
                 if id.has_event_from(&tick) {
                     ticked = true;
+                } else if id.has_event_from(&trigger_guard) {
+                    triggered = true;
+                } else if let Some(i) = input_guards.iter().position(|g| id.has_event_from(g)) {
+                    fired |= 1 << i.min(63);
                 }
                 CallbackProgression::Continue
             })
@@ -520,9 +528,15 @@ fn serve<U: Unit>(
             WaitSetRunResult::Interrupt => continue,
             _ => {}
         }
-        let _ = trigger.try_wait(|_| {});
-        for l in listeners {
-            let _ = l.try_wait(|_| {});
+        if triggered {
+            let _ = trigger.try_wait(|_| {});
+        }
+        for (i, l) in listeners.iter().enumerate() {
+            // A listener that fired after the wait is drained at the next one (the WaitSet
+            // reports it again at once).
+            if fired & (1 << i.min(63)) != 0 {
+                let _ = l.try_wait(|_| {});
+            }
         }
         for i in io.inputs.iter_mut() {
             i.poll()?;

@@ -347,8 +347,17 @@ impl Manager {
         };
         loop {
             let timeout = self.timeout(Instant::now());
+            // The wake listener is the only attachment: a callback means it fired (else the
+            // period's timeout ended the wait, and draining it would only meet EAGAIN).
+            let mut woken = false;
             let result = waitset
-                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout)
+                .wait_and_process_once_with_timeout(
+                    |_| {
+                        woken = true;
+                        CallbackProgression::Continue
+                    },
+                    timeout,
+                )
                 .map_err(|e| wait_err(&e))?;
             // A wait cut short by a signal other than SIGINT/SIGTERM (a debugger attaching,
             // SIGSTOP/SIGCONT) goes on.
@@ -361,7 +370,9 @@ impl Manager {
                 break;
             }
             let awake = thread_cpu_ns();
-            let _ = wake.try_wait(|_| {});
+            if woken {
+                let _ = wake.try_wait(|_| {});
+            }
             self.service_registry();
             if self.last_liveness.elapsed() >= LIVENESS_TICK {
                 self.check_liveness();

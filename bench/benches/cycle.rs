@@ -3,7 +3,7 @@
 //! manager's own measurement, cycle start → last sync skill done) or one round trip of the
 //! token around the floor's ring.
 //!
-//! `cargo build --release --workspace --bins && cargo bench -p skillfab-bench --bench cycle`
+//! `cargo build --release --workspace && cargo bench -p skillfab-bench --bench cycle`
 //! (`-- chain` for a subset). `target/release/latency-report` is the short version of all of
 //! it in one table.
 

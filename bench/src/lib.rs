@@ -1,7 +1,8 @@
 //! Benchmarks of skillfab: `benches/` holds the criterion benchmarks and `latency-report`
 //! (a binary of this package) a short run of all cases with their floors. Every case starts
 //! real processes in a private domain (through the tests' `TestDomain` fixture). Build the
-//! binaries first: `cargo build --release --workspace --bins`.
+//! binaries first: `cargo build --release --workspace` (the language cases also need
+//! libskillfab and build the C examples themselves with `make -C skills`).
 //!
 //! - [`Fabric`]: a skillfab network of one [`Case`]; its cycle latencies are the manager's
 //!   own (cycle start → last sync skill done), fetched over the control plane after the

@@ -1,7 +1,7 @@
 //! `latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]`: every case of the
 //! cycle benchmarks, back to back and paced at 100 Hz, with its floors measured in the same
 //! run; p50 / p99 / max in µs and the ratio skillfab ÷ iceoryx2 ring. Build first:
-//! `cargo build --release --workspace --bins && target/release/latency-report`.
+//! `cargo build --release --workspace && target/release/latency-report`.
 
 use skillfab_bench::Case;
 use skillfab_bench::report::{self, Row};

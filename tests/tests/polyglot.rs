@@ -222,6 +222,46 @@ fn sequencers_in_c_and_python_drive_the_hello_network() {
     assert!(stdout.contains("'event': 'monitor_fired'"), "{stdout}");
     assert!(stdout.trim_end().ends_with("ok"), "{stdout}");
     assert_eq!(t.ctl(&["get", "scale.gain"]).trim(), "3");
+
+    // An event too large for the caller's buffer is an error that keeps the event for the
+    // next call; a bad expression is refused with the parser's reason.
+    let script = r#"
+import ctypes, json, sys, skillfab
+from skillfab import lib
+c = skillfab.Client(sys.argv[1])
+try:
+    c.monitor("scale.scaled.value >")
+    raise SystemExit("a bad expression was accepted")
+except skillfab.FabricError as e:
+    print("refused:", e)
+c.monitor("scale.scaled.value > 0", mode="once")
+small = ctypes.create_string_buffer(8)
+while True:
+    rc = lib.sf_client_next_event(c._c, 5000, small, 8)
+    if rc != -9:
+        assert rc == 1, rc
+        continue
+    print("too small:", lib.sf_last_error().decode())
+    ev = c.next_event(timeout=0)
+    print("kept:", json.dumps(ev))
+    break
+"#;
+    let out = python()
+        .args(["-c", script, &domain])
+        .output()
+        .expect("python3");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("refused: "), "{stdout}");
+    assert!(
+        stdout.contains("too small: the buffer holds 8 bytes"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("kept: {"), "{stdout}");
 }
 
 #[test]

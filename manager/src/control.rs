@@ -705,7 +705,7 @@ impl Manager {
                     },
                 )
             })?,
-            ParamArg::Value(v) => coerce(spec.kind, v).ok_or_else(|| {
+            ParamArg::Value(v) => v.coerce(spec.kind).ok_or_else(|| {
                 param_err(
                     skill,
                     ParamError::WrongType {
@@ -944,20 +944,5 @@ fn check_numeric(f: &FieldPath, aggregate: bool) -> Result<(), String> {
         (true, k, Some(_)) if prim(k) => Ok(()),
         (true, FieldKind::Array { elem, .. }, None) if prim(elem) => Ok(()),
         (true, _, _) => Err("min()/max() need an array or a range of numbers".into()),
-    }
-}
-
-/// A typed value converted to a parameter's kind, if it fits.
-fn coerce(kind: skill_sdk::params::ParamKind, v: ParamValue) -> Option<ParamValue> {
-    use skill_sdk::params::ParamKind as K;
-    match (kind, v) {
-        (K::Bool, ParamValue::Bool(_)) | (K::Float, ParamValue::Float(_)) => Some(v),
-        (K::Float, ParamValue::Int(i)) => Some(ParamValue::Float(i as f64)),
-        (K::Float, ParamValue::UInt(u)) => Some(ParamValue::Float(u as f64)),
-        (K::Int, ParamValue::Int(_)) => Some(v),
-        (K::Int, ParamValue::UInt(u)) => i64::try_from(u).ok().map(ParamValue::Int),
-        (K::UInt, ParamValue::UInt(_)) => Some(v),
-        (K::UInt, ParamValue::Int(i)) => u64::try_from(i).ok().map(ParamValue::UInt),
-        _ => None,
     }
 }

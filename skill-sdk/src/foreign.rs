@@ -181,17 +181,11 @@ impl ForeignSkill {
         if self.params.iter().any(|p| p.name == spec.name) {
             return Err(bad("declared twice".into()));
         }
-        let kind_of = |v: &ParamValue| match v {
-            ParamValue::Bool(_) => crate::params::ParamKind::Bool,
-            ParamValue::Int(_) => crate::params::ParamKind::Int,
-            ParamValue::UInt(_) => crate::params::ParamKind::UInt,
-            ParamValue::Float(_) => crate::params::ParamKind::Float,
-        };
         for v in std::iter::once(&spec.default)
             .chain(&spec.min)
             .chain(&spec.max)
         {
-            if kind_of(v) != spec.kind {
+            if v.kind() != spec.kind {
                 return Err(bad(format!("{v} is not a {}", spec.kind)));
             }
             if v.as_f64().is_nan() {
@@ -351,35 +345,14 @@ impl Params for ForeignParams {
                 param: name.to_string(),
             })?;
         let spec = &specs[i];
-        // Integers may come in as the other integer kind, and floats as integers.
-        let coerced = match (spec.kind, value) {
-            (crate::params::ParamKind::Float, v) if !matches!(v, ParamValue::Bool(_)) => {
-                Some(ParamValue::Float(v.as_f64()))
-            }
-            (crate::params::ParamKind::Int, ParamValue::UInt(u)) => {
-                i64::try_from(u).ok().map(ParamValue::Int)
-            }
-            (crate::params::ParamKind::UInt, ParamValue::Int(i)) => {
-                u64::try_from(i).ok().map(ParamValue::UInt)
-            }
-            (k, v) if k == kind_of(&v) => Some(v),
-            _ => None,
-        };
-        self.values[i] = coerced.ok_or_else(|| ParamError::WrongType {
-            param: name.to_string(),
-            expected: spec.kind,
-            got: value,
-        })?;
+        self.values[i] = value
+            .coerce(spec.kind)
+            .ok_or_else(|| ParamError::WrongType {
+                param: name.to_string(),
+                expected: spec.kind,
+                got: value,
+            })?;
         Ok(())
-    }
-}
-
-fn kind_of(v: &ParamValue) -> crate::params::ParamKind {
-    match v {
-        ParamValue::Bool(_) => crate::params::ParamKind::Bool,
-        ParamValue::Int(_) => crate::params::ParamKind::Int,
-        ParamValue::UInt(_) => crate::params::ParamKind::UInt,
-        ParamValue::Float(_) => crate::params::ParamKind::Float,
     }
 }
 

@@ -39,6 +39,32 @@ pub enum ParamValue {
 }
 
 impl ParamValue {
+    /// Its kind.
+    pub fn kind(&self) -> ParamKind {
+        match self {
+            ParamValue::Bool(_) => ParamKind::Bool,
+            ParamValue::Int(_) => ParamKind::Int,
+            ParamValue::UInt(_) => ParamKind::UInt,
+            ParamValue::Float(_) => ParamKind::Float,
+        }
+    }
+
+    /// This value converted to a parameter of `kind`, if it fits: integers to floats, and
+    /// integers of the other signedness when in range.
+    pub fn coerce(self, kind: ParamKind) -> Option<ParamValue> {
+        use ParamKind as K;
+        match (kind, self) {
+            (K::Bool, ParamValue::Bool(_)) | (K::Float, ParamValue::Float(_)) => Some(self),
+            (K::Float, ParamValue::Int(i)) => Some(ParamValue::Float(i as f64)),
+            (K::Float, ParamValue::UInt(u)) => Some(ParamValue::Float(u as f64)),
+            (K::Int, ParamValue::Int(_)) => Some(self),
+            (K::Int, ParamValue::UInt(u)) => i64::try_from(u).ok().map(ParamValue::Int),
+            (K::UInt, ParamValue::UInt(_)) => Some(self),
+            (K::UInt, ParamValue::Int(i)) => u64::try_from(i).ok().map(ParamValue::UInt),
+            _ => None,
+        }
+    }
+
     /// Parses text as a value of `kind`.
     pub fn parse(kind: ParamKind, text: &str) -> Option<ParamValue> {
         let t = text.trim();

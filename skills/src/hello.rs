@@ -92,20 +92,25 @@ impl Skill for Smooth {
     type Outputs<'a> = SmoothOut<'a>;
     const MODE: Mode = Mode::Async;
     fn compute(&mut self, ctx: &Ctx<SmoothParams>, i: SmoothIn, o: &mut SmoothOut) -> SkillResult {
-        let a = ctx.params.alpha;
-        let next = match self.state {
-            None => Smoothed {
-                value: i.scaled.value,
-                samples: 1,
-            },
-            Some(s) => Smoothed {
-                value: a * i.scaled.value + (1.0 - a) * s.value,
-                samples: s.samples + 1,
-            },
-        };
+        let next = fold(self.state, i.scaled.value, ctx.params.alpha);
         self.state = Some(next);
         o.smoothed.set(next);
         Ok(())
+    }
+}
+
+/// The moving average after folding in `x` with weight `alpha` (the first sample is the
+/// average).
+pub fn fold(state: Option<Smoothed>, x: f64, alpha: f64) -> Smoothed {
+    match state {
+        None => Smoothed {
+            value: x,
+            samples: 1,
+        },
+        Some(s) => Smoothed {
+            value: alpha * x + (1.0 - alpha) * s.value,
+            samples: s.samples + 1,
+        },
     }
 }
 
@@ -154,17 +159,7 @@ impl Skill for CheckChain {
     type Outputs<'a> = CheckOut<'a>;
     fn compute(&mut self, ctx: &Ctx<CheckParams>, i: CheckIn, o: &mut CheckOut) -> SkillResult {
         let p = ctx.params;
-        let x = p.gain * i.tick.value as f64;
-        let r = match self.reference {
-            None => Smoothed {
-                value: x,
-                samples: 1,
-            },
-            Some(s) => Smoothed {
-                value: p.alpha * x + (1.0 - p.alpha) * s.value,
-                samples: s.samples + 1,
-            },
-        };
+        let r = fold(self.reference, p.gain * i.tick.value as f64, p.alpha);
         self.reference = Some(r);
         let error = (i.a.value - r.value).abs().max((i.b.value - r.value).abs());
         o.error.set(Scalar {

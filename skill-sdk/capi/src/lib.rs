@@ -536,25 +536,16 @@ unsafe fn run_ref<'a>(run: *const sf_run) -> Option<&'a mut ForeignRun<'a>> {
 pub unsafe extern "C" fn sf_input(run: *const sf_run, idx: i32, size: usize) -> *const c_void {
     guard(std::ptr::null(), || {
         // SAFETY: forwarded caller contract.
-        let Some(r) = (unsafe { run_ref(run) }) else {
-            fail(SF_ERR_NULL, "run is NULL");
-            return std::ptr::null();
-        };
-        let Some((bytes, _)) = usize::try_from(idx).ok().and_then(|i| r.input(i)) else {
-            fail(
-                SF_ERR_INDEX,
-                &format!("no input {idx} (or no sample on it)"),
-            );
-            return std::ptr::null();
-        };
-        if bytes.len() != size {
-            fail(
-                SF_ERR_SIZE,
-                &format!("input {idx} is {} bytes, asked for {size}", bytes.len()),
-            );
-            return std::ptr::null();
+        unsafe {
+            port_bytes(
+                run,
+                ("input", " (or no sample on it)"),
+                idx,
+                size,
+                |r, i| r.input(i).map(|(bytes, _)| bytes),
+            )
         }
-        bytes.as_ptr().cast()
+        .map_or(std::ptr::null(), |bytes| bytes.as_ptr().cast())
     })
 }
 
@@ -572,27 +563,46 @@ pub unsafe extern "C" fn sf_input_cycle(run: *const sf_run, idx: i32) -> u64 {
     })
 }
 
+/// Port `idx` of the run behind `run` as `get` finds it, checked to be `size` bytes; records
+/// why not (NULL run, no such port — `what.0`, with `what.1` added —, wrong size).
+///
+/// # Safety
+/// As `sf_input`.
+unsafe fn port_bytes<'a, B: AsRef<[u8]>>(
+    run: *const sf_run,
+    what: (&str, &str),
+    idx: i32,
+    size: usize,
+    get: impl FnOnce(&'a mut ForeignRun<'a>, usize) -> Option<B>,
+) -> Option<B> {
+    let (port, missing) = what;
+    // SAFETY: forwarded caller contract.
+    let Some(r) = (unsafe { run_ref(run) }) else {
+        fail(SF_ERR_NULL, "run is NULL");
+        return None;
+    };
+    let Some(bytes) = usize::try_from(idx).ok().and_then(|i| get(r, i)) else {
+        fail(SF_ERR_INDEX, &format!("no {port} {idx}{missing}"));
+        return None;
+    };
+    let len = bytes.as_ref().len();
+    if len != size {
+        fail(
+            SF_ERR_SIZE,
+            &format!("{port} {idx} is {len} bytes, asked for {size}"),
+        );
+        return None;
+    }
+    Some(bytes)
+}
+
 /// # Safety
 /// As `sf_input`.
 unsafe fn output(run: *mut sf_run, idx: i32, size: usize, clear: bool) -> *mut c_void {
     guard(std::ptr::null_mut(), || {
         // SAFETY: forwarded caller contract.
-        let Some(r) = (unsafe { run_ref(run) }) else {
-            fail(SF_ERR_NULL, "run is NULL");
-            return std::ptr::null_mut();
-        };
-        let Some(bytes) = usize::try_from(idx).ok().and_then(|i| r.output(i, clear)) else {
-            fail(SF_ERR_INDEX, &format!("no output {idx}"));
-            return std::ptr::null_mut();
-        };
-        if bytes.len() != size {
-            fail(
-                SF_ERR_SIZE,
-                &format!("output {idx} is {} bytes, asked for {size}", bytes.len()),
-            );
-            return std::ptr::null_mut();
-        }
-        bytes.as_mut_ptr().cast()
+        unsafe { port_bytes(run, ("output", ""), idx, size, |r, i| r.output(i, clear)) }
+            .map_or(std::ptr::null_mut(), |bytes| bytes.as_mut_ptr().cast())
     })
 }
 

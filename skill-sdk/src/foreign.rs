@@ -259,6 +259,8 @@ struct Declared {
     /// Which message type each input and output is.
     input_types: Vec<&'static MessageType>,
     output_types: Vec<&'static MessageType>,
+    /// Which outputs' types have a bool anywhere (only those are normalised after a run).
+    output_bools: Vec<bool>,
 }
 
 static DECLARED: OnceLock<Declared> = OnceLock::new();
@@ -289,6 +291,11 @@ pub fn run(mut skill: ForeignSkill, args: Vec<String>) -> Result<(), RunError> {
         priority: skill.priority,
         input_types: types(&skill.inputs),
         output_types: types(&skill.outputs),
+        output_bools: skill
+            .outputs
+            .iter()
+            .map(|p| p.schema.fields.iter().any(|f| contains_bool(&f.ty)))
+            .collect(),
         inputs: skill.inputs,
         outputs: skill.outputs,
         params: skill.params,
@@ -514,8 +521,10 @@ impl Unit for ForeignUnit {
                     if let Some(e) = error {
                         return Err(SkillError::msg(e));
                     }
-                    for (o, decl) in outputs.iter_mut().zip(&d.outputs) {
-                        if o.is_written() {
+                    for ((o, decl), bools) in
+                        outputs.iter_mut().zip(&d.outputs).zip(&d.output_bools)
+                    {
+                        if *bools && o.is_written() {
                             sanitize_message(&decl.schema, o.bytes_mut(false));
                         }
                     }

@@ -50,6 +50,32 @@ fn lib_path() -> std::path::PathBuf {
     bin("skillfab").with_file_name("libskillfab.so")
 }
 
+/// Runs `cmd` to completion, asserts it succeeded and returns its standard output.
+fn run_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap_or_else(|e| panic!("{cmd:?}: {e}"));
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// An executable Python skill script in the test's scratch dir: the `skillfab` package from
+/// the repository imported, then `body`.
+fn python_skill(t: &TestDomain, file: &str, body: &str) -> std::path::PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let script = t.dir.join(file);
+    let header = format!(
+        "#!/usr/bin/env python3\nimport sys\nsys.path.insert(0, \"{}\")\nimport skillfab\n",
+        repo_root().join("python").display()
+    );
+    std::fs::write(&script, header + body).unwrap();
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    script
+}
+
 #[test]
 fn generated_c_and_python_layouts_agree_with_rust() {
     let t = TestDomain::new("layout");
@@ -65,18 +91,13 @@ fn generated_c_and_python_layouts_agree_with_rust() {
     let probe = t.dir.join("probe.c");
     std::fs::write(&probe, codegen::c_layout_probe(&codegen::shared_schemas())).unwrap();
     let exe = t.dir.join("probe");
-    let cc = Command::new("gcc")
-        .args(["-std=c11", "-Wall", "-Werror", "-I"])
-        .arg(repo_root().join("skill-sdk/capi/include"))
-        .arg(&probe)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .expect("gcc");
-    assert!(
-        cc.status.success(),
-        "{}",
-        String::from_utf8_lossy(&cc.stderr)
+    run_ok(
+        Command::new("gcc")
+            .args(["-std=c11", "-Wall", "-Werror", "-I"])
+            .arg(repo_root().join("skill-sdk/capi/include"))
+            .arg(&probe)
+            .arg("-o")
+            .arg(&exe),
     );
     let out = Command::new(&exe).output().unwrap();
     assert_layouts_match("C", &String::from_utf8_lossy(&out.stdout));
@@ -90,13 +111,7 @@ for cls in msgs.BY_TYPE_NAME.values():
                       "align": ctypes.alignment(cls),
                       "offsets": {f: getattr(cls, f).offset for f, _ in cls._fields_}}))
 "#;
-    let out = python().args(["-c", script]).output().expect("python3");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_layouts_match("Python", &String::from_utf8_lossy(&out.stdout));
+    assert_layouts_match("Python", &run_ok(python().args(["-c", script])));
 }
 
 /// The polyglot launch file with its Python script at an absolute path and `extra` appended
@@ -163,19 +178,14 @@ fn a_c_skill_links_statically_too() {
         lib.display()
     );
     let exe = t.dir.join("scale_c_static");
-    let cc = Command::new("gcc")
-        .arg("-I")
-        .arg(repo_root().join("skill-sdk/capi/include"))
-        .arg(repo_root().join("skills/c/scale_c.c"))
-        .arg(&lib)
-        .args(["-lpthread", "-ldl", "-lm", "-lrt", "-o"])
-        .arg(&exe)
-        .output()
-        .expect("gcc");
-    assert!(
-        cc.status.success(),
-        "{}",
-        String::from_utf8_lossy(&cc.stderr)
+    run_ok(
+        Command::new("gcc")
+            .arg("-I")
+            .arg(repo_root().join("skill-sdk/capi/include"))
+            .arg(repo_root().join("skills/c/scale_c.c"))
+            .arg(&lib)
+            .args(["-lpthread", "-ldl", "-lm", "-lrt", "-o"])
+            .arg(&exe),
     );
     // It runs without libskillfab.so: a bad option gets the SDK's usage and exit code 2.
     let out = t.command_at(&exe).arg("--no-such-option").output().unwrap();
@@ -190,32 +200,16 @@ fn sequencers_in_c_and_python_drive_the_hello_network() {
     t.hello(&[]);
     let domain = t.domain.name().to_string();
 
-    let out = t
-        .command("sequencer_c")
-        .arg(&domain)
-        .output()
-        .expect("sequencer_c");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = run_ok(t.command("sequencer_c").arg(&domain));
     assert!(stdout.contains("scale.gain = 3"), "{stdout}");
     assert!(stdout.contains("refused: "), "{stdout}");
     assert!(stdout.contains("\"event\":\"monitor_fired\""), "{stdout}");
     assert!(stdout.trim_end().ends_with("ok"), "{stdout}");
 
-    let out = python()
-        .arg(repo_root().join("skills/python/sequencer_py.py"))
-        .arg(&domain)
-        .output()
-        .expect("python3");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = run_ok(
+        python()
+            .arg(repo_root().join("skills/python/sequencer_py.py"))
+            .arg(&domain),
     );
     assert!(stdout.contains("skills: "), "{stdout}");
     assert!(stdout.contains("refused: "), "{stdout}");
@@ -246,16 +240,7 @@ while True:
     print("kept:", json.dumps(ev))
     break
 "#;
-    let out = python()
-        .args(["-c", script, &domain])
-        .output()
-        .expect("python3");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = run_ok(python().args(["-c", script, &domain]));
     assert!(stdout.contains("refused: "), "{stdout}");
     assert!(
         stdout.contains("too small: the buffer holds 8 bytes"),
@@ -266,21 +251,15 @@ while True:
 
 #[test]
 fn a_python_skill_that_raises_fails_its_run_and_keeps_serving() {
-    use std::os::unix::fs::PermissionsExt;
     let t = TestDomain::new("pyraise");
-    let script = t.dir.join("flaky.py");
-    std::fs::write(
-        &script,
-        format!(
-            r#"#!/usr/bin/env python3
-import sys
-sys.path.insert(0, "{}")
-import skillfab
-from skillfab.msgs import Tick, Scalar
+    let script = python_skill(
+        &t,
+        "flaky.py",
+        r#"from skillfab.msgs import Tick, Scalar
 
 class Flaky(skillfab.Skill):
-    inputs = {{"tick": Tick}}
-    outputs = {{"out": Scalar}}
+    inputs = {"tick": Tick}
+    outputs = {"out": Scalar}
     def compute(self, run, i, o):
         if i.tick.value % 2 == 0:
             raise ValueError("even tick")
@@ -288,11 +267,7 @@ class Flaky(skillfab.Skill):
 
 skillfab.main(Flaky)
 "#,
-            repo_root().join("python").display()
-        ),
-    )
-    .unwrap();
-    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    );
     // libskillfab is found next to `skillfab` (SKILLFAB_BIN_DIR, set by `skillfab up`).
     let launch = format!(
         "[manager]\nperiod_ms = 5\ndeadline_ms = 5000\n[[process]]\nname = \"ticker\"\nbin = \"{{bin:ticker}}\"\n\
@@ -307,23 +282,17 @@ skillfab.main(Flaky)
 
 #[test]
 fn the_c_avoid_routine_turns_away_from_an_obstacle() {
-    use std::os::unix::fs::PermissionsExt;
     build_foreign_examples();
     let mut t = TestDomain::new("avoidc");
     // A sonar ring with one echo 0.3 m away, 15° to the left of the heading.
-    let script = t.dir.join("sonar_script.py");
-    std::fs::write(
-        &script,
-        format!(
-            r#"#!/usr/bin/env python3
-import sys
-sys.path.insert(0, "{}")
-import skillfab
-from skillfab.msgs import Tick, Sonar
+    let script = python_skill(
+        &t,
+        "sonar_script.py",
+        r#"from skillfab.msgs import Tick, Sonar
 
 class Script(skillfab.Skill):
-    inputs = {{"tick": Tick}}
-    outputs = {{"sonar": Sonar}}
+    inputs = {"tick": Tick}
+    outputs = {"sonar": Sonar}
     def compute(self, run, i, o):
         for k in range(24):
             o.sonar.range[k] = float("inf")
@@ -331,11 +300,7 @@ class Script(skillfab.Skill):
 
 skillfab.main(Script)
 "#,
-            repo_root().join("python").display()
-        ),
-    )
-    .unwrap();
-    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    );
     let launch = t.launch_file(&format!(
         "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{{bin:ticker}}\"\n\
          [[process]]\nname = \"sonar\"\nbin = \"{}\"\n\

@@ -212,19 +212,9 @@ impl ForeignSkill {
         self.body = Some(body);
     }
 
-    /// The declared inputs.
-    pub fn inputs(&self) -> &[PortDecl] {
-        &self.inputs
-    }
-
     /// The declared outputs.
     pub fn outputs(&self) -> &[PortDecl] {
         &self.outputs
-    }
-
-    /// The declared parameters.
-    pub fn params(&self) -> &[ParamSpec] {
-        &self.params
     }
 }
 
@@ -393,11 +383,6 @@ impl<'a> ForeignRun<'a> {
     /// The value of parameter `idx` (declaration order).
     pub fn param(&self, idx: usize) -> Option<ParamValue> {
         self.params.at(idx)
-    }
-
-    /// The index of parameter `name`.
-    pub fn param_index(&self, name: &str) -> Option<usize> {
-        declared().params.iter().position(|s| s.name == name)
     }
 
     /// Fails this run with `reason` (the body's return value decides as well).

@@ -11,9 +11,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use skill_sdk::client::Client;
-use skill_sdk::control::{EventKind, MonitorMode};
-use skill_sdk::header::now_ns;
+use skillfab_client::Client;
+use skillfab_proto::control::{EventKind, MonitorMode};
+use skillfab_proto::header::now_ns;
 use skillfab_tests::TestDomain;
 use std::time::{Duration, Instant};
 

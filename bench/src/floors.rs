@@ -13,9 +13,9 @@
 //! processes of this package.
 
 use crate::{PACE, Summary};
-use skill_sdk::domain::Domain;
-use skill_sdk::msg::Tick;
-use skill_sdk::services;
+use skillfab_msgs::Tick;
+use skillfab_proto::domain::Domain;
+use skillfab_proto::services;
 use skillfab_tests::TestDomain;
 use std::io::{Read, Write};
 use std::process::{Child, Stdio};
@@ -111,7 +111,7 @@ pub struct Iox {
         iceoryx2::port::publisher::Publisher<
             iceoryx2::service::ipc::Service,
             Tick,
-            skill_sdk::header::SampleHeader,
+            skillfab_proto::header::SampleHeader,
         >,
         iceoryx2::port::notifier::Notifier<iceoryx2::service::ipc::Service>,
     )>,
@@ -119,7 +119,7 @@ pub struct Iox {
         iceoryx2::port::subscriber::Subscriber<
             iceoryx2::service::ipc::Service,
             Tick,
-            skill_sdk::header::SampleHeader,
+            skillfab_proto::header::SampleHeader,
         >,
     >,
     listener: iceoryx2::port::listener::Listener<iceoryx2::service::ipc::Service>,

@@ -16,8 +16,8 @@
 pub mod floors;
 pub mod report;
 
-use skill_sdk::board::Board;
-use skill_sdk::client::Client;
+use skillfab_client::Client;
+use skillfab_proto::board::Board;
 use skillfab_tests::TestDomain;
 use std::time::Duration;
 
@@ -287,9 +287,9 @@ impl Fabric {
 
     /// Processes of the network: the manager (`skillfab up`) and every skill.
     pub fn pids(&self) -> (u32, Vec<u32>) {
-        let skills = (0..skill_sdk::board::MAX_SLOTS)
+        let skills = (0..skillfab_proto::board::MAX_SLOTS)
             .map(|i| self.board.slot(i))
-            .filter(|s| s.state() == skill_sdk::board::SlotState::Ready)
+            .filter(|s| s.state() == skillfab_proto::board::SlotState::Ready)
             .map(|s| s.pid.load(std::sync::atomic::Ordering::Acquire))
             .collect();
         (self.t.pid(self.up), skills)

@@ -7,6 +7,7 @@
 //! done. Events get consecutive sequence numbers in the order the engine queued them.
 
 use crate::engine::Manager;
+use crate::monitors::expr;
 use crate::monitors::{Monitor, Resolved};
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::node::Node;
@@ -15,17 +16,17 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
-use skill_sdk::board::pid_alive;
-use skill_sdk::control::{
+use skillfab_proto::board::pid_alive;
+use skillfab_proto::control::{
     self, ControlError, Event, EventKind, ParamArg, ParamErrorText, Reply, Request, Response,
     SkillInfo, Stats,
 };
-use skill_sdk::domain::Domain;
-use skill_sdk::header::now_ns;
-use skill_sdk::params::{ParamError, ParamValue, check_bounds};
-use skill_sdk::services::RawReader;
-use skill_sdk::value::{self, FieldPath, Value};
-use skill_sdk::{SdkError, expr, names, services};
+use skillfab_proto::domain::Domain;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::param::{ParamError, ParamValue, check_bounds};
+use skillfab_proto::services::RawReader;
+use skillfab_proto::value::{self, FieldPath, Value};
+use skillfab_proto::{Error as SdkError, names, services};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -536,7 +537,7 @@ impl Manager {
                     path: format!("{skill}.{}", p.port),
                     reason: err.reason,
                 })?;
-                let slot = (dir == "out" && p.kind == skill_sdk::decl::PortKind::Proposal)
+                let slot = (dir == "out" && p.kind == skillfab_proto::decl::PortKind::Proposal)
                     .then_some(s as u32);
                 ports.push((
                     dir,
@@ -577,7 +578,7 @@ impl Manager {
     }
 
     fn list(&self) -> Vec<SkillInfo> {
-        let ports = |p: &[skill_sdk::decl::PortDecl]| {
+        let ports = |p: &[skillfab_proto::decl::PortDecl]| {
             p.iter()
                 .map(|p| (p.port.clone(), p.topic.clone(), p.schema.type_name.clone()))
                 .collect()
@@ -776,7 +777,7 @@ impl Manager {
             })?;
         let f = value::resolve(&port.schema, field).map_err(|err| bad(err.reason))?;
         // Every proposer publishes on its channel's topic: read this skill's own proposals.
-        let slot = (port.kind == skill_sdk::decl::PortKind::Proposal).then_some(s as u32);
+        let slot = (port.kind == skillfab_proto::decl::PortKind::Proposal).then_some(s as u32);
         Ok((port.topic.clone(), f, slot))
     }
 
@@ -821,11 +822,11 @@ impl Manager {
             .flat_map(|e| e.decl.inputs.iter())
             .find(|p| {
                 p.channel_name() == Some(name)
-                    && matches!(p.kind, skill_sdk::decl::PortKind::Channel(_))
+                    && matches!(p.kind, skillfab_proto::decl::PortKind::Channel(_))
             })
             .map(|p| p.schema.clone())
             .ok_or_else(|| ControlError::NoValue(text.into()))?;
-        let topic = skill_sdk::names::command_topic(name);
+        let topic = skillfab_proto::names::command_topic(name);
         if !self.readers.contains_key(&topic) {
             let r = RawReader::open(&self.node, &topic, &schema)
                 .map_err(|e| ControlError::Refused(e.to_string()))?;
@@ -936,7 +937,7 @@ fn parsed_is_scalar_use(e: &expr::Expr, p: &expr::PathRef) -> bool {
 
 /// A plain path must name one number; inside min()/max() an array or range of numbers.
 fn check_numeric(f: &FieldPath, aggregate: bool) -> Result<(), String> {
-    use skill_sdk::schema::FieldKind;
+    use skillfab_proto::schema::FieldKind;
     let prim = |k: &FieldKind| matches!(k, FieldKind::Prim(_));
     match (aggregate, &f.kind, f.count) {
         (false, k, None) if prim(k) => Ok(()),

@@ -23,15 +23,15 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use skill_sdk::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
-use skill_sdk::control::EventKind;
-use skill_sdk::decl::SkillDecl;
-use skill_sdk::domain::Domain;
-use skill_sdk::header::now_ns;
-use skill_sdk::params::ParamValue;
-use skill_sdk::services::RawReader;
-use skill_sdk::value::FieldPath;
-use skill_sdk::{SdkError, names, services};
+use skillfab_proto::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
+use skillfab_proto::control::EventKind;
+use skillfab_proto::decl::SkillDecl;
+use skillfab_proto::domain::Domain;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::param::ParamValue;
+use skillfab_proto::services::RawReader;
+use skillfab_proto::value::FieldPath;
+use skillfab_proto::{Error as SdkError, names, services};
 use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -248,7 +248,7 @@ pub(crate) struct Figures {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ChannelView {
     pub(crate) device: String,
-    pub(crate) policy: skill_sdk::decl::Policy,
+    pub(crate) policy: skillfab_proto::decl::Policy,
     pub(crate) cycle: u64,
     pub(crate) winner: Option<String>,
     pub(crate) weights: Vec<(String, f64)>,
@@ -569,7 +569,7 @@ impl Manager {
             }
         }
         for ch in &self.plan.channels {
-            if ch.index < skill_sdk::board::MAX_CHANNELS {
+            if ch.index < skillfab_proto::board::MAX_CHANNELS {
                 self.board.slot(ch.device).channel_proposers[ch.index]
                     .store(ch.proposers, Ordering::Release);
             }
@@ -763,7 +763,7 @@ impl Manager {
         let name_of = |s: usize| self.skills.get(s)?.as_ref().map(|e| e.decl.name.clone());
         let mut changes = Vec::new();
         for ch in &self.plan.channels {
-            if ch.index >= skill_sdk::board::MAX_CHANNELS {
+            if ch.index >= skillfab_proto::board::MAX_CHANNELS {
                 continue;
             }
             let slot = self.board.slot(ch.device);
@@ -775,14 +775,14 @@ impl Manager {
             let winner = (winner > 0).then(|| name_of(winner as usize - 1)).flatten();
             let contributors: Vec<usize> =
                 (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0).collect();
-            let weights: Vec<f64> = if ch.policy == skill_sdk::decl::Policy::Priority {
+            let weights: Vec<f64> = if ch.policy == skillfab_proto::decl::Policy::Priority {
                 vec![1.0; contributors.len()]
             } else {
                 let priorities: Vec<i32> = contributors
                     .iter()
                     .map(|&s| self.board.slot(s).priority.load(Ordering::Acquire))
                     .collect();
-                skill_sdk::actuation::blend_weights(&priorities)
+                skillfab_proto::decl::blend_weights(&priorities)
             };
             // By name: slots follow the order in which processes happened to register.
             let mut weights: Vec<(String, f64)> = contributors
@@ -1119,7 +1119,7 @@ impl Manager {
 fn is_device(d: &SkillDecl) -> bool {
     d.inputs
         .iter()
-        .any(|p| matches!(p.kind, skill_sdk::decl::PortKind::Channel(_)))
+        .any(|p| matches!(p.kind, skillfab_proto::decl::PortKind::Channel(_)))
 }
 
 /// CPU time of the calling thread (ns): the manager's own work, not the time other

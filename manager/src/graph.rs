@@ -2,7 +2,7 @@
 //! each cycle (which sync skills are expected to run, which inputs must be same-cycle, whom
 //! the manager wakes at cycle start). Pure code, no I/O.
 
-use skill_sdk::decl::{Mode, PortDecl, PortKind, SkillDecl};
+use skillfab_proto::decl::{Mode, PortDecl, PortKind, SkillDecl};
 use std::collections::HashMap;
 
 /// Why a registration is refused.
@@ -387,7 +387,7 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
                 channel: ch.channel_name().unwrap_or(&ch.port).to_string(),
                 policy: match ch.kind {
                     PortKind::Channel(p) => p,
-                    _ => skill_sdk::decl::Policy::Priority,
+                    _ => skillfab_proto::decl::Policy::Priority,
                 },
                 proposers: mask,
             });
@@ -406,7 +406,7 @@ pub struct ChannelPlan {
     /// Channel name.
     pub channel: String,
     /// Arbitration policy.
-    pub policy: skill_sdk::decl::Policy,
+    pub policy: skillfab_proto::decl::Policy,
     /// Slots that propose on it.
     pub proposers: u64,
 }
@@ -420,8 +420,8 @@ fn is_data(p: &PortDecl) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use skill_sdk::msg::{Scaled, Tick};
-    use skill_sdk::params::ParamValue;
+    use skillfab_msgs::{Scaled, Tick};
+    use skillfab_proto::param::ParamValue;
 
     fn skill(name: &str, mode: Mode, inputs: Vec<PortDecl>, outputs: Vec<PortDecl>) -> SkillDecl {
         SkillDecl {
@@ -437,7 +437,7 @@ mod tests {
             param_values: Vec::<(String, ParamValue)>::new(),
         }
     }
-    fn port<T: skill_sdk::Message>(topic: &str) -> PortDecl {
+    fn port<T: skillfab_proto::Message>(topic: &str) -> PortDecl {
         PortDecl::of::<T>(topic)
     }
 

@@ -203,7 +203,7 @@ impl Launch {
                 name: p.name.clone(),
                 message,
             };
-            skill_sdk::names::check_name("process", &p.name, false)
+            skillfab_proto::names::check_name("process", &p.name, false)
                 .map_err(|e| bad(e.to_string()))?;
             if processes.iter().any(|q: &ProcessSpec| q.name == p.name) {
                 return Err(bad("the name is used twice".into()));

@@ -1,23 +1,22 @@
-//! # skillfab
+//! # skillfab-manager
 //!
-//! The skill manager daemon and the `skillfab` command line.
+//! The skill manager of a domain (the paper's do-periodic-step and update-record) and the
+//! supervisor that starts a launch file's processes around it. The `skillfab-manager` binary
+//! runs either; `skillfab manager …` and `skillfab up …` run that binary.
 //!
 //! ## Layout
 //! - [`engine`]: the cycle engine (registry, readiness, deadlines, liveness, stats).
 //! - [`graph`]: wiring checks and the per-cycle plan, pure.
-//! - [`control`]: the control plane (requests, events); [`monitors`]: conditions on live outputs.
+//! - [`control`]: the control plane (requests, events); [`monitors`]: conditions on live
+//!   outputs, with their expression language.
 //! - [`stats`]: latency percentiles and the run report.
-//! - [`launch`]: launch files, parsed then validated.
-//! - [`up`]: `skillfab up`, a manager plus supervised processes.
-//! - [`recorder`]: the fabric log (parameter changes, I/O samples) as JSON lines.
-//! - [`console`]: `skillfab console`, the terminal debugging interface.
-//!
-//! `src/main.rs` only parses arguments and calls into these.
+//! - [`recorder`]: the fabric log (parameter changes, I/O samples) as JSON lines or MCAP.
+//! - [`launch`]: launch files, parsed then validated; [`up`]: a manager plus supervised
+//!   processes.
+//! - [`args`]: the command-line arguments of `manager` and `up`, shared with `skillfab`.
 
-pub mod console;
+pub mod args;
 pub mod control;
-pub mod ctl;
-pub mod demo;
 pub mod engine;
 pub mod graph;
 pub mod launch;

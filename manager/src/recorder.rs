@@ -28,11 +28,11 @@
 //! killed leaves every record written so far readable (only the summary at the end is
 //! missing).
 
-use crate::ctl::param_json;
 use serde_json::{Value as Json, json};
-use skill_sdk::header::now_ns;
-use skill_sdk::params::ParamValue;
-use skill_sdk::value::FieldPath;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::json::param_json;
+use skillfab_proto::param::ParamValue;
+use skillfab_proto::value::FieldPath;
 use std::collections::{BTreeMap, HashMap};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -156,7 +156,7 @@ fn sample_json(s: &IoSample) -> Json {
     let value = s
         .field
         .read(&s.bytes)
-        .map_or(Json::Null, |v| crate::ctl::value_json(&v));
+        .map_or(Json::Null, |v| skillfab_proto::json::value_json(&v));
     json!({"kind": "sample", "cycle": s.cycle, "time_ns": now_ns(), "skill": s.skill,
            "dir": s.dir, "port": s.port, "topic": s.topic, "type": s.type_name,
            "stamp_ns": s.stamp_ns, "value": value})
@@ -309,8 +309,8 @@ fn sample_schema(s: &IoSample) -> Json {
     })
 }
 
-fn kind_schema(kind: &skill_sdk::schema::FieldKind) -> Json {
-    use skill_sdk::schema::{FieldKind, Prim};
+fn kind_schema(kind: &skillfab_proto::schema::FieldKind) -> Json {
+    use skillfab_proto::schema::{FieldKind, Prim};
     match kind {
         FieldKind::Prim(Prim::Bool) => json!({"type": "boolean"}),
         FieldKind::Prim(Prim::F32 | Prim::F64) => json!({"type": "number"}),
@@ -516,7 +516,7 @@ mod tests {
     }
 
     fn scaled_sample(cycle: u64, value: f64) -> IoSample {
-        use skill_sdk::schema::{FieldKind, FieldSchema, MessageSchema, Prim};
+        use skillfab_proto::schema::{FieldKind, FieldSchema, MessageSchema, Prim};
         let schema = MessageSchema {
             type_name: "skillfab.Scaled".into(),
             doc: "a scaled tick".into(),
@@ -536,7 +536,7 @@ mod tests {
             topic: "scaled".into(),
             type_name: schema.type_name.clone(),
             stamp_ns: now_ns(),
-            field: Arc::new(skill_sdk::value::resolve(&schema, "").unwrap()),
+            field: Arc::new(skillfab_proto::value::resolve(&schema, "").unwrap()),
             bytes: value.to_ne_bytes().to_vec(),
         }
     }

@@ -12,7 +12,7 @@ use crate::stats::Report;
 use anyhow::{Context, bail};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
-use skill_sdk::domain::{DOMAIN_ENV, Domain};
+use skillfab_proto::domain::{DOMAIN_ENV, Domain};
 use std::os::fd::AsFd;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};

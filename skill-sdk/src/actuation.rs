@@ -90,17 +90,7 @@ pub fn blend<T: Message>(leaves: &[(usize, Prim)], items: &[(f64, &T)]) -> T {
     out
 }
 
-/// The blend weights of proposers with these priorities, normalised to sum to 1: each
-/// weight is `max(priority, 0)`; if all are 0, all are equal. The device and the manager's
-/// report use this one rule.
-pub fn blend_weights(priorities: &[i32]) -> Vec<f64> {
-    let mut w: Vec<f64> = priorities.iter().map(|p| f64::from((*p).max(0))).collect();
-    if w.iter().all(|x| *x == 0.0) {
-        w.iter_mut().for_each(|x| *x = 1.0);
-    }
-    let total: f64 = w.iter().sum();
-    w.iter().map(|x| x / total).collect()
-}
+pub use skillfab_proto::decl::blend_weights;
 
 /// Picks the command of a cycle from `proposals` (slot → value) of `candidates`.
 pub fn arbitrate<T: Message + Actuation>(
@@ -182,10 +172,10 @@ impl<T: Actuation> ErasedInput for ChannelPort<T> {
                 }
                 Ok(None) => return Ok(()),
                 Err(e) => {
-                    return Err(crate::SdkError::Transport {
-                        what: format!("receive proposals of {}", T::TYPE_NAME),
-                        detail: format!("{e:?}"),
-                    });
+                    return Err(crate::SdkError::transport(
+                        &format!("receive proposals of {}", T::TYPE_NAME),
+                        e,
+                    ));
                 }
             }
         }
@@ -237,19 +227,14 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
         let mut s = self
             .publisher
             .loan_uninit()
-            .map_err(|e| crate::SdkError::Transport {
-                what: "loan command".into(),
-                detail: format!("{e:?}"),
-            })?
+            .map_err(|e| crate::SdkError::transport("loan command", e))?
             .write_payload(self.command);
         *s.user_header_mut() = SampleHeader {
             slot: self.header.slot,
             ..header
         };
-        s.send().map_err(|e| crate::SdkError::Transport {
-            what: "send command".into(),
-            detail: format!("{e:?}"),
-        })?;
+        s.send()
+            .map_err(|e| crate::SdkError::transport("send command", e))?;
         Ok(())
     }
 }
@@ -328,7 +313,24 @@ impl<'a, T: Actuation> InputField<'a> for Command<'a, T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msg::Drive;
+    use crate::prelude::Message;
+
+    #[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+    #[repr(C)]
+    struct Drive {
+        translate: f64,
+        rotate: f64,
+    }
+    impl Actuation for Drive {
+        fn safe() -> Self {
+            Drive::default()
+        }
+    }
+    #[derive(Message, Debug, Default, Clone, Copy, PartialEq)]
+    #[repr(C)]
+    struct Tick {
+        value: u64,
+    }
 
     fn cands() -> Vec<Candidate<'static>> {
         vec![
@@ -419,7 +421,7 @@ mod tests {
 
     #[test]
     fn non_float_types_are_not_blendable() {
-        assert!(float_leaves(&crate::msg::Tick::schema()).is_none());
+        assert!(float_leaves(&Tick::schema()).is_none());
         assert_eq!(float_leaves(&Drive::schema()).unwrap().len(), 2);
     }
 }

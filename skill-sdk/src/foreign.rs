@@ -3,22 +3,62 @@
 //! boxed body over raw message bytes — and [`run`] runs it through the same runtime as a Rust
 //! skill (registration, cycles, parameter updates, shutdown).
 //!
-//! Message types are looked up by type name in [`crate::msg::registry`]: a foreign skill can
-//! use every shared message type, and its bytes have exactly the Rust layout (the generated C
-//! header and Python classes are checked against it).
+//! Message types are looked up by type name in the registry the skill is declared with
+//! (`skillfab_msgs::registry()` for the shared catalog): a foreign skill can use every type
+//! listed there, and its bytes have exactly the Rust layout (the generated C header and Python
+//! classes are checked against it).
 //!
 //! A process runs one skill, so the declaration lives in a process-wide cell that the
 //! runtime's static hooks read; [`run`] may be called once per process.
 
 use crate::SdkError;
 use crate::decl::{Mode, PortDecl, PortKind};
-use crate::msg::MessageType;
 use crate::params::{ParamError, ParamSpec, ParamValue, Params, check_bounds};
 use crate::ports::{ErasedInput, ErasedOutput, InputMeta, InputSource, PortMaker};
 use crate::runtime::{Common, Io, Link, SkillArgs, Unit, guarded, step_skill};
 use crate::schema::{FieldKind, MessageSchema, Prim};
 use crate::skill::{Ctx, SkillError, SkillResult};
 use std::sync::{Mutex, OnceLock};
+
+/// A boxed runtime input port.
+pub type ErasedInputBox = Box<dyn ErasedInput>;
+
+/// What the runtime needs to use a message type chosen by name at run time (a skill declared
+/// in C or Python). Build one with [`MessageType::of`].
+#[derive(Debug)]
+pub struct MessageType {
+    /// The type name.
+    pub type_name: &'static str,
+    /// Its layout.
+    pub schema: fn() -> MessageSchema,
+    /// Builds the runtime input port of input `idx`.
+    pub input: fn(&PortMaker<'_>, usize) -> Result<ErasedInputBox, SdkError>,
+    /// Builds the runtime output cell of output `idx`.
+    pub output: fn(&PortMaker<'_>, usize) -> Result<ErasedOutput, SdkError>,
+    /// The bytes of a value of this type held as `&dyn Any`.
+    pub bytes: fn(&dyn std::any::Any) -> Option<&[u8]>,
+}
+
+impl MessageType {
+    /// The entry of message type `T`.
+    pub const fn of<T: crate::Message>() -> MessageType {
+        MessageType {
+            type_name: T::TYPE_NAME,
+            schema: T::schema,
+            input: <crate::ports::Input<'static, T> as crate::ports::InputField<'static>>::make,
+            output: <crate::ports::Output<'static, T> as crate::ports::OutputField<'static>>::make,
+            bytes: bytes_of::<T>,
+        }
+    }
+}
+
+fn bytes_of<T: crate::Message>(any: &dyn std::any::Any) -> Option<&[u8]> {
+    let value = any.downcast_ref::<T>()?;
+    // SAFETY: a Message is plain old data; the slice covers exactly the borrowed value.
+    Some(unsafe {
+        std::slice::from_raw_parts((value as *const T).cast::<u8>(), std::mem::size_of::<T>())
+    })
+}
 
 /// A skill body over raw message bytes.
 pub type Body = Box<dyn FnMut(&mut ForeignRun<'_>) -> SkillResult + Send>;
@@ -28,7 +68,7 @@ pub type Body = Box<dyn FnMut(&mut ForeignRun<'_>) -> SkillResult + Send>;
 #[non_exhaustive]
 pub enum DeclError {
     /// No shared message type of that name.
-    #[error("unknown message type '{type_name}' (see skill_sdk::msg::registry)")]
+    #[error("unknown message type '{type_name}' (not in the message registry)")]
     UnknownType {
         /// The name given.
         type_name: String,
@@ -69,6 +109,8 @@ pub struct ForeignSkill {
     outputs: Vec<PortDecl>,
     params: Vec<ParamSpec>,
     body: Option<Body>,
+    /// The message types ports may be declared with, by type name.
+    registry: &'static [MessageType],
 }
 
 impl std::fmt::Debug for ForeignSkill {
@@ -83,10 +125,16 @@ impl std::fmt::Debug for ForeignSkill {
     }
 }
 
-fn message_type(type_name: &str) -> Result<&'static MessageType, DeclError> {
-    crate::msg::find(type_name).ok_or_else(|| DeclError::UnknownType {
-        type_name: type_name.to_string(),
-    })
+fn message_type(
+    registry: &'static [MessageType],
+    type_name: &str,
+) -> Result<&'static MessageType, DeclError> {
+    registry
+        .iter()
+        .find(|t| t.type_name == type_name)
+        .ok_or_else(|| DeclError::UnknownType {
+            type_name: type_name.to_string(),
+        })
 }
 
 fn check_port_name(what: &'static str, name: &str, taken: &[PortDecl]) -> Result<(), DeclError> {
@@ -103,8 +151,13 @@ fn check_port_name(what: &'static str, name: &str, taken: &[PortDecl]) -> Result
 }
 
 impl ForeignSkill {
-    /// A skill of `kind` with no ports, parameters or body yet.
-    pub fn new(kind: &str, mode: Mode) -> Result<ForeignSkill, DeclError> {
+    /// A skill of `kind` with no ports, parameters or body yet, whose ports may have the
+    /// message types of `registry` (e.g. `skillfab_msgs::registry()`).
+    pub fn new(
+        kind: &str,
+        mode: Mode,
+        registry: &'static [MessageType],
+    ) -> Result<ForeignSkill, DeclError> {
         crate::names::check_name("skill", kind, false).map_err(|e| DeclError::BadName {
             what: "skill",
             name: kind.to_string(),
@@ -118,12 +171,13 @@ impl ForeignSkill {
             outputs: Vec::new(),
             params: Vec::new(),
             body: None,
+            registry,
         })
     }
 
     /// Declares input `port` of message type `type_name`; returns its index.
     pub fn input(&mut self, port: &str, type_name: &str) -> Result<usize, DeclError> {
-        let t = message_type(type_name)?;
+        let t = message_type(self.registry, type_name)?;
         check_port_name("input", port, &self.inputs)?;
         if self.inputs.len() >= 64 {
             return Err(DeclError::TooMany { what: "inputs" });
@@ -153,7 +207,7 @@ impl ForeignSkill {
         type_name: &str,
         kind: PortKind,
     ) -> Result<usize, DeclError> {
-        let t = message_type(type_name)?;
+        let t = message_type(self.registry, type_name)?;
         check_port_name("output", port, &self.outputs)?;
         if self.outputs.len() >= 64 {
             return Err(DeclError::TooMany { what: "outputs" });
@@ -273,7 +327,7 @@ pub fn run(mut skill: ForeignSkill, args: Vec<String>) -> Result<(), RunError> {
     let types = |ports: &[PortDecl]| {
         ports
             .iter()
-            .filter_map(|p| crate::msg::find(&p.schema.type_name))
+            .filter_map(|p| message_type(skill.registry, &p.schema.type_name).ok())
             .collect::<Vec<_>>()
     };
     let declared = Declared {
@@ -523,6 +577,39 @@ impl Unit for ForeignUnit {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::prelude::Message;
+
+    #[derive(Message, Debug, Default, Clone, Copy)]
+    #[message(type_name = "skillfab.Tick")]
+    #[repr(C)]
+    struct Tick {
+        value: u64,
+    }
+    #[derive(Message, Debug, Default, Clone, Copy)]
+    #[message(type_name = "skillfab.Scaled")]
+    #[repr(C)]
+    struct Scaled {
+        value: f64,
+    }
+    #[derive(Message, Debug, Default, Clone, Copy)]
+    #[message(type_name = "skillfab.Drive")]
+    #[repr(C)]
+    struct Drive {
+        translate: f64,
+        rotate: f64,
+    }
+    #[derive(Message, Debug, Default, Clone, Copy)]
+    #[message(type_name = "skillfab.Bumpers")]
+    #[repr(C)]
+    struct Bumpers {
+        hit: u32,
+        stall: bool,
+    }
+    static REGISTRY: [MessageType; 3] = [
+        MessageType::of::<Tick>(),
+        MessageType::of::<Scaled>(),
+        MessageType::of::<Drive>(),
+    ];
 
     fn float(name: &str, default: f64, min: f64, max: f64) -> ParamSpec {
         ParamSpec {
@@ -537,7 +624,7 @@ mod tests {
 
     #[test]
     fn declarations_are_checked() {
-        let mut s = ForeignSkill::new("c_scale", Mode::Sync).unwrap();
+        let mut s = ForeignSkill::new("c_scale", Mode::Sync, &REGISTRY).unwrap();
         assert_eq!(s.input("tick", "skillfab.Tick"), Ok(0));
         assert_eq!(s.output("scaled", "skillfab.Scaled"), Ok(0));
         assert_eq!(s.proposal("drive", "skillfab.Drive"), Ok(1));
@@ -570,12 +657,12 @@ mod tests {
         let mut wrong = float("g4", 0.0, -1.0, 1.0);
         wrong.default = ParamValue::Int(0);
         assert!(matches!(s.param(wrong), Err(DeclError::BadParam { .. })));
-        assert!(ForeignSkill::new("", Mode::Sync).is_err());
+        assert!(ForeignSkill::new("", Mode::Sync, &REGISTRY).is_err());
     }
 
     #[test]
     fn bools_written_by_c_are_made_valid() {
-        let schema = <crate::msg::Bumpers as crate::Message>::schema();
+        let schema = <Bumpers as crate::Message>::schema();
         let mut bytes = vec![0u8; schema.size as usize];
         let stall = schema.fields[1].offset as usize;
         bytes[stall] = 7;

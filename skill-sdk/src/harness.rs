@@ -3,7 +3,7 @@
 //! ```
 //! use skill_sdk::harness::Harness;
 //! # use skill_sdk::prelude::*;
-//! # use skill_sdk::msg::{Scaled, Tick};
+//! # use skillfab_msgs::{Scaled, Tick};
 //! # #[derive(Params, Debug, Clone)] struct P { #[param(default = 2.0)] gain: f64 }
 //! # #[derive(Inputs)] struct In<'a> { tick: Input<'a, Tick> }
 //! # #[derive(Outputs)] struct Out<'a> { scaled: Output<'a, Scaled> }

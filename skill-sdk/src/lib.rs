@@ -16,7 +16,7 @@
 //! A minimal skill (see `skills/src/bin/scale.rs`):
 //! ```no_run
 //! use skill_sdk::prelude::*;
-//! use skill_sdk::msg::{Scaled, Tick};
+//! use skillfab_msgs::{Scaled, Tick};
 //!
 //! #[derive(Params, Debug, Clone)]
 //! struct P { /// Factor applied to the tick.
@@ -37,84 +37,28 @@
 extern crate self as skill_sdk;
 
 pub mod actuation;
-pub mod board;
-pub mod client;
-pub mod codegen;
-pub mod control;
-pub mod decl;
 pub mod device;
-pub mod domain;
-pub mod expr;
 pub mod foreign;
 pub mod harness;
-pub mod header;
-pub mod json;
 pub mod logs;
-pub mod msg;
-pub mod names;
 pub mod params;
 pub mod ports;
 pub mod runtime;
-pub mod schema;
-pub mod services;
 pub mod skill;
-pub mod value;
+
+// The wire types the SDK is built on, under the names its modules use.
+pub(crate) use skillfab_proto::{board, decl, domain, header, names, schema, services, value};
 
 pub use runtime::{device_main, main};
+pub use skillfab_proto::Message;
 
-/// A fixed-size `#[repr(C)]` message type. Derive it with `#[derive(Message)]`.
-pub trait Message:
-    iceoryx2::prelude::ZeroCopySend + schema::FieldType + std::fmt::Debug + Copy + 'static
-{
-    /// The type name every process and language uses (also iceoryx2's type name).
-    const TYPE_NAME: &'static str;
-    /// Layout description.
-    fn schema() -> schema::MessageSchema;
-}
-
-/// Errors of the SDK and the fabric's plumbing.
+/// Errors of the SDK: a skill's start-up, declaration and ports.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SdkError {
-    /// A domain name that is not allowed.
-    #[error("bad domain name '{name}': use 1-40 of [A-Za-z0-9.-]")]
-    BadDomain {
-        /// The name given.
-        name: String,
-    },
-    /// A skill or topic name that is not allowed.
-    #[error("bad {what} name '{name}': use 1-64 of [A-Za-z0-9_-]")]
-    BadName {
-        /// Skill or topic.
-        what: String,
-        /// The name given.
-        name: String,
-    },
-    /// The cycle board could not be opened or created.
-    #[error("cycle board {name}: {source}")]
-    Board {
-        /// Its shared-memory name.
-        name: String,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// The board exists but its manager has not finished setting it up.
-    #[error("the cycle board is not ready yet")]
-    BoardNotReady,
-    /// Another manager owns the domain.
-    #[error("a manager (pid {pid}) already runs in this domain")]
-    ManagerRunning {
-        /// Its pid.
-        pid: u32,
-    },
-    /// The declaration does not fit the board.
-    #[error("skill declaration is {len} bytes, more than the {max} the board holds")]
-    DeclTooLarge {
-        /// Encoded size.
-        len: usize,
-        /// Room.
-        max: usize,
-    },
+    /// The fabric's plumbing failed (names, board, iceoryx2).
+    #[error(transparent)]
+    Fabric(#[from] skillfab_proto::Error),
     /// Every slot of the board is taken.
     #[error("no free skill slot in this domain (at most {max} skills)")]
     BoardFull {
@@ -138,17 +82,6 @@ pub enum SdkError {
         /// The name given.
         port: String,
     },
-    /// An iceoryx2 operation failed.
-    #[error("{what}: {detail}")]
-    Transport {
-        /// What was attempted.
-        what: String,
-        /// iceoryx2's error.
-        detail: String,
-    },
-    /// Encoding or decoding a declaration failed.
-    #[error("declaration encoding: {0}")]
-    Encoding(#[from] postcard::Error),
     /// `--policy C=blend` on a channel whose command type has non-float fields.
     #[error("channel '{channel}' cannot blend: {type_name} has fields that are not floats")]
     NotBlendable {
@@ -174,6 +107,13 @@ pub enum SdkError {
     NoNode,
 }
 
+impl SdkError {
+    /// A failed iceoryx2 operation: `what` was attempted, `e` is iceoryx2's error.
+    pub(crate) fn transport(what: &str, e: impl std::fmt::Debug) -> SdkError {
+        SdkError::Fabric(skillfab_proto::Error::transport(what, e))
+    }
+}
+
 /// What skill code imports.
 pub mod prelude {
     pub use crate::Message;
@@ -186,7 +126,8 @@ pub mod prelude {
     pub use skill_sdk_macros::{Inputs, Message, Outputs, Params};
 }
 
+/// What the derives generate code against; not an API.
 #[doc(hidden)]
 pub mod __private {
-    pub use iceoryx2::prelude::ZeroCopySend;
+    pub use skillfab_proto as proto;
 }

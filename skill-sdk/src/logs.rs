@@ -1,26 +1,20 @@
-//! The log stream: each skill's tracing events, forwarded over a per-domain iceoryx2
-//! publish-subscribe service ([`names::logs`]) so a console or `skillfab ctl logs` can show
-//! them next to the running fabric.
+//! Forwards each skill's tracing events onto the domain's log stream
+//! ([`skillfab_proto::log`]), so a console or `skillfab ctl logs` can show them next to the
+//! running fabric.
 //!
-//! - In a skill process, [`init_tracing`](crate::runtime::init_tracing) installs a
-//!   [`ForwardLayer`] beside the usual stderr output; [`forward`] starts the forwarder once the
-//!   skill's name and domain are known. The layer only formats the line and `try_send`s it to
-//!   a bounded queue — it never blocks the skill — after a token bucket
-//!   ([`RATE_PER_S`] lines/s, bursts of [`BURST`]); lines over the rate are counted and the
-//!   next line that passes carries the count (`dropped`).
-//! - A forwarder thread with its own node publishes the lines (postcard-encoded [`LogLine`]s
-//!   as byte slices). The service has no paired event service: readers poll, so a log line
-//!   never adds a wake-up to anything.
-//! - [`LogReader`] is the reading side.
+//! - In a skill process, [`init_tracing`](crate::init_tracing) installs a [`ForwardLayer`]
+//!   beside the usual stderr output; [`forward`] starts the forwarder once the skill's name and
+//!   domain are known. The layer only formats the line and `try_send`s it to a bounded queue —
+//!   it never blocks the skill — after a token bucket ([`RATE_PER_S`] lines/s, bursts of
+//!   [`BURST`]); lines over the rate are counted and the next line that passes carries the
+//!   count (`dropped`).
+//! - A forwarder thread with its own node publishes the lines.
 
-use crate::domain::Domain;
-use crate::header::now_ns;
-use crate::{SdkError, names, services};
-use iceoryx2::node::Node;
-use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::*;
-use serde::{Deserialize, Serialize};
+use skillfab_proto::domain::Domain;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::log::{Level, LogLine, MAX_LINE, MAX_MESSAGE, encode, service};
+use skillfab_proto::services;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -31,94 +25,18 @@ use std::time::{Duration, Instant};
 pub const RATE_PER_S: f64 = 50.0;
 /// Lines a process may forward at once after a quiet spell.
 pub const BURST: f64 = 50.0;
-/// Longest message forwarded (bytes); longer ones are cut at a character boundary.
-pub const MAX_MESSAGE: usize = 400;
-/// Largest encoded line (the publisher's slice size).
-const MAX_LINE: usize = 640;
-/// Lines each publisher keeps for late subscribers (a console opened later sees them).
-const HISTORY: usize = 16;
-/// Lines a reader may queue between two polls.
-const READER_BUFFER: usize = 256;
-/// Publishers of the log stream: every skill process, with room for dead ones awaiting cleanup.
-const MAX_PUBLISHERS: usize = 2 * crate::board::MAX_SLOTS;
 /// How long the forwarder sleeps while nothing is logged (it then offers its history to new
 /// readers): rarely, so an idle skill's forwarder costs next to no wake-ups.
 const QUIET: Duration = Duration::from_millis(500);
-/// Readers at once (consoles, `ctl logs`).
-const MAX_SUBSCRIBERS: usize = 8;
 
-/// Severity, most severe first (tracing's order).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[allow(missing_docs)]
-pub enum Level {
-    Error,
-    Warn,
-    Info,
-    Debug,
-    Trace,
-}
-
-impl From<&tracing::Level> for Level {
-    fn from(l: &tracing::Level) -> Self {
-        match *l {
-            tracing::Level::ERROR => Level::Error,
-            tracing::Level::WARN => Level::Warn,
-            tracing::Level::INFO => Level::Info,
-            tracing::Level::DEBUG => Level::Debug,
-            _ => Level::Trace,
-        }
+fn level(l: &tracing::Level) -> Level {
+    match *l {
+        tracing::Level::ERROR => Level::Error,
+        tracing::Level::WARN => Level::Warn,
+        tracing::Level::INFO => Level::Info,
+        tracing::Level::DEBUG => Level::Debug,
+        _ => Level::Trace,
     }
-}
-
-impl std::fmt::Display for Level {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.pad(match self {
-            Level::Error => "ERROR",
-            Level::Warn => "WARN",
-            Level::Info => "INFO",
-            Level::Debug => "DEBUG",
-            Level::Trace => "TRACE",
-        })
-    }
-}
-
-/// One forwarded log line.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LogLine {
-    /// The skill (instance name) that logged it.
-    pub skill: String,
-    /// Its process id.
-    pub pid: u32,
-    /// Severity.
-    pub level: Level,
-    /// The tracing target (module path).
-    pub target: String,
-    /// The message, then `key=value` for each other field.
-    pub message: String,
-    /// Monotonic clock (ns) when it was logged.
-    pub time_ns: u64,
-    /// Lines this process dropped (rate limit, full queue) since the previous forwarded one.
-    pub dropped: u32,
-}
-
-impl std::fmt::Display for LogLine {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{:<5} {}: {}", self.level, self.skill, self.message)?;
-        if self.dropped > 0 {
-            write!(f, " ({} lines dropped before)", self.dropped)?;
-        }
-        Ok(())
-    }
-}
-
-/// Encodes a line.
-pub fn encode(line: &LogLine) -> Result<Vec<u8>, postcard::Error> {
-    postcard::to_allocvec(line)
-}
-
-/// Decodes a line.
-pub fn decode(bytes: &[u8]) -> Result<LogLine, postcard::Error> {
-    postcard::from_bytes(bytes)
 }
 
 /// A token bucket: `rate` per second on average, at most `burst` at once.
@@ -235,7 +153,7 @@ impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for ForwardLayer {
         let line = LogLine {
             skill: sink.skill.clone(),
             pid: std::process::id(),
-            level: meta.level().into(),
+            level: level(meta.level()),
             target: cut(meta.target().to_string(), 120),
             message: cut(f.message + &f.rest, MAX_MESSAGE),
             time_ns: now_ns(),
@@ -304,7 +222,7 @@ fn forward_loop(
             .publisher_builder()
             .initial_max_slice_len(MAX_LINE)
             .create()
-            .map_err(|e| transport("log publisher", e))?;
+            .map_err(|e| skillfab_proto::Error::transport("log publisher", e))?;
         Ok((node, p))
     });
     let (_node, publisher) = match publisher {
@@ -340,76 +258,10 @@ fn forward_loop(
     }
 }
 
-fn transport(what: &str, e: impl std::fmt::Debug) -> SdkError {
-    SdkError::Transport {
-        what: what.to_string(),
-        detail: format!("{e:?}"),
-    }
-}
-
-type LogFactory =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [u8], ()>;
-
-fn service(node: &Node<ipc::Service>) -> Result<LogFactory, SdkError> {
-    let name = names::logs();
-    let service_name =
-        ServiceName::new(&name).map_err(|e| transport(&format!("service name '{name}'"), e))?;
-    node.service_builder(&service_name)
-        .publish_subscribe::<[u8]>()
-        .max_publishers(MAX_PUBLISHERS)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_PUBLISHERS + MAX_SUBSCRIBERS + 8)
-        .history_size(HISTORY)
-        .subscriber_max_buffer_size(READER_BUFFER)
-        .subscriber_max_borrowed_samples(2)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| transport(&format!("open '{name}'"), e))
-}
-
-/// Reads the log stream of a domain (polling: the stream wakes nobody).
-pub struct LogReader {
-    node: Node<ipc::Service>,
-    subscriber: Subscriber<ipc::Service, [u8], ()>,
-}
-
-impl LogReader {
-    /// Subscribes to `domain`'s log stream; each skill's last few lines arrive first.
-    pub fn open(domain: &Domain, name: &str) -> Result<LogReader, SdkError> {
-        let node = services::node(domain, name)?;
-        let subscriber = service(&node)?
-            .subscriber_builder()
-            .buffer_size(READER_BUFFER)
-            .history_request(HISTORY)
-            .create()
-            .map_err(|e| transport("log subscriber", e))?;
-        Ok(LogReader { node, subscriber })
-    }
-
-    /// Every line that arrived since the last call (undecodable ones are skipped).
-    pub fn poll(&self) -> Result<Vec<LogLine>, SdkError> {
-        let mut out = Vec::new();
-        while let Some(s) = self
-            .subscriber
-            .receive()
-            .map_err(|e| transport("log receive", e))?
-        {
-            if let Ok(line) = decode(s.payload()) {
-                out.push(line);
-            }
-        }
-        Ok(out)
-    }
-
-    /// Waits `timeout`; `false` once SIGINT/SIGTERM asked this process to stop.
-    pub fn wait(&self, timeout: Duration) -> bool {
-        self.node.wait(timeout).is_ok()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use skillfab_proto::log::decode;
 
     #[test]
     fn the_bucket_allows_bursts_then_the_rate() {

@@ -146,10 +146,10 @@ impl<T: Message> ErasedInput for InputPort<T> {
                 }
                 Ok(None) => return Ok(()),
                 Err(e) => {
-                    return Err(crate::SdkError::Transport {
-                        what: format!("receive {}", T::TYPE_NAME),
-                        detail: format!("{e:?}"),
-                    });
+                    return Err(crate::SdkError::transport(
+                        &format!("receive {}", T::TYPE_NAME),
+                        e,
+                    ));
                 }
             }
         }
@@ -328,9 +328,8 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
         self.pending.is_some()
     }
     fn commit(&mut self, header: SampleHeader) -> Result<bool, crate::SdkError> {
-        let send_err = |e: &dyn std::fmt::Debug| crate::SdkError::Transport {
-            what: format!("send on {}", T::TYPE_NAME),
-            detail: format!("{e:?}"),
+        let send_err = |e: &dyn std::fmt::Debug| {
+            crate::SdkError::transport(&format!("send on {}", T::TYPE_NAME), e)
         };
         match self.pending.take() {
             None => return Ok(false),

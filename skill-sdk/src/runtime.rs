@@ -293,7 +293,7 @@ pub fn run<U: Unit>(args: SkillArgs, kind: &str) -> Result<(), SdkError> {
         };
         // A new manager learns the values the previous one set.
         decl.param_values = common.params.values();
-        let encoded = postcard::to_allocvec(&decl)?;
+        let encoded = postcard::to_allocvec(&decl).map_err(skillfab_proto::Error::from)?;
         let idx = match register(&node, &board, &decl, &encoded, &trigger, &wake)? {
             Registration::Accepted(idx) => idx,
             Registration::ManagerGone => continue,
@@ -417,7 +417,7 @@ fn register(
     slot.pid.store(std::process::id(), Ordering::Release);
     if let Err(e) = slot.write_decl(encoded) {
         slot.set_state(SlotState::Free);
-        return Err(e);
+        return Err(e.into());
     }
     slot.set_state(SlotState::Pending);
     let _ = wake.notify();
@@ -479,10 +479,7 @@ fn serve<U: Unit>(
         listeners,
         ..
     } = *link;
-    let transport = |what: &str, e: &dyn std::fmt::Debug| SdkError::Transport {
-        what: what.to_string(),
-        detail: format!("{e:?}"),
-    };
+    let transport = |what: &str, e: &dyn std::fmt::Debug| crate::SdkError::transport(what, e);
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()

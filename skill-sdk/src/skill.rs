@@ -9,7 +9,7 @@ use std::fmt;
 ///
 /// ```
 /// use skill_sdk::prelude::*;
-/// use skill_sdk::msg::{Scaled, Tick};
+/// use skillfab_msgs::{Scaled, Tick};
 ///
 /// #[derive(Params, Debug, Clone)]
 /// pub struct ScaleParams {

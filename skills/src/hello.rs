@@ -1,7 +1,7 @@
 //! The hello network: `ticker` → `scale` → `smooth` (see `skills/launch/hello.toml`).
 
-use skill_sdk::msg::{Scalar, Scaled, Smoothed, Tick};
 use skill_sdk::prelude::*;
+use skillfab_msgs::{Scalar, Scaled, Smoothed, Tick};
 
 /// Outputs of [`Ticker`].
 #[derive(Outputs)]

@@ -2,8 +2,8 @@
 //! `drive` channel; default priorities: stop 10, avoid 8, go_through 6, home 4, wall_follow 3,
 //! wander 2 (higher wins).
 
-use skill_sdk::msg::{Barcodes, Door, Drive, Odometry, SONARS, Sonar, Target};
 use skill_sdk::prelude::*;
+use skillfab_msgs::{Barcodes, Door, Drive, Odometry, SONARS, Sonar, Target};
 use std::f64::consts::{PI, TAU};
 
 /// Angle of sonar `i` from the front (rad, counter-clockwise).

@@ -13,9 +13,9 @@
 
 pub mod skills;
 
-use skill_sdk::board::{Board, MAX_SLOTS, SlotState};
-use skill_sdk::decl::SkillDecl;
-use skill_sdk::domain::Domain;
+use skillfab_proto::board::{Board, MAX_SLOTS, SlotState};
+use skillfab_proto::decl::SkillDecl;
+use skillfab_proto::domain::Domain;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};

@@ -1,8 +1,8 @@
 //! Skills made for tests.
 
-use skill_sdk::header::now_ns;
-use skill_sdk::msg::{Scalar, Scaled, Tick};
 use skill_sdk::prelude::*;
+use skillfab_msgs::{Scalar, Scaled, Tick};
+use skillfab_proto::header::now_ns;
 
 /// Parameters of [`Work`] and [`WorkAsync`].
 #[derive(Params, Debug, Clone)]
@@ -208,7 +208,7 @@ pub struct ProposerParams {
 #[derive(Outputs)]
 pub struct ProposerOut<'a> {
     /// The proposal on the `drive` channel.
-    pub drive: Proposal<'a, skill_sdk::msg::Drive>,
+    pub drive: Proposal<'a, skillfab_msgs::Drive>,
 }
 
 /// Sync, no inputs: proposes a fixed drive command every cycle (unless `propose=false`).
@@ -221,7 +221,7 @@ impl Skill for Proposer {
     type Outputs<'a> = ProposerOut<'a>;
     fn compute(&mut self, ctx: &Ctx<ProposerParams>, _: (), o: &mut ProposerOut) -> SkillResult {
         if ctx.params.propose {
-            o.drive.set(skill_sdk::msg::Drive {
+            o.drive.set(skillfab_msgs::Drive {
                 translate: ctx.params.translate,
                 rotate: ctx.params.rotate,
             });
@@ -234,7 +234,7 @@ impl Skill for Proposer {
 #[derive(Inputs)]
 pub struct ReactorIn<'a> {
     /// The mock device's state.
-    pub state: Input<'a, skill_sdk::msg::Tick>,
+    pub state: Input<'a, skillfab_msgs::Tick>,
 }
 
 /// Sync, downstream of the mock device like a real controller of a real device: proposes a
@@ -260,14 +260,14 @@ impl Skill for Reactor {
 #[derive(Outputs)]
 pub struct MockOut<'a> {
     /// The cycle of the sample.
-    pub state: Output<'a, skill_sdk::msg::Tick>,
+    pub state: Output<'a, skillfab_msgs::Tick>,
 }
 
 /// Channels of [`MockDevice`].
 #[derive(Inputs)]
 pub struct MockCommands<'a> {
     /// The drive channel.
-    pub drive: Command<'a, skill_sdk::msg::Drive>,
+    pub drive: Command<'a, skillfab_msgs::Drive>,
 }
 
 /// A device with one channel, `drive`, publishing its `state` each cycle; fails a cycle if it ever gets a command of another
@@ -282,7 +282,7 @@ impl Device for MockDevice {
     type Outputs<'a> = MockOut<'a>;
     type Commands<'a> = MockCommands<'a>;
     fn sample(&mut self, ctx: &Ctx<NoParams>, o: &mut MockOut) -> SkillResult {
-        o.state.set(skill_sdk::msg::Tick { value: ctx.cycle });
+        o.state.set(skillfab_msgs::Tick { value: ctx.cycle });
         Ok(())
     }
     fn command(&mut self, ctx: &Ctx<NoParams>, c: MockCommands) -> SkillResult {

@@ -4,9 +4,9 @@
 // Helpers of this test crate fail the test right where a step goes wrong.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use skill_sdk::client::Client;
-use skill_sdk::control::EventKind;
-use skill_sdk::value::Value;
+use skillfab_client::Client;
+use skillfab_proto::control::EventKind;
+use skillfab_proto::value::Value;
 use skillfab_tests::{TestDomain, registered};
 use std::time::Duration;
 

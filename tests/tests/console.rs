@@ -7,8 +7,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nix::pty::{Winsize, openpty};
-use skill_sdk::client::Client;
-use skill_sdk::params::ParamValue;
+use skillfab_client::Client;
+use skillfab_proto::param::ParamValue;
 use skillfab_tests::{TestDomain, WAIT};
 use std::io::{Read, Write};
 use std::num::NonZeroU16;

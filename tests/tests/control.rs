@@ -5,9 +5,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nix::sys::signal::Signal;
-use skill_sdk::client::{Client, ClientError};
-use skill_sdk::control::{ControlError, EventKind, MonitorMode};
-use skill_sdk::params::ParamValue;
+use skillfab_client::{Client, ClientError};
+use skillfab_proto::control::{ControlError, EventKind, MonitorMode};
+use skillfab_proto::param::ParamValue;
 use skillfab_tests::TestDomain;
 use std::time::Duration;
 

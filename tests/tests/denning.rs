@@ -5,9 +5,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nix::sys::signal::Signal;
-use skill_sdk::client::Client;
-use skill_sdk::control::EventKind;
-use skill_sdk::value::Value;
+use skillfab_client::Client;
+use skillfab_proto::control::EventKind;
+use skillfab_proto::value::Value;
 use skillfab_tests::{TestDomain, bin};
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -285,7 +285,7 @@ fn a_clean_shutdown_leaves_no_files_and_no_processes() {
     assert!(t.wait_exit(up).success());
     for pid in pids {
         assert!(
-            !skill_sdk::board::pid_alive(pid),
+            !skillfab_proto::board::pid_alive(pid),
             "skill process {pid} outlived skillfab up"
         );
     }

@@ -6,8 +6,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use serde_json::Value as Json;
-use skill_sdk::client::Client;
-use skill_sdk::params::ParamValue;
+use skillfab_client::Client;
+use skillfab_proto::param::ParamValue;
 use skillfab_tests::TestDomain;
 
 /// Stops `skillfab up` with SIGINT, as Ctrl-C would.

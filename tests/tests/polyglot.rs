@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use serde_json::Value as Json;
-use skill_sdk::codegen;
+use skillfab_codegen as codegen;
 use skillfab_tests::{TestDomain, bin, build_foreign_examples, repo_root, skill};
 use std::process::Command;
 

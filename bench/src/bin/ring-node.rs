@@ -23,7 +23,7 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             };
             let name = std::env::var("SKILLFAB_DOMAIN").unwrap_or_else(|_| "default".into());
-            let domain = match skill_sdk::domain::Domain::new(&name) {
+            let domain = match skillfab_proto::domain::Domain::new(&name) {
                 Ok(d) => d,
                 Err(e) => {
                     eprintln!("ring-node: {e}");

@@ -8,8 +8,7 @@ use std::f64::consts::{PI, TAU};
 
 /// Robot radius (m).
 pub const RADIUS: f64 = 0.36;
-/// Sonars on the ring.
-pub const SONARS: usize = 24;
+pub use denning::codec::SONARS;
 /// Largest sonar range (m).
 pub const SONAR_MAX: f64 = 10.0;
 /// Smallest sonar range (m).

@@ -9,6 +9,9 @@ pub const SYNC_B: u8 = 0xFB;
 pub const MAX_COUNT: usize = 200;
 /// Most sightings in a barcode packet.
 pub const MAX_SIGHTINGS: usize = 8;
+/// Sonars on the robot's ring, 15° apart, sonar 0 facing forward (a status packet reports
+/// any subset of them by index).
+pub const SONARS: usize = 24;
 
 const ARG_POS: u8 = 0x3B;
 const ARG_NEG: u8 = 0x1B;

@@ -17,8 +17,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// Number of sonars.
-pub const SONARS: usize = 24;
+pub use crate::codec::SONARS;
 /// A fabric command older than this is replaced by stop.
 pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(500);
 /// A link without a valid packet for this long is reconnected.

@@ -6,7 +6,8 @@
 //!   in-memory fake for unit tests.
 //! - [`driver`]: the thread that owns the port: handshake, reading, the latest sample,
 //!   commands, keep-alive, resynchronisation and reconnection.
-//! - `src/bin/denning.rs`: the device process, a thin shell over the driver.
+//!
+//! The device process that puts this robot on a fabric is `device/` (crate `denning-device`).
 
 pub mod codec;
 pub mod driver;

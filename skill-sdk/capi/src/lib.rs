@@ -22,13 +22,13 @@
 
 #![allow(non_camel_case_types)]
 
-use skill_sdk::client::{Client, ClientError};
-use skill_sdk::control::MonitorMode;
-use skill_sdk::decl::Mode;
-use skill_sdk::domain::Domain;
 use skill_sdk::foreign::{DeclError, ForeignRun, ForeignSkill};
 use skill_sdk::params::{ParamKind, ParamSpec, ParamValue};
 use skill_sdk::skill::SkillError;
+use skillfab_client::{Client, ClientError};
+use skillfab_proto::control::MonitorMode;
+use skillfab_proto::decl::Mode;
+use skillfab_proto::domain::Domain;
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -182,7 +182,7 @@ pub unsafe extern "C" fn sf_skill_new(kind: *const c_char, mode: i32) -> *mut sf
                 return std::ptr::null_mut();
             }
         };
-        match ForeignSkill::new(kind, mode) {
+        match ForeignSkill::new(kind, mode, skillfab_msgs::registry()) {
             Ok(inner) => Box::into_raw(Box::new(sf_skill { inner })),
             Err(e) => {
                 decl_error(&e);
@@ -792,7 +792,7 @@ unsafe fn json_out(v: &serde_json::Value, buf: *mut c_char, len: usize) -> i32 {
 pub unsafe extern "C" fn sf_client_connect(domain: *const c_char) -> *mut sf_client {
     guard(std::ptr::null_mut(), || {
         let name = if domain.is_null() {
-            std::env::var(skill_sdk::domain::DOMAIN_ENV).unwrap_or_else(|_| "default".into())
+            std::env::var(skillfab_proto::domain::DOMAIN_ENV).unwrap_or_else(|_| "default".into())
         } else {
             // SAFETY: forwarded caller contract.
             match unsafe { text(domain, "domain") } {
@@ -935,7 +935,7 @@ pub unsafe extern "C" fn sf_client_get_param(
             client,
             [(skill, "skill"), (param, "param")],
             |c, [s, p]| match c.inner.get_param(s, p) {
-                Ok(v) => json_out(&skill_sdk::json::param_json(&v), buf, len),
+                Ok(v) => json_out(&skillfab_client::json::param_json(&v), buf, len),
                 Err(e) => client_error(&e),
             },
         )
@@ -958,7 +958,7 @@ pub unsafe extern "C" fn sf_client_query(
     unsafe {
         with_client(client, [(path, "path")], |c, [p]| match c.inner.query(p) {
             Ok((v, cycle)) => json_out(
-                &serde_json::json!({"value": skill_sdk::json::value_json(&v), "cycle": cycle}),
+                &serde_json::json!({"value": skillfab_client::json::value_json(&v), "cycle": cycle}),
                 buf,
                 len,
             ),
@@ -1040,8 +1040,10 @@ pub unsafe extern "C" fn sf_client_next_event(
                     .inner
                     .next_event(Duration::from_millis(u64::from(timeout_ms)))
                 {
-                    Ok(Some(ev)) => CString::new(skill_sdk::json::event_json(&ev).to_string())
-                        .unwrap_or_default(),
+                    Ok(Some(ev)) => {
+                        CString::new(skillfab_client::json::event_json(&ev).to_string())
+                            .unwrap_or_default()
+                    }
                     Ok(None) => return 0,
                     Err(e) => return client_error(&e),
                 },
@@ -1089,7 +1091,12 @@ pub unsafe extern "C" fn sf_client_list(
     unsafe {
         with_client(client, [], |c, []| match c.inner.list() {
             Ok(skills) => json_out(
-                &serde_json::Value::Array(skills.iter().map(skill_sdk::json::skill_json).collect()),
+                &serde_json::Value::Array(
+                    skills
+                        .iter()
+                        .map(skillfab_client::json::skill_json)
+                        .collect(),
+                ),
                 buf,
                 len,
             ),
@@ -1219,7 +1226,7 @@ mod tests {
     #[test]
     fn the_message_header_is_in_sync() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let generated = skill_sdk::codegen::c_header(&skill_sdk::codegen::shared_schemas());
+        let generated = skillfab_codegen::c_header(&skillfab_codegen::shared_schemas());
         let path = dir.join("include/skillfab_msgs.h");
         if std::env::var_os("SKILLFAB_BLESS").is_some() {
             std::fs::write(&path, &generated).unwrap();

@@ -1,7 +1,9 @@
 //! Derive macros of `skill-sdk`. Skill authors use them through `skill_sdk::prelude`.
 //!
-//! Layout: one function per derive. Every generated path goes through `::skill_sdk` so a skill
-//! crate depends on `skill-sdk` alone (it never names iceoryx2).
+//! Layout: one function per derive. Every generated path goes through `::skill_sdk` (its
+//! hidden `__private` module for the wire types) so a skill crate depends on `skill-sdk` alone
+//! (it never names iceoryx2 or `skillfab-proto`). `skillfab-proto` derives its own messages
+//! with `#[message(crate = "crate")]`.
 //!
 //! - [`Message`]: `#[repr(C)]` data types: the iceoryx2 `ZeroCopySend` impl with an explicit
 //!   type name (`#[message(type_name = "...")]`, default `skillfab.<Ident>`) and a run-time
@@ -78,14 +80,19 @@ fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
         ));
     }
     let mut type_name = format!("skillfab.{ident}");
+    let mut krate: syn::Path = syn::parse_quote!(::skill_sdk::__private::proto);
     for a in input.attrs.iter().filter(|a| a.path().is_ident("message")) {
         a.parse_nested_meta(|meta| {
             if meta.path.is_ident("type_name") {
                 let s: syn::LitStr = meta.value()?.parse()?;
                 type_name = s.value();
                 Ok(())
+            } else if meta.path.is_ident("crate") {
+                let s: syn::LitStr = meta.value()?.parse()?;
+                krate = s.parse()?;
+                Ok(())
             } else {
-                Err(meta.error("expected `type_name = \"...\"`"))
+                Err(meta.error("expected `type_name = \"...\"` or `crate = \"...\"`"))
             }
         })?;
     }
@@ -98,10 +105,10 @@ fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
         let fid = &f.ident;
         let ty = &f.ty;
         schema_fields.push(quote! {
-            ::skill_sdk::schema::FieldSchema {
+            #krate::schema::FieldSchema {
                 name: #name.to_string(),
                 offset: ::core::mem::offset_of!(#ident, #fid) as u32,
-                ty: <#ty as ::skill_sdk::schema::FieldType>::field_type(),
+                ty: <#ty as #krate::schema::FieldType>::field_type(),
             }
         });
         checks.push(quote! { assert_field::<#ty>(); });
@@ -109,19 +116,19 @@ fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
     Ok(quote! {
         // SAFETY: the type is #[repr(C)] and every field is a `FieldType` (checked below), which
         // only plain-old-data types implement: it has no pointers and one layout everywhere.
-        unsafe impl ::skill_sdk::__private::ZeroCopySend for #ident {
+        unsafe impl #krate::__private::ZeroCopySend for #ident {
             unsafe fn type_name() -> &'static str { #type_name }
         }
         // SAFETY: as above; every `FieldType` is valid when all its bytes are zero.
-        unsafe impl ::skill_sdk::schema::FieldType for #ident {
-            fn field_type() -> ::skill_sdk::schema::FieldKind {
-                ::skill_sdk::schema::FieldKind::Struct(<Self as ::skill_sdk::Message>::schema())
+        unsafe impl #krate::schema::FieldType for #ident {
+            fn field_type() -> #krate::schema::FieldKind {
+                #krate::schema::FieldKind::Struct(<Self as #krate::Message>::schema())
             }
         }
-        impl ::skill_sdk::Message for #ident {
+        impl #krate::Message for #ident {
             const TYPE_NAME: &'static str = #type_name;
-            fn schema() -> ::skill_sdk::schema::MessageSchema {
-                ::skill_sdk::schema::MessageSchema {
+            fn schema() -> #krate::schema::MessageSchema {
+                #krate::schema::MessageSchema {
                     type_name: #type_name.to_string(),
                     doc: #doc.to_string(),
                     size: ::core::mem::size_of::<Self>() as u32,
@@ -131,7 +138,7 @@ fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
             }
         }
         const _: () = {
-            const fn assert_field<T: ::skill_sdk::schema::FieldType>() {}
+            const fn assert_field<T: #krate::schema::FieldType>() {}
             #(#checks)*
         };
     })
@@ -297,7 +304,7 @@ fn ports(input: &DeriveInput, inputs: bool) -> syn::Result<proc_macro2::TokenStr
     Ok(if inputs {
         quote! {
             impl<#lt> ::skill_sdk::ports::InputSet<#lt> for #ident<#lt> {
-                fn ports() -> ::std::vec::Vec<::skill_sdk::decl::PortDecl> { vec![#(#decls),*] }
+                fn ports() -> ::std::vec::Vec<::skill_sdk::__private::proto::decl::PortDecl> { vec![#(#decls),*] }
                 fn fetch(src: &#lt dyn ::skill_sdk::ports::InputSource) -> ::core::option::Option<Self> {
                     Some(Self { #(#builds),* })
                 }
@@ -310,7 +317,7 @@ fn ports(input: &DeriveInput, inputs: bool) -> syn::Result<proc_macro2::TokenStr
     } else {
         quote! {
             impl<#lt> ::skill_sdk::ports::OutputSet<#lt> for #ident<#lt> {
-                fn ports() -> ::std::vec::Vec<::skill_sdk::decl::PortDecl> { vec![#(#decls),*] }
+                fn ports() -> ::std::vec::Vec<::skill_sdk::__private::proto::decl::PortDecl> { vec![#(#decls),*] }
                 fn bind(slots: &#lt mut [::skill_sdk::ports::ErasedOutput]) -> Self {
                     let mut slots = ::skill_sdk::ports::OutputSlots::new(slots);
                     Self { #(#builds),* }

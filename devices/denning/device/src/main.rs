@@ -1,0 +1,125 @@
+//! `denning`: the Denning robot's device process. It owns the serial port (`--port`, a real
+//! tty or the simulator's link; `--baud`), publishes the latest buffered sample at the start
+//! of every cycle without waiting for the robot, and forwards the arbitrated `drive` command.
+
+use denning::driver::{Driver, SONARS};
+use denning::transport::{Serial, Transport};
+use skill_sdk::prelude::*;
+use skillfab_msgs::{Barcodes, Battery, Bumpers, Drive, Link, Odometry, Sonar};
+use std::time::Instant;
+
+// The fabric's sonar message has one reading per sonar of the protocol's ring.
+const _: () = assert!(skillfab_msgs::SONARS == SONARS);
+
+/// Sensor outputs.
+#[derive(Outputs)]
+pub struct Sensors<'a> {
+    /// The sonar ring.
+    pub sonar: Output<'a, Sonar>,
+    /// Odometry.
+    pub odometry: Output<'a, Odometry>,
+    /// Bumpers and stall.
+    pub bumpers: Output<'a, Bumpers>,
+    /// Barcode sightings.
+    pub barcodes: Output<'a, Barcodes>,
+    /// Battery.
+    pub battery: Output<'a, Battery>,
+    /// The serial link.
+    pub link: Output<'a, Link>,
+}
+
+/// Channels served.
+#[derive(Inputs)]
+pub struct Channels<'a> {
+    /// Translate and rotate velocity; safe command: stop.
+    pub drive: Command<'a, Drive>,
+}
+
+/// The device.
+#[derive(Default)]
+pub struct Denning {
+    driver: Option<Driver>,
+}
+
+impl Device for Denning {
+    type Params = NoParams;
+    type Outputs<'a> = Sensors<'a>;
+    type Commands<'a> = Channels<'a>;
+
+    fn init(&mut self, options: &DeviceOptions) -> SkillResult {
+        let port = options.port.clone().ok_or_else(|| {
+            SkillError::msg("--port PATH is required (a tty or the simulator's link)")
+        })?;
+        let baud = options.baud.unwrap_or(38_400);
+        tracing::info!(%port, baud, "opening the robot's port");
+        self.driver = Some(Driver::start(Box::new(move || {
+            Serial::open(&port, baud).map(|s| Box::new(s) as Box<dyn Transport>)
+        })));
+        Ok(())
+    }
+
+    fn sample(&mut self, _: &Ctx<NoParams>, out: &mut Sensors) -> SkillResult {
+        let Some(d) = &self.driver else {
+            return Ok(());
+        };
+        let s = d.latest();
+        let now = Instant::now();
+        let ms = |t: Instant| now.duration_since(t).as_secs_f64() * 1000.0;
+        let sonar = out.sonar.get_mut();
+        for i in 0..SONARS {
+            match s.sonar[i] {
+                Some((r, at)) => {
+                    sonar.range[i] = r.unwrap_or(f64::INFINITY);
+                    sonar.age_ms[i] = ms(at);
+                }
+                None => {
+                    sonar.range[i] = f64::NAN;
+                    sonar.age_ms[i] = f64::INFINITY;
+                }
+            }
+        }
+        out.odometry.set(Odometry {
+            x: s.pose.0,
+            y: s.pose.1,
+            theta: s.pose.2,
+            v: s.vel.0,
+            w: s.vel.1,
+        });
+        out.bumpers.set(Bumpers {
+            hit: u32::from(s.flags >> 1) & 0xff,
+            stall: s.flags & 1 != 0,
+        });
+        let mut b = Barcodes {
+            age_ms: s.barcodes.1.map_or(f64::INFINITY, ms),
+            ..Barcodes::default()
+        };
+        for (i, sight) in s.barcodes.0.iter().take(8).enumerate() {
+            b.id[i] = u32::from(sight.id);
+            b.bearing[i] = (f64::from(sight.bearing) / 10.0).to_radians();
+            b.range[i] = f64::from(sight.range) / 1000.0;
+            b.count += 1;
+        }
+        out.barcodes.set(b);
+        out.battery.set(Battery { volts: s.battery });
+        out.link.set(Link {
+            connected: s.connected,
+            age_ms: s.received.map_or(f64::INFINITY, ms),
+            frames: s.stats.frames,
+            bad_frames: s.stats.bad_checksum + s.stats.bad_count,
+            garbage: s.stats.garbage,
+            connects: s.connects,
+        });
+        Ok(())
+    }
+
+    fn command(&mut self, _: &Ctx<NoParams>, c: Channels) -> SkillResult {
+        if let Some(d) = &self.driver {
+            d.command(c.drive.translate, c.drive.rotate);
+        }
+        Ok(())
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    skill_sdk::device_main::<Denning>()
+}

@@ -1,0 +1,547 @@
+//! `skillfab demo exit-lab`: the paper's experiment. A sequencer written against the client
+//! library drives the simulated Denning robot out of the lab:
+//!
+//! 1. activate wander + avoid + barcode_track; a monitor waits for the door's barcode;
+//! 2. switch wander for home (drive to the barcode) and let door_locate look;
+//! 3. near the barcode, follow its wall (on the left; after 4 m without a door, home again
+//!    and follow it the other way) while door_locate gathers evidence;
+//! 4. once the door is located, lower `avoid.safe_distance` for the tight passage (the
+//!    paper's example of parameterising a skill) and let go_through drive; when the
+//!    simulator's ground truth says the robot is outside, stop it, restore the parameter,
+//!    and report.
+
+use anyhow::{Context, bail};
+use serde::Serialize;
+use skillfab_client::Client;
+use skillfab_manager::launch::find_program;
+use skillfab_proto::control::{EventKind, MonitorMode};
+use skillfab_proto::domain::Domain;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Options of `skillfab demo exit-lab`.
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    /// World file.
+    pub world: PathBuf,
+    /// Seed of the first run (run i uses seed + i).
+    pub seed: u64,
+    /// Number of runs.
+    pub runs: u32,
+    /// Simulated seconds per real second.
+    pub time_factor: f64,
+    /// Write the first run's trajectory picture here.
+    pub plot: Option<PathBuf>,
+    /// Print progress (false with `--json`).
+    pub verbose: bool,
+    /// Give up after this much simulated time.
+    pub limit_s: f64,
+}
+
+/// One run's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunOutcome {
+    /// Seed.
+    pub seed: u64,
+    /// World name.
+    pub world: String,
+    /// Left the lab within the limit.
+    pub success: bool,
+    /// Simulated time at the end (s).
+    pub time_s: f64,
+    /// Collisions the simulator reported.
+    pub collisions: u64,
+    /// Sequencer steps: (what, cycle, simulated time).
+    pub steps: Vec<(String, u64, f64)>,
+    #[serde(skip)]
+    trajectory: Vec<[f64; 3]>,
+}
+
+/// What `--json` prints.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Runs.
+    pub runs: u32,
+    /// Successful runs.
+    pub successes: u32,
+    /// Median simulated time of the successful runs (s).
+    pub median_time_s: Option<f64>,
+    /// Each run.
+    pub runs_detail: Vec<RunOutcome>,
+}
+
+/// The last ground-truth row of the simulator: (t, x, y, collisions, outside).
+fn truth(path: &Path, all: &mut Vec<[f64; 3]>) -> Option<(f64, f64, f64, u64, bool)> {
+    let text = std::fs::read_to_string(path).ok()?;
+    all.clear();
+    let mut last = None;
+    for line in text.lines().skip(1) {
+        let f: Vec<f64> = line.split(',').filter_map(|x| x.parse().ok()).collect();
+        if f.len() == 9 {
+            all.push([f[0], f[1], f[2]]);
+            last = Some((f[0], f[1], f[2], f[7] as u64, f[8] > 0.5));
+        }
+    }
+    last
+}
+
+struct Network {
+    child: Child,
+    dir: PathBuf,
+    domain: Domain,
+}
+
+impl Drop for Network {
+    fn drop(&mut self) {
+        if let Ok(pid) = i32::try_from(self.child.id()) {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(pid),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if matches!(self.child.try_wait(), Ok(Some(_))) {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.domain.remove_all_files();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+const SKILLS: [&str; 8] = [
+    "avoid",
+    "wander",
+    "wall_follow",
+    "barcode_track",
+    "home",
+    "door_locate",
+    "go_through",
+    "stop",
+];
+
+fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, PathBuf)> {
+    let domain = Domain::new(&format!("demo-{}-{run}", std::process::id()))?;
+    domain.remove_all_files();
+    let dir = std::env::temp_dir().join(format!("skillfab-demo-{}-{run}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let world = std::fs::canonicalize(&opts.world)
+        .with_context(|| format!("world {}", opts.world.display()))?;
+    let link = dir.join("robot");
+    let traj = dir.join("trajectory.csv");
+    let program = |name: &str| {
+        find_program(name, Path::new("."))
+            .with_context(|| format!("program '{name}' not found next to skillfab"))
+    };
+    let period_ms = 10.0 / opts.time_factor;
+    let mut launch = format!(
+        "[manager]\nperiod_ms = {period_ms}\ndeadline_ms = {}\n\
+         [[process]]\nname = \"denning-sim\"\nbin = {:?}\nregisters = false\n\
+         args = [\"--world\", {:?}, \"--link\", {:?}, \"--seed\", \"{seed}\", \"--time-factor\", \"{}\", \"--trajectory\", {:?}]\n\
+         [[process]]\nname = \"denning\"\nbin = {:?}\nargs = [\"--port\", {:?}]\nrestart = \"always\"\n",
+        (period_ms * 5.0).max(20.0),
+        program("denning-sim")?,
+        world,
+        link,
+        opts.time_factor,
+        traj,
+        program("denning")?,
+        link,
+    );
+    for s in SKILLS {
+        let extra = if s == "wander" {
+            format!("params = {{ seed = {seed} }}\n")
+        } else {
+            String::new()
+        };
+        launch.push_str(&format!(
+            "[[process]]\nname = \"{s}\"\nbin = {:?}\nactive = false\n{extra}",
+            program(s)?
+        ));
+    }
+    let path = dir.join("exit-lab.toml");
+    std::fs::write(&path, launch)?;
+    let log = std::fs::File::create(dir.join("up.log"))?;
+    let mut cmd = Command::new(std::env::current_exe()?);
+    cmd.args([
+        "up",
+        path.to_str().unwrap_or_default(),
+        "--domain",
+        domain.name(),
+    ])
+    .env_remove("SKILLFAB_DOMAIN")
+    .stdin(Stdio::null())
+    .stdout(Stdio::null())
+    .stderr(log);
+    // If the demo dies, `up` gets SIGTERM and shuts the network down cleanly.
+    // SAFETY: only async-signal-safe system calls between fork and exec.
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        cmd.pre_exec(|| {
+            let _ = nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM);
+            Ok(())
+        });
+    }
+    let child = cmd.spawn().context("starting skillfab up")?;
+    Ok((Network { child, dir, domain }, traj))
+}
+
+fn connect(net: &Network) -> anyhow::Result<Client> {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        if let Ok(c) = Client::connect(&net.domain)
+            && let Ok(list) = c.list()
+            && list.len() == SKILLS.len() + 1
+            && list.iter().all(|s| s.state != "starting")
+        {
+            return Ok(c);
+        }
+        if Instant::now() > deadline {
+            bail!("the exit-lab network did not come up within 60 s (see the log of skillfab up)");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Where the sequencer is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// Wandering until the barcode is seen.
+    Search,
+    /// Homing on the barcode.
+    Home,
+    /// Following the wall from the barcode with the wall on this side (-1 left, 1 right).
+    Follow(i32),
+    /// Back to the barcode after following the wall on the left in vain.
+    Return,
+    /// Driving through the located door.
+    Through,
+}
+
+/// The exit-lab sequencer: which skills run in each phase, and the monitor that ends it.
+/// Barcode seen: wander -> home (and door_locate looks). Near the barcode: follow the wall
+/// with it on the left; 4 m away without a door, home again and follow it on the right. Door
+/// located (in any phase): lower `avoid.safe_distance` for the tight passage, go_through.
+struct Sequencer {
+    phase: Phase,
+    seen: u64,
+    near: Option<u64>,
+    far: Option<u64>,
+    found: Option<u64>,
+}
+
+impl Sequencer {
+    /// Reacts to a monitor firing; returns the step to report.
+    fn on_monitor(&mut self, c: &Client, id: u64) -> anyhow::Result<Option<String>> {
+        let near_code =
+            |c: &Client| c.add_monitor("barcode_track.target.range < 1.7", MonitorMode::Once, 2);
+        let step = match self.phase {
+            _ if Some(id) == self.found && self.phase != Phase::Through => {
+                self.phase = Phase::Through;
+                c.set_param("avoid", "safe_distance", "0.2")?;
+                c.deactivate(&["home", "wall_follow"])?;
+                c.activate(&["go_through"])?;
+                "door located: avoid.safe_distance = 0.2 for the passage; go_through drives"
+                    .to_string()
+            }
+            Phase::Search if id == self.seen => {
+                self.phase = Phase::Home;
+                c.deactivate(&["wander"])?;
+                c.activate(&["home", "door_locate"])?;
+                self.near = Some(near_code(c)?);
+                self.found =
+                    Some(c.add_monitor("door_locate.door.found == 1", MonitorMode::Once, 0)?);
+                "barcode seen: wander -> home; door_locate looks".to_string()
+            }
+            Phase::Home | Phase::Return if Some(id) == self.near => {
+                let side = if self.phase == Phase::Home { -1 } else { 1 };
+                self.phase = Phase::Follow(side);
+                c.deactivate(&["home"])?;
+                c.set_param("wall_follow", "side", &side.to_string())?;
+                c.activate(&["wall_follow"])?;
+                if side < 0 {
+                    self.far = Some(c.add_monitor(
+                        "barcode_track.target.range > 4.0",
+                        MonitorMode::Once,
+                        2,
+                    )?);
+                }
+                format!(
+                    "near the barcode: home -> wall_follow, wall on the {}",
+                    if side < 0 { "left" } else { "right" }
+                )
+            }
+            Phase::Follow(-1) if Some(id) == self.far => {
+                self.phase = Phase::Return;
+                c.deactivate(&["wall_follow"])?;
+                c.activate(&["home"])?;
+                self.near = Some(near_code(c)?);
+                "no door within 4 m that way: wall_follow -> home, then the other way".to_string()
+            }
+            _ => return Ok(None),
+        };
+        Ok(Some(step))
+    }
+}
+
+/// One run of the experiment.
+pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOutcome> {
+    let (net, traj) = start(opts, seed, run)?;
+    let mut c = connect(&net)?;
+    c.subscribe()?;
+    let mut rows = Vec::new();
+    let mut out = RunOutcome {
+        seed,
+        world: opts
+            .world
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        success: false,
+        time_s: 0.0,
+        collisions: 0,
+        steps: Vec::new(),
+        trajectory: Vec::new(),
+    };
+    let step = |c: &Client, out: &mut RunOutcome, what: &str, rows: &mut Vec<[f64; 3]>| {
+        let cycle = c.stats().map(|s| s.cycles).unwrap_or(0);
+        let t = truth(&traj, rows).map_or(0.0, |r| r.0);
+        if opts.verbose {
+            println!("  [cycle {cycle:>6}, t = {t:>6.1} s] {what}");
+        }
+        out.steps.push((what.to_string(), cycle, t));
+    };
+    c.activate(&["wander", "avoid", "barcode_track"])?;
+    step(
+        &c,
+        &mut out,
+        "activate wander + avoid + barcode_track; monitor the door's barcode",
+        &mut rows,
+    );
+    let mut seq = Sequencer {
+        phase: Phase::Search,
+        seen: c.add_monitor("barcode_track.target.seen == 1", MonitorMode::Once, 0)?,
+        near: None,
+        far: None,
+        found: None,
+    };
+    let started = Instant::now();
+    loop {
+        if INTERRUPTED.load(Ordering::Acquire) {
+            bail!("interrupted");
+        }
+        if out.time_s == 0.0 && started.elapsed() > Duration::from_secs(30) {
+            bail!("the simulator wrote no ground truth within 30 s (see the log of skillfab up)");
+        }
+        let ev = c.next_event(Duration::from_millis(100))?;
+        if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind)
+            && let Some(what) = seq.on_monitor(&c, id)?
+        {
+            step(&c, &mut out, &what, &mut rows);
+        }
+        if let Some((t, _, _, collisions, outside)) = truth(&traj, &mut rows) {
+            out.time_s = t;
+            out.collisions = collisions;
+            if outside {
+                out.success = true;
+                c.activate(&["stop"])?;
+                step(&c, &mut out, "outside the lab: stop", &mut rows);
+                break;
+            }
+            if t > opts.limit_s {
+                step(&c, &mut out, "time limit reached", &mut rows);
+                break;
+            }
+        }
+    }
+    c.set_param("avoid", "safe_distance", "0.6")?;
+    let all: Vec<&str> = SKILLS.iter().copied().filter(|s| *s != "stop").collect();
+    c.deactivate(&all)?;
+    step(
+        &c,
+        &mut out,
+        "avoid.safe_distance restored; skills deactivated",
+        &mut rows,
+    );
+    truth(&traj, &mut rows);
+    out.trajectory = rows.iter().map(|r| [r[0], r[1], r[2]]).collect();
+    drop(c);
+    drop(net);
+    Ok(out)
+}
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: nix::libc::c_int) {
+    INTERRUPTED.store(true, Ordering::Release);
+}
+
+/// Runs the experiment `opts.runs` times. Ctrl-C or SIGTERM ends it cleanly: the network is
+/// shut down and its shared memory and files removed.
+pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
+    for sig in [
+        nix::sys::signal::Signal::SIGINT,
+        nix::sys::signal::Signal::SIGTERM,
+    ] {
+        // SAFETY: the handler only stores to an atomic.
+        unsafe { nix::sys::signal::signal(sig, nix::sys::signal::SigHandler::Handler(on_signal)) }?;
+    }
+    let mut detail = Vec::new();
+    for run in 0..opts.runs {
+        let seed = opts.seed + u64::from(run);
+        if opts.verbose {
+            println!(
+                "run {} of {}: world {}, seed {seed}",
+                run + 1,
+                opts.runs,
+                opts.world.display()
+            );
+        }
+        let r = run_once(opts, seed, run)?;
+        if opts.verbose {
+            println!(
+                "  => {} in {:.1} s simulated, {} collisions",
+                if r.success { "SUCCESS" } else { "FAILURE" },
+                r.time_s,
+                r.collisions
+            );
+        }
+        if run == 0
+            && let Some(p) = &opts.plot
+        {
+            let world = std::fs::read_to_string(&opts.world)?;
+            std::fs::write(p, svg(&world, &r))?;
+            if opts.verbose {
+                println!("  trajectory picture: {}", p.display());
+            }
+        }
+        detail.push(r);
+    }
+    let mut times: Vec<f64> = detail
+        .iter()
+        .filter(|r| r.success)
+        .map(|r| r.time_s)
+        .collect();
+    times.sort_by(f64::total_cmp);
+    Ok(Summary {
+        runs: opts.runs,
+        successes: detail.iter().filter(|r| r.success).count() as u32,
+        median_time_s: (!times.is_empty()).then(|| times[times.len() / 2]),
+        runs_detail: detail,
+    })
+}
+
+/// The trajectory over the world map, with the sequencer's switches marked.
+fn svg(world_text: &str, r: &RunOutcome) -> String {
+    #[derive(serde::Deserialize)]
+    struct Seg {
+        from: [f64; 2],
+        to: [f64; 2],
+    }
+    #[derive(serde::Deserialize)]
+    struct Rect {
+        min: [f64; 2],
+        max: [f64; 2],
+    }
+    #[derive(serde::Deserialize)]
+    struct Code {
+        at: [f64; 2],
+        id: u32,
+    }
+    #[derive(serde::Deserialize)]
+    struct W {
+        #[serde(default)]
+        wall: Vec<Seg>,
+        #[serde(default, rename = "box")]
+        boxes: Vec<Rect>,
+        #[serde(default)]
+        door: Vec<Seg>,
+        #[serde(default)]
+        barcode: Vec<Code>,
+    }
+    let w: W = toml::from_str(world_text).unwrap_or(W {
+        wall: vec![],
+        boxes: vec![],
+        door: vec![],
+        barcode: vec![],
+    });
+    // The map's top edge (m) sets the picture's; the steps are listed below the map.
+    let top = w
+        .wall
+        .iter()
+        .flat_map(|s| [s.from[1], s.to[1]])
+        .fold(0.0f64, f64::max);
+    let (sx, sy, ox, oy, h) = (50.0, 50.0, 50.0, 50.0, top + 0.5);
+    let px = |x: f64| ox + x * sx;
+    let py = |y: f64| oy + (h - y) * sy;
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
+        px(14.0),
+        py(-1.2) + 16.0 * r.steps.len() as f64
+    );
+    for seg in &w.wall {
+        s.push_str(&format!(
+            "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\" stroke-width=\"4\"/>\n",
+            px(seg.from[0]), py(seg.from[1]), px(seg.to[0]), py(seg.to[1])
+        ));
+    }
+    for seg in &w.door {
+        s.push_str(&format!(
+            "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#2a2\" stroke-width=\"2\" stroke-dasharray=\"4 3\"/>\n",
+            px(seg.from[0]), py(seg.from[1]), px(seg.to[0]), py(seg.to[1])
+        ));
+    }
+    for b in &w.boxes {
+        s.push_str(&format!(
+            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#bbb\" stroke=\"#555\"/>\n",
+            px(b.min[0]), py(b.max[1]), (b.max[0] - b.min[0]) * sx, (b.max[1] - b.min[1]) * sy
+        ));
+    }
+    for c in &w.barcode {
+        s.push_str(&format!(
+            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"8\" height=\"8\" fill=\"#d22\"/><text x=\"{:.1}\" y=\"{:.1}\">barcode {}</text>\n",
+            px(c.at[0]) - 4.0, py(c.at[1]) - 4.0, px(c.at[0]) + 8.0, py(c.at[1]) - 6.0, c.id
+        ));
+    }
+    let pts: Vec<String> = r
+        .trajectory
+        .iter()
+        .map(|p| format!("{:.1},{:.1}", px(p[1]), py(p[2])))
+        .collect();
+    s.push_str(&format!(
+        "<polyline points=\"{}\" fill=\"none\" stroke=\"#15c\" stroke-width=\"2\"/>\n",
+        pts.join(" ")
+    ));
+    for (i, (what, _, t)) in r.steps.iter().enumerate() {
+        if let Some(p) = r.trajectory.iter().find(|p| p[0] >= *t) {
+            s.push_str(&format!(
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"5\" fill=\"#f80\"/><text x=\"{:.1}\" y=\"{:.1}\">{}</text>\n",
+                px(p[1]), py(p[2]), px(p[1]) + 7.0, py(p[2]) + 4.0, i + 1
+            ));
+        }
+        s.push_str(&format!(
+            "<text x=\"{:.1}\" y=\"{:.1}\">{}. t={:.1}s {}</text>\n",
+            px(0.0),
+            py(-0.8) + 16.0 * i as f64,
+            i + 1,
+            t,
+            what.replace('<', "&lt;").replace('>', "&gt;")
+        ));
+    }
+    s.push_str(&format!(
+        "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"16\">{} — {} in {:.1} s (seed {})</text>\n</svg>\n",
+        px(0.0),
+        oy - 20.0,
+        r.world,
+        if r.success { "success" } else { "failure" },
+        r.time_s,
+        r.seed
+    ));
+    s
+}

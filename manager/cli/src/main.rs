@@ -1,0 +1,191 @@
+//! `skillfab`: the one user-facing binary. `ctl`, `console`, `schema` and `demo` run here;
+//! `manager` and `up` hand over to the `skillfab-manager` binary.
+
+mod ctl;
+mod demo;
+
+use clap::{Parser, Subcommand};
+use skillfab_manager::args::{ManagerArgs, UpArgs};
+use skillfab_proto::domain::{DOMAIN_ENV, Domain};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "skillfab",
+    version,
+    about = "A zero-copy shared-memory multi-process skill fabric"
+)]
+struct Cli {
+    /// Fabric domain: processes of different domains never see each other.
+    #[arg(long, global = true, env = DOMAIN_ENV, default_value = "default")]
+    domain: String,
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Run the skill manager of a domain (the skillfab-manager binary).
+    Manager(ManagerArgs),
+    /// Start a manager and the processes of a launch file; supervise them (the
+    /// skillfab-manager binary).
+    Up(UpArgs),
+    /// The debugging interface: a terminal UI over a running fabric.
+    Console,
+    /// The shared message types: their schemas as JSON, or as C or Python declarations.
+    Schema {
+        /// Print the C header (skill-sdk/capi/include/skillfab_msgs.h).
+        #[arg(long, conflicts_with = "python")]
+        c: bool,
+        /// Print the Python ctypes module (python/skillfab/msgs.py).
+        #[arg(long)]
+        python: bool,
+    },
+    /// The paper's experiment.
+    Demo {
+        #[command(subcommand)]
+        which: DemoCmd,
+    },
+    /// Talk to a running manager: the sequencer's link, from the shell.
+    Ctl {
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        #[command(subcommand)]
+        cmd: ctl::CtlCmd,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum DemoCmd {
+    /// A sequencer drives the simulated Denning robot out of the lab.
+    ExitLab {
+        /// World file.
+        #[arg(long, default_value = "devices/denning-sim/worlds/exit-lab.toml")]
+        world: PathBuf,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Number of runs.
+        #[arg(long, default_value_t = 1)]
+        runs: u32,
+        /// Simulated seconds per real second.
+        #[arg(long, default_value_t = 4.0)]
+        time_factor: f64,
+        /// Write the first run's trajectory picture (SVG).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Print one JSON object: runs, successes, median time, each run.
+        #[arg(long)]
+        json: bool,
+        /// Simulated seconds before a run counts as failed.
+        #[arg(long, default_value_t = 300.0)]
+        limit_s: f64,
+    },
+}
+
+/// Hands `manager` and `up` over to the `skillfab-manager` binary (beside this one, else on
+/// `PATH`) with this process's own arguments, as cargo does with its external subcommands:
+/// the same pid, signals, standard streams and exit status.
+fn exec_manager() -> anyhow::Result<()> {
+    use std::os::unix::process::CommandExt;
+    let beside = std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().map(|dir| dir.join("skillfab-manager")))
+        .filter(|p| p.is_file());
+    let program = beside.unwrap_or_else(|| PathBuf::from("skillfab-manager"));
+    let err = std::process::Command::new(&program)
+        .args(std::env::args_os().skip(1))
+        .exec();
+    Err(anyhow::Error::from(err).context(format!("running {}", program.display())))
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let domain = Domain::new(&cli.domain)?;
+    match cli.command {
+        Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
+        Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
+        Cmd::Console => skillfab_console::run(&domain),
+        Cmd::Schema { c, python } => {
+            let schemas = skillfab_codegen::shared_schemas();
+            if c {
+                print!("{}", skillfab_codegen::c_header(&schemas));
+            } else if python {
+                print!("{}", skillfab_codegen::python_module(&schemas));
+            } else {
+                println!("{}", serde_json::to_string_pretty(&schemas)?);
+            }
+            Ok(())
+        }
+        Cmd::Demo {
+            which:
+                DemoCmd::ExitLab {
+                    world,
+                    seed,
+                    runs,
+                    time_factor,
+                    plot,
+                    json,
+                    limit_s,
+                },
+        } => {
+            if !(time_factor > 0.0 && time_factor <= 50.0) {
+                anyhow::bail!("--time-factor must be in (0, 50], got {time_factor}");
+            }
+            let opts = demo::DemoOptions {
+                world,
+                seed,
+                runs: runs.max(1),
+                time_factor,
+                plot,
+                verbose: !json,
+                limit_s,
+            };
+            let summary = demo::demo(&opts)?;
+            if json {
+                println!("{}", serde_json::to_string(&summary)?);
+            } else {
+                println!(
+                    "{} of {} runs left the lab; median time {}",
+                    summary.successes,
+                    summary.runs,
+                    summary
+                        .median_time_s
+                        .map_or("-".into(), |t| format!("{t:.1} s simulated"))
+                );
+            }
+            if summary.successes == 0 {
+                anyhow::bail!("the robot did not leave the lab");
+            }
+            Ok(())
+        }
+    }
+}
+
+fn init_tracing() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    // The console owns the terminal: log lines on stderr would scribble over it.
+    if !matches!(cli.command, Cmd::Console) {
+        init_tracing();
+    }
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line: the refusal (and its cause chain) for scripts and people alike.
+            eprintln!("skillfab: error: {}", format!("{e:#}").replace('\n', " "));
+            ExitCode::FAILURE
+        }
+    }
+}

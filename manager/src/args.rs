@@ -1,0 +1,143 @@
+//! The command-line arguments of the manager's two programs, `manager` (a domain's manager)
+//! and `up` (a manager plus a launch file's processes), and the code that runs them. Both the
+//! `skillfab-manager` binary and `skillfab` parse them, so `skillfab up --help` is complete and
+//! a mistyped flag is refused before `skillfab` hands over to `skillfab-manager`.
+
+use crate::engine::{Manager, ManagerConfig, Pace};
+use crate::launch::Launch;
+use crate::stats::Report;
+use crate::up::{UpOptions, up};
+use anyhow::Context;
+use clap::Args;
+use skillfab_proto::domain::Domain;
+use std::path::PathBuf;
+use std::time::Duration;
+
+#[derive(Args, Debug, Clone)]
+pub struct PaceArgs {
+    /// Cycle period in milliseconds (default 10: 100 Hz).
+    #[arg(long, conflicts_with = "free_run")]
+    pub period_ms: Option<f64>,
+    /// Start the next cycle as soon as the previous one finished.
+    #[arg(long)]
+    pub free_run: bool,
+    /// Stop after N cycles.
+    #[arg(long, value_name = "N")]
+    pub cycles: Option<u64>,
+    /// Print the final report as one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// The fabric log: parameter changes and logged samples, as JSON lines, or MCAP for a
+    /// FILE.mcap (default: <domain>-<unix seconds>-<pid>.jsonl in $SKILLFAB_LOG_DIR, else
+    /// $XDG_STATE_HOME/skillfab/log, else ~/.local/state/skillfab/log; created with the first
+    /// change).
+    #[arg(long, value_name = "FILE")]
+    pub param_log: Option<PathBuf>,
+}
+
+impl PaceArgs {
+    /// The pace the flags ask for (`None`: the default).
+    pub fn pace(&self) -> anyhow::Result<Option<Pace>> {
+        if self.free_run {
+            return Ok(Some(Pace::FreeRun));
+        }
+        match self.period_ms {
+            None => Ok(None),
+            Some(ms) if ms.is_finite() && ms > 0.0 => {
+                Ok(Some(Pace::Period(Duration::from_secs_f64(ms / 1000.0))))
+            }
+            Some(0.0) => Ok(Some(Pace::FreeRun)),
+            Some(ms) => anyhow::bail!(
+                "--period-ms must be positive (0 or --free-run: free-running), got {ms}"
+            ),
+        }
+    }
+}
+
+/// `manager`: run the skill manager of a domain.
+#[derive(Args, Debug, Clone)]
+pub struct ManagerArgs {
+    #[command(flatten)]
+    pub pace: PaceArgs,
+    /// Longest a cycle may take before it counts as an overrun (default: the period).
+    #[arg(long)]
+    pub deadline_ms: Option<f64>,
+    /// Start with cycling stopped.
+    #[arg(long)]
+    pub paused: bool,
+    /// Do not start cycling until these skills registered (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub wait_for: Vec<String>,
+}
+
+/// `up`: start a manager and the processes of a launch file; supervise them.
+#[derive(Args, Debug, Clone)]
+pub struct UpArgs {
+    /// The launch file (TOML).
+    pub launch: PathBuf,
+    #[command(flatten)]
+    pub pace: PaceArgs,
+    /// Seconds to wait for every skill to register before the first cycle.
+    #[arg(long, default_value_t = 30.0)]
+    pub wait_timeout_s: f64,
+}
+
+/// Runs a domain's manager until it is stopped (or its cycle budget is spent), then prints
+/// its report.
+pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
+    let ManagerArgs {
+        pace,
+        deadline_ms,
+        paused,
+        wait_for,
+    } = args;
+    let mut config = ManagerConfig::new(domain);
+    if let Some(p) = pace.pace()? {
+        config.pace = p;
+    }
+    config.deadline = deadline_ms.map(|ms| Duration::from_secs_f64(ms.max(0.0) / 1000.0));
+    config.paused = paused;
+    config.max_cycles = pace.cycles;
+    config.wait_for = wait_for;
+    config.param_log = pace.param_log.clone();
+    let mut manager = Manager::new(config).context("starting the manager")?;
+    let report = manager.run(&|_| false);
+    manager.shutdown();
+    print_report(&report?, pace.json)
+}
+
+/// Runs a launch file: a manager plus its supervised processes; prints the manager's report.
+pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
+    let launch = Launch::load(&args.launch)?;
+    let report = up(UpOptions {
+        launch,
+        domain,
+        cycles: args.pace.cycles,
+        pace: args.pace.pace()?,
+        wait_timeout: Duration::from_secs_f64(args.wait_timeout_s.max(0.0)),
+        param_log: args.pace.param_log.clone(),
+    })?;
+    print_report(&report, args.pace.json)
+}
+
+fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string(r)?);
+        return Ok(());
+    }
+    println!(
+        "{} cycles, {} overruns, latency p50 {:.1} µs  p99 {:.1} µs  max {:.1} µs",
+        r.cycles, r.overruns, r.latency_us.p50, r.latency_us.p99, r.latency_us.max
+    );
+    println!(
+        "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12}",
+        "skill", "kind", "mode", "runs", "skips", "fails", "compute µs"
+    );
+    for s in &r.skills {
+        println!(
+            "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12.1}",
+            s.name, s.kind, s.mode, s.runs, s.skips, s.failures, s.compute_us_mean
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,376 @@
+//! The control-plane client: what a sequencer (and `skillfab ctl`) uses to drive the
+//! reactive layer — activate and deactivate skills, set and get parameters, query values,
+//! install monitors, run/stop/step the manager, and receive events. [`json`] renders its
+//! answers for scripts (`skillfab ctl --json`, the C ABI).
+//!
+//! ```no_run
+//! use skillfab_client::Client;
+//! use skillfab_proto::control::MonitorMode;
+//! use skillfab_proto::domain::Domain;
+//! use std::time::Duration;
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mut c = Client::connect(&Domain::new("default")?)?;
+//! c.set_param("scale", "gain", "3")?;
+//! let id = c.add_monitor("ticker.tick.value > 50", MonitorMode::Once, 0)?;
+//! while let Some(ev) = c.next_event(Duration::from_secs(5))? {
+//!     println!("{ev:?}");
+//! }
+//! # Ok(()) }
+//! ```
+
+pub use skillfab_proto::json;
+
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use skillfab_proto::board::Board;
+use skillfab_proto::control::{
+    self, ControlError, Event, MonitorInfo, MonitorMode, ParamArg, Reply, Request, SkillInfo, Stats,
+};
+use skillfab_proto::domain::Domain;
+use skillfab_proto::param::ParamValue;
+use skillfab_proto::value::Value;
+use skillfab_proto::{names, services};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+/// Why a control call failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ClientError {
+    /// The manager refused the request; the reason is precise.
+    #[error(transparent)]
+    Refused(#[from] ControlError),
+    /// iceoryx2 set-up or transfer failed.
+    #[error(transparent)]
+    Fabric(#[from] skillfab_proto::Error),
+    /// No manager runs in the domain.
+    #[error("no manager is running in domain '{0}'")]
+    NoManager(String),
+    /// No answer in time.
+    #[error("no answer from the manager within {0:?}")]
+    Timeout(Duration),
+    /// An answer that does not decode.
+    #[error("undecodable answer: {0}")]
+    Decode(String),
+    /// An answer of the wrong kind for the request.
+    #[error("unexpected answer: {0}")]
+    Unexpected(String),
+}
+
+fn sdk(what: &str, e: impl std::fmt::Debug) -> ClientError {
+    ClientError::Fabric(skillfab_proto::Error::transport(what, e))
+}
+
+/// The events subscriber and the listener woken after each publication.
+type EventsPort = (Subscriber<ipc::Service, [u8], ()>, Listener<ipc::Service>);
+
+/// A connection to a domain's manager.
+pub struct Client {
+    id: String,
+    domain: Domain,
+    port: iceoryx2::port::client::Client<ipc::Service, [u8], (), [u8], ()>,
+    wake: Notifier<ipc::Service>,
+    answers: Listener<ipc::Service>,
+    node: Node<ipc::Service>,
+    /// Subscribed on first use: a client that never reads events costs the manager nothing.
+    events: Option<EventsPort>,
+    last_seq: u64,
+    lost: u64,
+    timeout: Duration,
+}
+
+impl Client {
+    /// Connects to the manager of `domain` (which must be running). Events published from
+    /// now on reach [`Client::next_event`].
+    pub fn connect(domain: &Domain) -> Result<Client, ClientError> {
+        static N: AtomicU32 = AtomicU32::new(0);
+        let id = format!(
+            "{}-{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::Relaxed)
+        );
+        match Board::open(&domain.prefix()) {
+            Ok(b) if b.manager_alive() => {}
+            _ => return Err(ClientError::NoManager(domain.name().to_string())),
+        }
+        let node = services::node(domain, &format!("client-{id}"))?;
+        let answers = services::listener(&node, &names::client(&id))?;
+        let port = services::control_service(&node)?
+            .client_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| sdk("control client", e))?;
+        let wake = services::notifier(&node, &names::control())?;
+        Ok(Client {
+            id,
+            domain: domain.clone(),
+            node,
+            port,
+            wake,
+            answers,
+            events: None,
+            last_seq: 0,
+            lost: 0,
+            timeout: Duration::from_secs(10),
+        })
+    }
+
+    /// This client's id (monitors belong to it).
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// How long a request waits for its answer (default 10 s; `step` waits as long as the
+    /// manager lives).
+    pub fn set_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
+
+    /// Sends a request and waits for the answer.
+    pub fn request(&self, request: &Request) -> Result<Reply, ClientError> {
+        let bytes = control::encode_request(&self.id, request)
+            .map_err(|e| ClientError::Decode(e.to_string()))?;
+        let pending = self
+            .port
+            .loan_slice_uninit(bytes.len())
+            .map_err(|e| sdk("loan request", e))?
+            .write_from_slice(&bytes)
+            .send()
+            .map_err(|e| sdk("send request", e))?;
+        self.wake
+            .notify()
+            .map_err(|e| sdk("wake the control plane", e))?;
+        let patient = matches!(request, Request::Step(_));
+        let start = Instant::now();
+        // Poll often at first: the answer usually comes within a cycle, and the manager
+        // finishes connecting its answer channel when this side polls.
+        let mut nap = Duration::from_micros(500);
+        loop {
+            if let Some(answer) = pending.receive().map_err(|e| sdk("receive answer", e))? {
+                let response = control::decode_response(answer.payload())
+                    .map_err(|e| ClientError::Decode(e.to_string()))?;
+                return Ok(response?);
+            }
+            if !patient && start.elapsed() > self.timeout {
+                return Err(ClientError::Timeout(self.timeout));
+            }
+            let _ = self.answers.timed_wait(|_| {}, nap);
+            nap = (nap * 2).min(Duration::from_millis(100));
+            if start.elapsed() > Duration::from_secs(1) && !self.manager_alive() {
+                return Err(ClientError::NoManager(self.domain.name().to_string()));
+            }
+        }
+    }
+
+    fn manager_alive(&self) -> bool {
+        Board::open(&self.domain.prefix()).is_ok_and(|b| b.manager_alive())
+    }
+
+    fn done(&self, request: Request) -> Result<(), ClientError> {
+        match self.request(&request)? {
+            Reply::Done => Ok(()),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Every registered skill.
+    pub fn list(&self) -> Result<Vec<SkillInfo>, ClientError> {
+        match self.request(&Request::List)? {
+            Reply::Skills(s) => Ok(s),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Activates skills, all or none.
+    pub fn activate(&self, skills: &[&str]) -> Result<(), ClientError> {
+        self.done(Request::Activate(
+            skills.iter().map(|s| s.to_string()).collect(),
+        ))
+    }
+
+    /// Deactivates skills, all or none.
+    pub fn deactivate(&self, skills: &[&str]) -> Result<(), ClientError> {
+        self.done(Request::Deactivate(
+            skills.iter().map(|s| s.to_string()).collect(),
+        ))
+    }
+
+    /// Sets a parameter from text (parsed by its declared type); applied from the next cycle.
+    pub fn set_param(&self, skill: &str, param: &str, value: &str) -> Result<(), ClientError> {
+        self.done(Request::SetParam {
+            skill: skill.into(),
+            param: param.into(),
+            value: ParamArg::Text(value.into()),
+        })
+    }
+
+    /// Sets a parameter to a typed value; applied from the next cycle.
+    pub fn set_param_value(
+        &self,
+        skill: &str,
+        param: &str,
+        value: ParamValue,
+    ) -> Result<(), ClientError> {
+        self.done(Request::SetParam {
+            skill: skill.into(),
+            param: param.into(),
+            value: ParamArg::Value(value),
+        })
+    }
+
+    /// A parameter's current value.
+    pub fn get_param(&self, skill: &str, param: &str) -> Result<ParamValue, ClientError> {
+        match self.request(&Request::GetParam {
+            skill: skill.into(),
+            param: param.into(),
+        })? {
+            Reply::Param(v) => Ok(v),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// The latest value at `skill.output[.field][index]` and the cycle it was produced in.
+    pub fn query(&self, path: &str) -> Result<(Value, u64), ClientError> {
+        match self.request(&Request::Query(path.into()))? {
+            Reply::Value { value, cycle } => Ok((value, cycle)),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Installs a monitor; its firings arrive as events. Returns its id.
+    pub fn add_monitor(
+        &self,
+        expr: &str,
+        mode: MonitorMode,
+        hold: u32,
+    ) -> Result<u64, ClientError> {
+        match self.request(&Request::AddMonitor {
+            expr: expr.into(),
+            mode,
+            hold,
+        })? {
+            Reply::MonitorAdded(id) => Ok(id),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Removes a monitor.
+    pub fn remove_monitor(&self, id: u64) -> Result<(), ClientError> {
+        self.done(Request::RemoveMonitor(id))
+    }
+
+    /// Every monitor.
+    pub fn monitors(&self) -> Result<Vec<MonitorInfo>, ClientError> {
+        match self.request(&Request::ListMonitors)? {
+            Reply::Monitors(m) => Ok(m),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Starts cycling.
+    pub fn run(&self) -> Result<(), ClientError> {
+        self.done(Request::Run)
+    }
+
+    /// Stops cycling after the current cycle.
+    pub fn stop(&self) -> Result<(), ClientError> {
+        self.done(Request::Stop)
+    }
+
+    /// Runs `n` cycles then stops; returns the cycle count when they are done.
+    pub fn step(&self, n: u64) -> Result<u64, ClientError> {
+        match self.request(&Request::Step(n))? {
+            Reply::Stepped(c) => Ok(c),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Cycle and skill statistics.
+    pub fn stats(&self) -> Result<Stats, ClientError> {
+        match self.request(&Request::Stats)? {
+            Reply::Stats(s) => Ok(s),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Changes a skill's arbitration priority from the next cycle.
+    pub fn set_priority(&self, skill: &str, priority: i32) -> Result<(), ClientError> {
+        self.done(Request::SetPriority {
+            skill: skill.into(),
+            priority,
+        })
+    }
+
+    /// The latencies of up to `n` most recent cycles (µs, oldest first) and the last cycle.
+    pub fn latencies(&self, n: u32) -> Result<(u64, Vec<f32>), ClientError> {
+        match self.request(&Request::Latencies(n))? {
+            Reply::Latencies { cycle, latency_us } => Ok((cycle, latency_us)),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Turns the logging of a skill's input and output samples on or off.
+    pub fn set_io_log(&self, skill: &str, on: bool) -> Result<(), ClientError> {
+        self.done(Request::SetIoLog {
+            skill: skill.into(),
+            on,
+        })
+    }
+
+    /// The manager's fabric log file and the skills whose samples it logs.
+    pub fn logging(&self) -> Result<(Option<String>, Vec<String>), ClientError> {
+        match self.request(&Request::Logging)? {
+            Reply::Logging { file, io_skills } => Ok((file, io_skills)),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Subscribes to the events stream (done by the first [`Client::next_event`] too): every
+    /// event published from now on can be read.
+    pub fn subscribe(&mut self) -> Result<(), ClientError> {
+        if self.events.is_none() {
+            let listener = services::listener(&self.node, &names::events())?;
+            let sub = services::events_service(&self.node)?
+                .subscriber_builder()
+                .buffer_size(services::EVENT_BUFFER)
+                .create()
+                .map_err(|e| sdk("events subscriber", e))?;
+            self.events = Some((sub, listener));
+        }
+        Ok(())
+    }
+
+    /// The next event, waiting at most `timeout`; `None` if none came.
+    pub fn next_event(&mut self, timeout: Duration) -> Result<Option<Event>, ClientError> {
+        self.subscribe()?;
+        let Some((events, listener)) = self.events.as_ref() else {
+            return Ok(None);
+        };
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(sample) = events.receive().map_err(|e| sdk("receive event", e))? {
+                let ev = control::decode_event(sample.payload())
+                    .map_err(|e| ClientError::Decode(e.to_string()))?;
+                if self.last_seq != 0 && ev.seq > self.last_seq + 1 {
+                    self.lost += ev.seq - self.last_seq - 1;
+                }
+                self.last_seq = ev.seq;
+                return Ok(Some(ev));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            let _ = listener.timed_wait(|_| {}, (deadline - now).min(Duration::from_millis(200)));
+        }
+    }
+
+    /// Events lost because this client did not read them fast enough (sequence gaps).
+    pub fn lost_events(&self) -> u64 {
+        self.lost
+    }
+}

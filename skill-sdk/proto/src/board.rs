@@ -1,0 +1,561 @@
+//! The cycle board: one shared-memory segment per domain, created by the manager.
+//!
+//! It carries what must not cost a wake-up: the current cycle number, which skills are active,
+//! which of a skill's inputs must come from the same cycle, and the completion stamps and
+//! counters that skills write when they finish. Skills wake each other directly through their
+//! topics' event services; the manager reads the board and is woken once, by the skill that
+//! finishes a cycle's last expected run (or by one whose run produced nothing to pass on).
+//!
+//! Every field is an atomic, so plain shared references are sound across processes. Byte areas
+//! (a skill's declaration, the manager's refusal text) are owned by one side at a time; the
+//! slot's `state` atomic hands them over with release/acquire ordering.
+
+use crate::Error;
+use nix::fcntl::OFlag;
+use nix::sys::mman::{MapFlags, ProtFlags, mmap, munmap, shm_open, shm_unlink};
+use nix::sys::stat::Mode as FileMode;
+use std::cell::UnsafeCell;
+use std::num::NonZeroUsize;
+use std::ptr::NonNull;
+use std::sync::atomic::{AtomicI32, AtomicU32, AtomicU64, Ordering};
+
+/// Most skill instances in one domain.
+pub const MAX_SLOTS: usize = 64;
+/// Room for one skill's encoded declaration.
+pub const DECL_BYTES: usize = 16 * 1024;
+/// Room for the manager's answer text.
+pub const MSG_BYTES: usize = 1024;
+/// Most actuator channels one device serves.
+pub const MAX_CHANNELS: usize = 4;
+/// Room for a skill's encoded parameter values.
+pub const PARAM_BYTES: usize = 4096;
+const MAGIC: u64 = 0x5346_424f_4152_4402; // "SFBOARD" + layout version 2
+
+/// Life of a slot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum SlotState {
+    /// Unused.
+    Free = 0,
+    /// A skill took it and is writing its declaration.
+    Claimed = 1,
+    /// Declaration written; the manager has not answered yet.
+    Pending = 2,
+    /// Registered; the skill is opening its data ports.
+    Accepted = 3,
+    /// Refused; the reason is in the message area.
+    Refused = 4,
+    /// The skill is leaving cleanly.
+    Leaving = 5,
+    /// Ports open: taking part in cycles. Only now can a cycle count on it, since a
+    /// subscriber that connects after a sample was sent would miss that sample.
+    Ready = 6,
+}
+
+impl SlotState {
+    fn from_u32(v: u32) -> SlotState {
+        match v {
+            1 => SlotState::Claimed,
+            2 => SlotState::Pending,
+            3 => SlotState::Accepted,
+            4 => SlotState::Refused,
+            5 => SlotState::Leaving,
+            6 => SlotState::Ready,
+            _ => SlotState::Free,
+        }
+    }
+}
+
+/// Outcome of a skill's last run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RunStatus {
+    /// Not run yet.
+    None = 0,
+    /// The body returned `Ok`; its written outputs were published.
+    Ok = 1,
+    /// Not run: an input it needs was missing (e.g. an async producer has not produced yet).
+    Skipped = 2,
+    /// The body returned an error or panicked; nothing was published.
+    Failed = 3,
+}
+
+impl RunStatus {
+    /// Decodes the stored value.
+    pub fn from_u32(v: u32) -> RunStatus {
+        match v {
+            1 => RunStatus::Ok,
+            2 => RunStatus::Skipped,
+            3 => RunStatus::Failed,
+            _ => RunStatus::None,
+        }
+    }
+}
+
+/// Board-wide fields.
+#[repr(C)]
+pub struct Header {
+    magic: AtomicU64,
+    /// Process id of the manager that created the board.
+    pub manager_pid: AtomicU32,
+    /// 1 while the manager runs; 0 once it has shut down.
+    pub open: AtomicU32,
+    /// The cycle in progress (or last finished), starting at 1.
+    pub cycle: AtomicU64,
+    /// Expected sync runs left in the current cycle: `(cycle as u32) << 32 | count`.
+    pub remaining: AtomicU64,
+    /// Monotonic clock (ns) when the current cycle started.
+    pub cycle_start_ns: AtomicU64,
+}
+
+/// One skill instance.
+#[repr(C)]
+pub struct Slot {
+    /// A [`SlotState`].
+    pub state: AtomicU32,
+    /// Process id of the skill.
+    pub pid: AtomicU32,
+    /// Bumped by the manager each time the slot is (re)accepted, so stats can tell instances apart.
+    pub generation: AtomicU32,
+    /// 1 when active (written by the manager).
+    pub active: AtomicU32,
+    /// The cycle in which the manager expects this (sync) skill to run; a skill only runs
+    /// for cycle k when this says k, so an unexpected run never counts toward completion.
+    pub expected_cycle: AtomicU64,
+    /// Bit i set: input i comes from a sync producer and must be from the running cycle
+    /// (written by the manager). Inputs with the bit clear use the latest sample.
+    pub fresh_mask: AtomicU64,
+    /// Last cycle this skill finished a run (or skip) for.
+    pub done_cycle: AtomicU64,
+    /// [`RunStatus`] of that run.
+    pub status: AtomicU32,
+    /// Bit i set: output i was published by that run.
+    pub published_mask: AtomicU64,
+    /// Number of completed runs (status Ok).
+    pub runs: AtomicU64,
+    /// Number of failed runs.
+    pub failures: AtomicU64,
+    /// Number of skipped cycles.
+    pub skips: AtomicU64,
+    /// Sum of body compute times (ns).
+    pub compute_ns_total: AtomicU64,
+    /// Compute time of the last run (ns).
+    pub last_compute_ns: AtomicU64,
+    /// Monotonic clock (ns) when the last run started.
+    pub last_start_ns: AtomicU64,
+    /// Monotonic clock (ns) when the last run finished and its outputs were sent.
+    pub last_end_ns: AtomicU64,
+    /// Arbitration priority (written by the manager at cycle start).
+    pub priority: AtomicI32,
+    /// The cycle in which the manager found this skill unable to run (an upstream run
+    /// failed): a device waiting for its proposal stops waiting.
+    pub cancelled_cycle: AtomicU64,
+    /// For a device: per channel, the slots that propose on it (written by the manager).
+    pub channel_proposers: [AtomicU64; MAX_CHANNELS],
+    /// For a device: per channel, the cycle of the last arbitration.
+    pub channel_cycle: [AtomicU64; MAX_CHANNELS],
+    /// For a device: per channel, the winner's slot + 1 (0: nobody proposed, safe command).
+    pub channel_winner: [AtomicU32; MAX_CHANNELS],
+    /// For a device: per channel, the slots whose proposals made the command.
+    pub channel_mask: [AtomicU64; MAX_CHANNELS],
+    /// Parameter snapshot generation (a seqlock: odd while the manager writes).
+    pub param_gen: AtomicU64,
+    param_len: AtomicU32,
+    params: [AtomicU64; PARAM_BYTES / 8],
+    decl_len: AtomicU32,
+    msg_len: AtomicU32,
+    decl: UnsafeCell<[u8; DECL_BYTES]>,
+    msg: UnsafeCell<[u8; MSG_BYTES]>,
+}
+
+#[repr(C)]
+struct Layout {
+    header: Header,
+    slots: [Slot; MAX_SLOTS],
+}
+
+/// A mapping of a domain's board.
+pub struct Board {
+    ptr: NonNull<Layout>,
+    name: String,
+    owner: bool,
+}
+
+// SAFETY: the mapping is shared memory made only of atomics and byte areas whose ownership is
+// handed over through atomics; it may be used from any thread.
+unsafe impl Send for Board {}
+// SAFETY: as above.
+unsafe impl Sync for Board {}
+
+fn map(fd: &std::os::fd::OwnedFd) -> Result<NonNull<Layout>, nix::Error> {
+    let len = NonZeroUsize::new(std::mem::size_of::<Layout>()).ok_or(nix::Error::EINVAL)?;
+    // SAFETY: mapping a shared-memory object we opened, of at least `len` bytes, read-write.
+    let p = unsafe {
+        mmap(
+            None,
+            len,
+            ProtFlags::PROT_READ | ProtFlags::PROT_WRITE,
+            MapFlags::MAP_SHARED,
+            fd,
+            0,
+        )?
+    };
+    Ok(p.cast())
+}
+
+impl Board {
+    /// Creates the board of a domain (the manager does this). An existing board of a manager
+    /// that is still alive is an error; a stale one is replaced.
+    pub fn create(prefix: &str) -> Result<Board, Error> {
+        let name = crate::names::board(prefix);
+        let io = |e: nix::Error| Error::Board {
+            name: name.clone(),
+            source: std::io::Error::from(e),
+        };
+        let fd = match shm_open(
+            name.as_str(),
+            OFlag::O_CREAT | OFlag::O_EXCL | OFlag::O_RDWR,
+            FileMode::from_bits_truncate(0o600),
+        ) {
+            Ok(fd) => fd,
+            Err(nix::Error::EEXIST) => {
+                if let Ok(old) = Board::open(prefix)
+                    && old.manager_alive()
+                {
+                    return Err(Error::ManagerRunning {
+                        pid: old.header().manager_pid.load(Ordering::Acquire),
+                    });
+                }
+                let _ = shm_unlink(name.as_str());
+                shm_open(
+                    name.as_str(),
+                    OFlag::O_CREAT | OFlag::O_EXCL | OFlag::O_RDWR,
+                    FileMode::from_bits_truncate(0o600),
+                )
+                .map_err(io)?
+            }
+            Err(e) => return Err(io(e)),
+        };
+        nix::unistd::ftruncate(&fd, std::mem::size_of::<Layout>() as i64).map_err(io)?;
+        let ptr = map(&fd).map_err(io)?;
+        let board = Board {
+            ptr,
+            name: name.clone(),
+            owner: true,
+        };
+        let h = board.header();
+        h.manager_pid.store(std::process::id(), Ordering::Relaxed);
+        h.open.store(1, Ordering::Relaxed);
+        h.magic.store(MAGIC, Ordering::Release);
+        Ok(board)
+    }
+
+    /// Opens the board of a domain; fails while no manager has created it.
+    pub fn open(prefix: &str) -> Result<Board, Error> {
+        let name = crate::names::board(prefix);
+        let io = |e: nix::Error| Error::Board {
+            name: name.clone(),
+            source: std::io::Error::from(e),
+        };
+        let fd = shm_open(name.as_str(), OFlag::O_RDWR, FileMode::empty()).map_err(io)?;
+        let st = nix::sys::stat::fstat(&fd).map_err(io)?;
+        if (st.st_size as usize) < std::mem::size_of::<Layout>() {
+            return Err(Error::BoardNotReady);
+        }
+        let ptr = map(&fd).map_err(io)?;
+        let board = Board {
+            ptr,
+            name,
+            owner: false,
+        };
+        if board.header().magic.load(Ordering::Acquire) != MAGIC {
+            return Err(Error::BoardNotReady);
+        }
+        Ok(board)
+    }
+
+    /// Board-wide fields.
+    pub fn header(&self) -> &Header {
+        // SAFETY: the mapping lives as long as `self` and holds a `Layout`.
+        unsafe { &self.ptr.as_ref().header }
+    }
+
+    /// Slot `i` (< [`MAX_SLOTS`]).
+    pub fn slot(&self, i: usize) -> &Slot {
+        // SAFETY: as in `header`; indexing panics past MAX_SLOTS.
+        unsafe { &self.ptr.as_ref().slots[i] }
+    }
+
+    /// Whether the manager that created this board is still running.
+    pub fn manager_alive(&self) -> bool {
+        let h = self.header();
+        h.open.load(Ordering::Acquire) == 1 && pid_alive(h.manager_pid.load(Ordering::Acquire))
+    }
+
+    /// Marks the board closed (the manager, on shutdown).
+    pub fn close(&self) {
+        self.header().open.store(0, Ordering::Release);
+    }
+
+    /// Arms the completion counter for `cycle` with `count` expected runs.
+    pub fn arm(&self, cycle: u64, count: u32) {
+        self.header().remaining.store(
+            ((cycle as u32 as u64) << 32) | u64::from(count),
+            Ordering::Release,
+        );
+    }
+
+    /// Takes `n` expected runs of `cycle` off the counter; true if that finished the cycle.
+    /// A stale call (another cycle armed meanwhile) changes nothing and returns false.
+    pub fn complete(&self, cycle: u64, n: u32) -> bool {
+        let r = &self.header().remaining;
+        let mut cur = r.load(Ordering::Acquire);
+        loop {
+            let (c, left) = ((cur >> 32) as u32, cur as u32);
+            if c != cycle as u32 || left == 0 {
+                return false;
+            }
+            let next = ((c as u64) << 32) | u64::from(left.saturating_sub(n));
+            match r.compare_exchange_weak(cur, next, Ordering::AcqRel, Ordering::Acquire) {
+                Ok(_) => return left <= n,
+                Err(now) => cur = now,
+            }
+        }
+    }
+
+    /// Expected runs left in `cycle` (0 if another cycle is armed).
+    pub fn remaining(&self, cycle: u64) -> u32 {
+        let cur = self.header().remaining.load(Ordering::Acquire);
+        if (cur >> 32) as u32 == cycle as u32 {
+            cur as u32
+        } else {
+            0
+        }
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        // SAFETY: unmapping what `map` mapped, once.
+        unsafe {
+            let _ = munmap(self.ptr.cast(), std::mem::size_of::<Layout>());
+        }
+        if self.owner {
+            let _ = shm_unlink(self.name.as_str());
+        }
+    }
+}
+
+impl Slot {
+    /// Current state.
+    pub fn state(&self) -> SlotState {
+        SlotState::from_u32(self.state.load(Ordering::Acquire))
+    }
+
+    /// Moves the slot from `from` to `to`; false if it was not in `from`.
+    pub fn transition(&self, from: SlotState, to: SlotState) -> bool {
+        self.state
+            .compare_exchange(from as u32, to as u32, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+
+    /// Sets the state unconditionally (by the side that owns the slot now).
+    pub fn set_state(&self, to: SlotState) {
+        self.state.store(to as u32, Ordering::Release);
+    }
+
+    /// Writes the declaration bytes (the skill, in state `Claimed`).
+    pub fn write_decl(&self, bytes: &[u8]) -> Result<(), Error> {
+        if bytes.len() > DECL_BYTES {
+            return Err(Error::DeclTooLarge {
+                len: bytes.len(),
+                max: DECL_BYTES,
+            });
+        }
+        // SAFETY: in state `Claimed` only the claiming skill touches the area; the later
+        // release store of `Pending` publishes it.
+        unsafe {
+            std::ptr::copy_nonoverlapping(bytes.as_ptr(), self.decl.get().cast::<u8>(), bytes.len())
+        };
+        self.decl_len.store(bytes.len() as u32, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Reads the declaration bytes (the manager, in state `Pending` or later).
+    pub fn read_decl(&self) -> Vec<u8> {
+        let len = (self.decl_len.load(Ordering::Relaxed) as usize).min(DECL_BYTES);
+        // SAFETY: after the acquire load of `Pending` the skill no longer writes the area.
+        unsafe { std::slice::from_raw_parts(self.decl.get().cast::<u8>(), len).to_vec() }
+    }
+
+    /// Writes the answer text (the manager, before setting `Refused`).
+    pub fn write_msg(&self, text: &str) {
+        let b = text.as_bytes();
+        let n = b.len().min(MSG_BYTES);
+        // SAFETY: in state `Pending` only the manager writes the area; the release store of
+        // `Refused` publishes it.
+        unsafe { std::ptr::copy_nonoverlapping(b.as_ptr(), self.msg.get().cast::<u8>(), n) };
+        self.msg_len.store(n as u32, Ordering::Relaxed);
+    }
+
+    /// Reads the answer text (the skill, after seeing `Refused`).
+    pub fn read_msg(&self) -> String {
+        let n = (self.msg_len.load(Ordering::Relaxed) as usize).min(MSG_BYTES);
+        // SAFETY: after the acquire load of `Refused` the manager no longer writes the area.
+        let bytes = unsafe { std::slice::from_raw_parts(self.msg.get().cast::<u8>(), n).to_vec() };
+        String::from_utf8_lossy(&bytes).into_owned()
+    }
+
+    /// Publishes a new parameter snapshot (the manager). Readers that overlap the write see
+    /// an odd or changed generation and retry.
+    pub fn write_params(&self, bytes: &[u8]) -> Result<(), Error> {
+        if bytes.len() > PARAM_BYTES {
+            return Err(Error::DeclTooLarge {
+                len: bytes.len(),
+                max: PARAM_BYTES,
+            });
+        }
+        self.param_gen.fetch_add(1, Ordering::AcqRel);
+        for (i, chunk) in bytes.chunks(8).enumerate() {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.params[i].store(u64::from_ne_bytes(w), Ordering::Relaxed);
+        }
+        self.param_len.store(bytes.len() as u32, Ordering::Relaxed);
+        self.param_gen.fetch_add(1, Ordering::Release);
+        Ok(())
+    }
+
+    /// The parameter snapshot if its generation differs from `seen` (the skill).
+    pub fn read_params(&self, seen: u64) -> Option<(u64, Vec<u8>)> {
+        for _ in 0..1000 {
+            let g1 = self.param_gen.load(Ordering::Acquire);
+            if g1 == seen {
+                return None;
+            }
+            if g1 % 2 == 1 {
+                std::hint::spin_loop();
+                continue;
+            }
+            let len = (self.param_len.load(Ordering::Relaxed) as usize).min(PARAM_BYTES);
+            let mut out = Vec::with_capacity(len + 8);
+            for w in &self.params[..len.div_ceil(8)] {
+                out.extend_from_slice(&w.load(Ordering::Relaxed).to_ne_bytes());
+            }
+            out.truncate(len);
+            std::sync::atomic::fence(Ordering::Acquire);
+            if self.param_gen.load(Ordering::Relaxed) == g1 {
+                return Some((g1, out));
+            }
+        }
+        None
+    }
+
+    /// Resets the run counters (the manager, when it accepts a new instance).
+    pub fn reset_counters(&self) {
+        for a in [
+            &self.done_cycle,
+            &self.published_mask,
+            &self.runs,
+            &self.failures,
+            &self.skips,
+            &self.compute_ns_total,
+            &self.last_compute_ns,
+            &self.last_start_ns,
+            &self.last_end_ns,
+            &self.fresh_mask,
+            &self.expected_cycle,
+            &self.param_gen,
+            &self.cancelled_cycle,
+        ] {
+            a.store(0, Ordering::Relaxed);
+        }
+        self.status.store(RunStatus::None as u32, Ordering::Relaxed);
+        for c in 0..MAX_CHANNELS {
+            self.channel_proposers[c].store(0, Ordering::Relaxed);
+            self.channel_cycle[c].store(0, Ordering::Relaxed);
+            self.channel_winner[c].store(0, Ordering::Relaxed);
+            self.channel_mask[c].store(0, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Whether a process exists and is not a zombie.
+pub fn pid_alive(pid: u32) -> bool {
+    if pid == 0 {
+        return false;
+    }
+    let Ok(p) = i32::try_from(pid) else {
+        return false;
+    };
+    if nix::sys::signal::kill(nix::unistd::Pid::from_raw(p), None)
+        .is_err_and(|e| e == nix::Error::ESRCH)
+    {
+        return false;
+    }
+    // A killed child stays a zombie until its parent reaps it: that is dead too.
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Ok(stat) => stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .is_none_or(|s| s != "Z" && s != "X"),
+        Err(_) => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn completion_counter_is_cycle_tagged() {
+        let prefix = format!("sf_unit-board-{}_", std::process::id());
+        let b = Board::create(&prefix).unwrap();
+        b.arm(7, 2);
+        assert!(!b.complete(6, 1), "a stale cycle changes nothing");
+        assert_eq!(b.remaining(7), 2);
+        assert!(!b.complete(7, 1));
+        assert!(b.complete(7, 1));
+        assert!(!b.complete(7, 1), "already finished");
+        b.arm(8, 3);
+        assert!(
+            b.complete(8, 5),
+            "cancelling more than is left finishes the cycle"
+        );
+        let other = Board::open(&prefix).unwrap();
+        assert!(other.manager_alive());
+        drop(other);
+        drop(b);
+        assert!(Board::open(&prefix).is_err(), "the owner unlinks the board");
+    }
+
+    #[test]
+    fn parameter_snapshots_pass_through_the_seqlock() {
+        let prefix = format!("sf_unit-board3-{}_", std::process::id());
+        let b = Board::create(&prefix).unwrap();
+        let s = b.slot(3);
+        assert_eq!(s.read_params(0), None, "nothing written yet");
+        s.write_params(b"gain=3 and some more bytes").unwrap();
+        let (g, bytes) = s.read_params(0).unwrap();
+        assert_eq!(bytes, b"gain=3 and some more bytes");
+        assert_eq!(s.read_params(g), None, "nothing new");
+        assert!(s.write_params(&[0; PARAM_BYTES + 1]).is_err());
+    }
+
+    #[test]
+    fn a_second_live_manager_is_refused() {
+        let prefix = format!("sf_unit-board2-{}_", std::process::id());
+        let b = Board::create(&prefix).unwrap();
+        assert!(matches!(
+            Board::create(&prefix),
+            Err(Error::ManagerRunning { .. })
+        ));
+        drop(b);
+    }
+
+    #[test]
+    fn own_pid_is_alive_and_pid_zero_is_not() {
+        assert!(pid_alive(std::process::id()));
+        assert!(!pid_alive(0));
+    }
+}

@@ -1,0 +1,130 @@
+//! Requests, from a client (sequencer, `ctl`, console) to the manager.
+
+use super::{ControlError, PROTOCOL_VERSION};
+use crate::param::ParamValue;
+use serde::{Deserialize, Serialize};
+
+/// A request as sent: version, who asks, what.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RequestEnvelope {
+    /// [`PROTOCOL_VERSION`] of the client.
+    pub version: u16,
+    /// The client's id (`<pid>-<n>`); monitors belong to it.
+    pub client: String,
+    /// The request.
+    pub request: Request,
+}
+
+/// A parameter value as the client gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ParamArg {
+    /// Text, parsed by the parameter's declared type (`ctl set s.p=3`).
+    Text(String),
+    /// A typed value.
+    Value(ParamValue),
+}
+
+/// When a monitor fires.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MonitorMode {
+    /// The first cycle the condition holds; then the monitor is removed.
+    Once,
+    /// Each cycle the condition becomes true (rising edge).
+    Edge,
+    /// Every cycle the condition holds.
+    Every,
+}
+
+/// What a client can ask.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Request {
+    /// Every registered skill.
+    List,
+    /// Activate skills (all or none).
+    Activate(Vec<String>),
+    /// Deactivate skills (all or none).
+    Deactivate(Vec<String>),
+    /// Set a parameter; applied from the next cycle.
+    SetParam {
+        /// Skill instance.
+        skill: String,
+        /// Parameter name.
+        param: String,
+        /// New value.
+        value: ParamArg,
+    },
+    /// Read a parameter.
+    GetParam {
+        /// Skill instance.
+        skill: String,
+        /// Parameter name.
+        param: String,
+    },
+    /// Read a value: `skill.output[.field][index]`.
+    Query(String),
+    /// Install a monitor.
+    AddMonitor {
+        /// The condition.
+        expr: String,
+        /// When it fires.
+        mode: MonitorMode,
+        /// Cycles the condition must hold before it counts as true (0 or 1: at once).
+        hold: u32,
+    },
+    /// Remove a monitor.
+    RemoveMonitor(u64),
+    /// Every monitor.
+    ListMonitors,
+    /// Start cycling.
+    Run,
+    /// Stop cycling (the current cycle finishes).
+    Stop,
+    /// Run N cycles, then stop; answered when they are done.
+    Step(u64),
+    /// Cycle and skill statistics.
+    Stats,
+    /// Change a skill's arbitration priority.
+    SetPriority {
+        /// Skill instance.
+        skill: String,
+        /// New priority (higher wins).
+        priority: i32,
+    },
+    // Variants below were added after version 1 shipped; appending keeps the encoding of
+    // every earlier request unchanged (an older manager answers them `Malformed`).
+    /// The latencies of the most recent cycles (at most this many, capped by the manager).
+    Latencies(u32),
+    /// Turn the logging of a skill's input and output samples on or off.
+    SetIoLog {
+        /// Skill instance.
+        skill: String,
+        /// Log every sample from the next cycle on.
+        on: bool,
+    },
+    /// Where the manager logs, and whose samples.
+    Logging,
+}
+
+/// Encodes a request.
+pub fn encode_request(client: &str, request: &Request) -> Result<Vec<u8>, postcard::Error> {
+    postcard::to_allocvec(&RequestEnvelope {
+        version: PROTOCOL_VERSION,
+        client: client.to_string(),
+        request: request.clone(),
+    })
+}
+
+/// Decodes a request, checking the version first.
+pub fn decode_request(bytes: &[u8]) -> Result<RequestEnvelope, ControlError> {
+    // The version is the envelope's first field: read it alone so that a client of another
+    // version gets a version error rather than a decoding error.
+    let (version, _): (u16, _) =
+        postcard::take_from_bytes(bytes).map_err(|e| ControlError::Malformed(e.to_string()))?;
+    if version != PROTOCOL_VERSION {
+        return Err(ControlError::Version {
+            client: version,
+            manager: PROTOCOL_VERSION,
+        });
+    }
+    postcard::from_bytes(bytes).map_err(|e| ControlError::Malformed(e.to_string()))
+}

@@ -1,0 +1,127 @@
+//! The fabric's values and events as JSON: what `skillfab ctl --json`, the fabric log and the
+//! C and Python clients print and parse.
+
+use crate::control::{Event, EventKind, SkillInfo};
+use crate::param::ParamValue;
+use crate::value::Value;
+use serde_json::{Value as Json, json};
+
+/// A parameter value as a plain JSON number or bool.
+pub fn param_json(v: &ParamValue) -> Json {
+    match *v {
+        ParamValue::Bool(b) => json!(b),
+        ParamValue::Int(i) => json!(i),
+        ParamValue::UInt(u) => json!(u),
+        ParamValue::Float(f) => json!(f),
+    }
+}
+
+/// A decoded value as JSON.
+pub fn value_json(v: &Value) -> Json {
+    serde_json::from_str(&v.to_string()).unwrap_or(Json::Null)
+}
+
+/// An event as one JSON object: `{"seq", "cycle", "time_ns", "event": "<kind>", ...fields}`.
+pub fn event_json(e: &Event) -> Json {
+    let mut obj = json!({"seq": e.seq, "cycle": e.cycle, "time_ns": e.time_ns});
+    let (name, fields) = match &e.kind {
+        EventKind::MonitorFired {
+            id,
+            client,
+            expr,
+            values,
+            stamp_ns,
+        } => {
+            let vals: serde_json::Map<String, Json> = values
+                .iter()
+                .map(|(p, v)| (p.clone(), value_json(v)))
+                .collect();
+            (
+                "monitor_fired",
+                json!({"monitor": id, "client": client, "expr": expr, "values": vals, "stamp_ns": stamp_ns}),
+            )
+        }
+        EventKind::SkillRegistered {
+            skill,
+            pid,
+            restarted,
+        } => (
+            "skill_registered",
+            json!({"skill": skill, "pid": pid, "restarted": restarted}),
+        ),
+        EventKind::SkillActivated { skill } => ("skill_activated", json!({"skill": skill})),
+        EventKind::SkillDeactivated { skill } => ("skill_deactivated", json!({"skill": skill})),
+        EventKind::SkillDied { skill, pid } => ("skill_died", json!({"skill": skill, "pid": pid})),
+        EventKind::SkillLeft { skill } => ("skill_left", json!({"skill": skill})),
+        EventKind::DeviceLost { device } => ("device_lost", json!({"device": device})),
+        EventKind::DeviceBack { device } => ("device_back", json!({"device": device})),
+        EventKind::ParamChanged {
+            skill,
+            param,
+            old,
+            new,
+            by,
+        } => (
+            "param_changed",
+            json!({"skill": skill, "param": param, "old": param_json(old), "new": param_json(new), "by": by}),
+        ),
+        EventKind::PriorityChanged {
+            skill,
+            old,
+            new,
+            by,
+        } => (
+            "priority_changed",
+            json!({"skill": skill, "old": old, "new": new, "by": by}),
+        ),
+        EventKind::CycleOverrun { unfinished } => {
+            ("cycle_overrun", json!({"unfinished": unfinished}))
+        }
+        EventKind::Cycling { running } => ("cycling", json!({"running": running})),
+        EventKind::ChannelWinner {
+            channel,
+            winner,
+            weights,
+        } => {
+            let w: serde_json::Map<String, Json> =
+                weights.iter().map(|(n, x)| (n.clone(), json!(x))).collect();
+            (
+                "channel_winner",
+                json!({"channel": channel, "winner": winner, "weights": w}),
+            )
+        }
+    };
+    obj["event"] = json!(name);
+    if let (Some(o), Json::Object(f)) = (obj.as_object_mut(), fields) {
+        o.extend(f);
+    }
+    obj
+}
+
+/// A registered skill as JSON (what `skillfab ctl --json ls` prints per skill).
+pub fn skill_json(s: &SkillInfo) -> Json {
+    let params: Vec<Json> = s
+        .params
+        .iter()
+        .map(|p| {
+            let value = s
+                .values
+                .iter()
+                .find(|(n, _)| *n == p.name)
+                .map(|(_, v)| param_json(v));
+            json!({"name": p.name, "type": p.kind.to_string(), "value": value,
+                   "default": param_json(&p.default), "min": p.min.as_ref().map(param_json),
+                   "max": p.max.as_ref().map(param_json), "doc": p.doc})
+        })
+        .collect();
+    let ports = |p: &[(String, String, String)]| -> Vec<Json> {
+        p.iter()
+            .map(|(port, topic, ty)| json!({"port": port, "topic": topic, "type": ty}))
+            .collect()
+    };
+    json!({"name": s.name, "kind": s.kind, "mode": s.mode.to_string(), "state": s.state,
+           "priority": s.priority, "pid": s.pid, "params": params, "inputs": ports(&s.inputs),
+           "outputs": ports(&s.outputs), "runs": s.runs, "skips": s.skips, "failures": s.failures,
+           "last_cycle": s.last_cycle, "compute_us_last": s.compute_us_last,
+           "compute_us_mean": s.compute_us_mean})
+}

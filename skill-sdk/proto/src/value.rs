@@ -1,0 +1,332 @@
+//! Decoding message bytes through their schema: dynamic values and field paths.
+//!
+//! The manager (queries, monitors), the CLI and the console read any message without its Rust
+//! type: a [`FieldPath`] such as `range[3]` or `pose.x` is resolved against a
+//! [`MessageSchema`] once, then read from sample bytes each time.
+
+use crate::schema::{FieldKind, MessageSchema, Prim};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// A decoded value.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub enum Value {
+    Bool(bool),
+    Int(i64),
+    UInt(u64),
+    Float(f64),
+    Array(Vec<Value>),
+    Struct(Vec<(String, Value)>),
+    Text(String),
+    Null,
+}
+
+impl Value {
+    /// The value as a number (bools are 0/1); `None` for arrays and structs.
+    pub fn as_f64(&self) -> Option<f64> {
+        match *self {
+            Value::Bool(b) => Some(f64::from(u8::from(b))),
+            Value::Int(i) => Some(i as f64),
+            Value::UInt(u) => Some(u as f64),
+            Value::Float(f) => Some(f),
+            _ => None,
+        }
+    }
+
+    /// Every number in the value, flattened.
+    pub fn numbers(&self) -> Vec<f64> {
+        match self {
+            Value::Array(v) => v.iter().flat_map(Value::numbers).collect(),
+            Value::Struct(v) => v.iter().flat_map(|(_, x)| x.numbers()).collect(),
+            other => other.as_f64().into_iter().collect(),
+        }
+    }
+}
+
+/// JSON text (non-finite floats become `null`), so human and `--json` output agree.
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{b}"),
+            Value::Int(i) => write!(f, "{i}"),
+            Value::UInt(u) => write!(f, "{u}"),
+            Value::Float(x) if x.is_finite() => write!(f, "{x}"),
+            Value::Float(_) | Value::Null => f.write_str("null"),
+            Value::Text(t) => write!(f, "{t:?}"),
+            Value::Array(v) => {
+                f.write_str("[")?;
+                for (i, x) in v.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{x}")?;
+                }
+                f.write_str("]")
+            }
+            Value::Struct(v) => {
+                f.write_str("{")?;
+                for (i, (k, x)) in v.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "\"{k}\": {x}")?;
+                }
+                f.write_str("}")
+            }
+        }
+    }
+}
+
+/// Bytes one value of `kind` occupies (array stride included).
+pub fn kind_size(kind: &FieldKind) -> usize {
+    match kind {
+        FieldKind::Prim(p) => p.size(),
+        FieldKind::Array { elem, len } => kind_size(elem) * *len as usize,
+        FieldKind::Struct(s) => s.size as usize,
+    }
+}
+
+fn prim_at(p: Prim, b: &[u8]) -> Option<Value> {
+    macro_rules! rd {
+        ($t:ty) => {
+            <$t>::from_ne_bytes(b.get(..std::mem::size_of::<$t>())?.try_into().ok()?)
+        };
+    }
+    Some(match p {
+        Prim::U8 => Value::UInt(u64::from(rd!(u8))),
+        Prim::U16 => Value::UInt(u64::from(rd!(u16))),
+        Prim::U32 => Value::UInt(u64::from(rd!(u32))),
+        Prim::U64 => Value::UInt(rd!(u64)),
+        Prim::I8 => Value::Int(i64::from(rd!(i8))),
+        Prim::I16 => Value::Int(i64::from(rd!(i16))),
+        Prim::I32 => Value::Int(i64::from(rd!(i32))),
+        Prim::I64 => Value::Int(rd!(i64)),
+        Prim::F32 => Value::Float(f64::from(rd!(f32))),
+        Prim::F64 => Value::Float(rd!(f64)),
+        Prim::Bool => Value::Bool(*b.first()? != 0),
+    })
+}
+
+/// Decodes one value of `kind` from the start of `bytes`; `None` if too short.
+pub fn decode(kind: &FieldKind, bytes: &[u8]) -> Option<Value> {
+    match kind {
+        FieldKind::Prim(p) => prim_at(*p, bytes),
+        FieldKind::Array { elem, len } => {
+            let step = kind_size(elem);
+            (0..*len as usize)
+                .map(|i| decode(elem, bytes.get(i * step..)?))
+                .collect::<Option<Vec<_>>>()
+                .map(Value::Array)
+        }
+        FieldKind::Struct(s) => decode_message(s, bytes),
+    }
+}
+
+/// Decodes a whole message.
+pub fn decode_message(schema: &MessageSchema, bytes: &[u8]) -> Option<Value> {
+    if bytes.len() < schema.size as usize {
+        return None;
+    }
+    schema
+        .fields
+        .iter()
+        .map(|f| {
+            Some((
+                f.name.clone(),
+                decode(&f.ty, bytes.get(f.offset as usize..)?)?,
+            ))
+        })
+        .collect::<Option<Vec<_>>>()
+        .map(Value::Struct)
+}
+
+/// Why a field path does not fit a schema.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{reason}")]
+pub struct PathError {
+    /// What is wrong, naming the offending part.
+    pub reason: String,
+}
+
+fn perr(reason: String) -> PathError {
+    PathError { reason }
+}
+
+/// A path resolved against a schema: where the value is and what it is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldPath {
+    /// Byte offset of the first element.
+    pub offset: usize,
+    /// Kind of one element.
+    pub kind: FieldKind,
+    /// Number of consecutive elements (a range `[a..b]` of an array), or `None` for one.
+    pub count: Option<usize>,
+}
+
+impl FieldPath {
+    /// Reads the value from message bytes (an array for a range).
+    pub fn read(&self, bytes: &[u8]) -> Option<Value> {
+        let start = bytes.get(self.offset..)?;
+        match self.count {
+            None => decode(&self.kind, start),
+            Some(n) => {
+                let step = kind_size(&self.kind);
+                (0..n)
+                    .map(|i| decode(&self.kind, start.get(i * step..)?))
+                    .collect::<Option<Vec<_>>>()
+                    .map(Value::Array)
+            }
+        }
+    }
+}
+
+/// Resolves `path` (e.g. `range[3]`, `pose.x`, `range[0..3]`, `range[0..=2]`, or empty for
+/// the whole message) inside `schema`.
+pub fn resolve(schema: &MessageSchema, path: &str) -> Result<FieldPath, PathError> {
+    let mut kind = FieldKind::Struct(schema.clone());
+    let mut offset = 0usize;
+    let mut count = None;
+    let mut rest = path.trim();
+    while !rest.is_empty() {
+        if count.is_some() {
+            return Err(perr(format!("nothing may follow a range in '{path}'")));
+        }
+        if let Some(r) = rest.strip_prefix('[') {
+            let end = r
+                .find(']')
+                .ok_or_else(|| perr(format!("missing ']' in '{path}'")))?;
+            let inside = r[..end].trim();
+            rest = &r[end + 1..];
+            let FieldKind::Array { elem, len } = kind else {
+                return Err(perr(format!(
+                    "'{path}': [{inside}] indexes something that is not an array"
+                )));
+            };
+            let num = |s: &str| {
+                s.trim()
+                    .parse::<usize>()
+                    .map_err(|_| perr(format!("'{path}': '{s}' is not an index")))
+            };
+            let (a, b) = if let Some((a, b)) = inside.split_once("..=") {
+                (num(a)?, num(b)? + 1)
+            } else if let Some((a, b)) = inside.split_once("..") {
+                (num(a)?, num(b)?)
+            } else {
+                let i = num(inside)?;
+                (i, i + 1)
+            };
+            if a >= b || b > len as usize {
+                return Err(perr(format!(
+                    "'{path}': index {inside} is out of bounds (length {len})"
+                )));
+            }
+            offset += a * kind_size(&elem);
+            if inside.contains("..") {
+                count = Some(b - a);
+            }
+            kind = *elem;
+        } else {
+            let r = rest.strip_prefix('.').unwrap_or(rest);
+            let end = r.find(['.', '[']).unwrap_or(r.len());
+            let name = &r[..end];
+            rest = &r[end..];
+            let FieldKind::Struct(s) = &kind else {
+                return Err(perr(format!(
+                    "'{path}': '{name}' is a field of something that has none"
+                )));
+            };
+            let f = s.fields.iter().find(|f| f.name == name).ok_or_else(|| {
+                let names: Vec<&str> = s.fields.iter().map(|f| f.name.as_str()).collect();
+                perr(format!(
+                    "{} has no field '{name}' (fields: {})",
+                    s.type_name,
+                    names.join(", ")
+                ))
+            })?;
+            offset += f.offset as usize;
+            kind = f.ty.clone();
+        }
+    }
+    Ok(FieldPath {
+        offset,
+        kind,
+        count,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Message;
+    use skill_sdk_macros::Message;
+
+    #[derive(Message, Debug, Clone, Copy, Default)]
+    #[message(crate = "crate")]
+    #[repr(C)]
+    struct Inner {
+        x: f32,
+        ok: bool,
+    }
+    #[derive(Message, Debug, Clone, Copy, Default)]
+    #[message(crate = "crate")]
+    #[repr(C)]
+    struct Outer {
+        id: u16,
+        range: [f64; 4],
+        inner: Inner,
+        grid: [[i8; 2]; 2],
+    }
+
+    fn bytes<T: Copy>(v: &T) -> Vec<u8> {
+        // SAFETY: reading the bytes of a POD value for a test.
+        unsafe {
+            std::slice::from_raw_parts((v as *const T).cast::<u8>(), std::mem::size_of::<T>())
+                .to_vec()
+        }
+    }
+
+    #[test]
+    fn paths_read_the_right_bytes() {
+        let v = Outer {
+            id: 7,
+            range: [0.5, 1.5, 2.5, 3.5],
+            inner: Inner { x: -2.0, ok: true },
+            grid: [[1, -2], [3, -4]],
+        };
+        let b = bytes(&v);
+        let s = Outer::schema();
+        let read = |p: &str| resolve(&s, p).unwrap().read(&b).unwrap();
+        assert_eq!(read("id"), Value::UInt(7));
+        assert_eq!(read("range[2]"), Value::Float(2.5));
+        assert_eq!(
+            read("range[1..3]"),
+            Value::Array(vec![Value::Float(1.5), Value::Float(2.5)])
+        );
+        assert_eq!(read("range[0..=1]").numbers(), vec![0.5, 1.5]);
+        assert_eq!(read("inner.x"), Value::Float(-2.0));
+        assert_eq!(read("inner.ok"), Value::Bool(true));
+        assert_eq!(read("grid[1][1]"), Value::Int(-4));
+        assert_eq!(
+            read("").to_string(),
+            r#"{"id": 7, "range": [0.5, 1.5, 2.5, 3.5], "inner": {"x": -2, "ok": true}, "grid": [[1, -2], [3, -4]]}"#
+        );
+    }
+
+    #[test]
+    fn bad_paths_say_why() {
+        let s = Outer::schema();
+        let e = |p: &str| resolve(&s, p).unwrap_err().reason;
+        assert!(e("nope").contains("no field 'nope'"));
+        assert!(e("range[4]").contains("out of bounds"));
+        assert!(e("id[0]").contains("not an array"));
+        assert!(e("range[x]").contains("not an index"));
+        assert!(e("range[0..2].y").contains("nothing may follow"));
+        assert!(e("range[1").contains("missing ']'"));
+    }
+
+    #[test]
+    fn short_bytes_decode_to_none() {
+        assert_eq!(decode_message(&Outer::schema(), &[0u8; 3]), None);
+    }
+}

@@ -228,7 +228,14 @@ fn assert_never_loses(c: &mut Client, winner: &str, cycles: u64) {
     c.subscribe().unwrap();
     let from = c.stats().unwrap().cycles;
     let mut lost = Vec::new();
+    // A fabric that stops cycling fails the test instead of hanging it.
+    let deadline = std::time::Instant::now() + skillfab_tests::WAIT;
     while c.stats().unwrap().cycles < from + cycles {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{cycles} cycles did not run within {:?}",
+            skillfab_tests::WAIT
+        );
         while let Some(ev) = c.next_event(Duration::from_millis(10)).unwrap() {
             if let EventKind::ChannelWinner { winner: w, .. } = ev.kind
                 && w.as_deref() != Some(winner)

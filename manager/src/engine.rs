@@ -347,17 +347,8 @@ impl Manager {
         };
         loop {
             let timeout = self.timeout(Instant::now());
-            // The wake listener is the only attachment: a callback means it fired (else the
-            // period's timeout ended the wait, and draining it would only meet EAGAIN).
-            let mut woken = false;
             let result = waitset
-                .wait_and_process_once_with_timeout(
-                    |_| {
-                        woken = true;
-                        CallbackProgression::Continue
-                    },
-                    timeout,
-                )
+                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout)
                 .map_err(|e| wait_err(&e))?;
             // A wait cut short by a signal other than SIGINT/SIGTERM (a debugger attaching,
             // SIGSTOP/SIGCONT) goes on.
@@ -370,9 +361,15 @@ impl Manager {
                 break;
             }
             let awake = thread_cpu_ns();
-            if woken {
-                let _ = wake.try_wait(|_| {});
-            }
+            // Drained after every wait, the timed-out ones too. iceoryx2 0.10's listener keeps
+            // a "notified" flag beside its socket: a notifier sends a datagram only when the
+            // flag was clear, and a drain clears it. A drain that races two notifiers can
+            // leave the flag set with the socket empty; from then on no notifier sends and
+            // the wait never fires again, so a listener drained only when it fired stays deaf
+            // for good (seen: every cycle closed by the 200 ms liveness tick). Draining on a
+            // timeout too clears the flag at the next tick at the latest; it costs one
+            // recvfrom (EAGAIN) per timed-out wait.
+            let _ = wake.try_wait(|_| {});
             self.service_registry();
             if self.last_liveness.elapsed() >= LIVENESS_TICK {
                 self.check_liveness();

@@ -525,13 +525,17 @@ fn serve<U: Unit>(
             WaitSetRunResult::Interrupt => continue,
             _ => {}
         }
-        if triggered {
+        // Only the listeners that fired are drained; a listener that fired after the wait is
+        // drained at the next one (the WaitSet reports it again at once). On the liveness
+        // tick every listener is drained: iceoryx2 0.10's listener can be left with its
+        // "notified" flag set and its socket empty by a drain that races two notifiers, after
+        // which no notifier sends to it (see the manager's loop); the tick's drain clears
+        // that, so a deaf listener recovers within a second.
+        if triggered || ticked {
             let _ = trigger.try_wait(|_| {});
         }
         for (i, l) in listeners.iter().enumerate() {
-            // A listener that fired after the wait is drained at the next one (the WaitSet
-            // reports it again at once).
-            if fired & (1 << i.min(63)) != 0 {
+            if ticked || fired & (1 << i.min(63)) != 0 {
                 let _ = l.try_wait(|_| {});
             }
         }

@@ -275,14 +275,22 @@ impl Fabric {
     /// payload).
     pub fn failures(&self) -> Vec<(String, u64)> {
         let stats = self.client.stats().unwrap();
-        stats.skills.into_iter().map(|s| (s.0, s.3)).collect()
+        stats
+            .skills
+            .into_iter()
+            .map(|s| (s.name, s.figures.failures))
+            .collect()
     }
 
     /// Mean compute time of a run of each skill so far (µs; for a skill in another language:
     /// its body and the crossing into it).
     pub fn compute_us(&self) -> Vec<(String, f64)> {
         let stats = self.client.stats().unwrap();
-        stats.skills.into_iter().map(|s| (s.0, s.4)).collect()
+        stats
+            .skills
+            .into_iter()
+            .map(|s| (s.name, s.figures.compute_us_mean))
+            .collect()
     }
 
     /// Processes of the network: the manager (`skillfab up`) and every skill.

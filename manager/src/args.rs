@@ -136,7 +136,13 @@ fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {
     for s in &r.skills {
         println!(
             "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12.1}",
-            s.name, s.kind, s.mode, s.runs, s.skips, s.failures, s.compute_us_mean
+            s.name,
+            s.kind,
+            s.mode,
+            s.figures.runs,
+            s.figures.skips,
+            s.figures.failures,
+            s.figures.compute_us_mean
         );
     }
     Ok(())

@@ -18,14 +18,14 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 use skillfab_proto::board::pid_alive;
 use skillfab_proto::control::{
-    self, ControlError, Event, EventKind, ParamArg, ParamErrorText, Reply, Request, Response,
-    SkillInfo, Stats,
+    self, ChannelStat, ControlError, Event, EventKind, ParamArg, ParamErrorText, PortInfo, Reply,
+    Request, Response, SkillInfo, SkillStat, SkillState, Stats,
 };
 use skillfab_proto::domain::Domain;
 use skillfab_proto::header::now_ns;
 use skillfab_proto::param::{ParamError, ParamValue, check_bounds};
 use skillfab_proto::services::RawReader;
-use skillfab_proto::value::{self, FieldPath, Value};
+use skillfab_proto::value::{self, FieldPath, OutputPath, Value};
 use skillfab_proto::{Error as SdkError, names, services};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -580,39 +580,34 @@ impl Manager {
     fn list(&self) -> Vec<SkillInfo> {
         let ports = |p: &[skillfab_proto::decl::PortDecl]| {
             p.iter()
-                .map(|p| (p.port.clone(), p.topic.clone(), p.schema.type_name.clone()))
+                .map(|p| PortInfo {
+                    port: p.port.clone(),
+                    topic: p.topic.clone(),
+                    type_name: p.schema.type_name.clone(),
+                })
                 .collect()
         };
         self.order
             .iter()
             .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
-            .map(|(s, e)| {
-                let f = self.figures(s);
-                SkillInfo {
-                    name: e.decl.name.clone(),
-                    kind: e.decl.kind.clone(),
-                    mode: e.decl.mode,
-                    state: if !e.ready {
-                        "starting"
-                    } else if e.active {
-                        "active"
-                    } else {
-                        "inactive"
-                    }
-                    .to_string(),
-                    priority: e.decl.priority,
-                    pid: e.decl.pid,
-                    params: e.decl.params.clone(),
-                    values: e.values.clone(),
-                    inputs: ports(&e.decl.inputs),
-                    outputs: ports(&e.decl.outputs),
-                    runs: f.runs,
-                    skips: f.skips,
-                    failures: f.failures,
-                    last_cycle: f.last_cycle,
-                    compute_us_last: f.compute_us_last,
-                    compute_us_mean: f.compute_us_mean,
-                }
+            .map(|(s, e)| SkillInfo {
+                name: e.decl.name.clone(),
+                kind: e.decl.kind.clone(),
+                mode: e.decl.mode,
+                state: if !e.ready {
+                    SkillState::Starting
+                } else if e.active {
+                    SkillState::Active
+                } else {
+                    SkillState::Inactive
+                },
+                priority: e.decl.priority,
+                pid: e.decl.pid,
+                params: e.decl.params.clone(),
+                values: e.values.clone(),
+                inputs: ports(&e.decl.inputs),
+                outputs: ports(&e.decl.outputs),
+                figures: self.figures(s),
             })
             .collect()
     }
@@ -623,16 +618,19 @@ impl Manager {
             cycles: self.cycle,
             running: !self.paused,
             overruns: self.stats.overruns,
-            latency_us: (l.p50, l.p99, l.max),
+            latency_us: l,
             skills: self
                 .list()
                 .into_iter()
-                .map(|s| (s.name, s.runs, s.skips, s.failures, s.compute_us_mean))
+                .map(|s| SkillStat {
+                    name: s.name,
+                    figures: s.figures,
+                })
                 .collect(),
             deaths: self.deaths,
             events: self.events_published,
             channels: {
-                let mut v: Vec<(String, String, u64)> = self
+                let mut v: Vec<ChannelStat> = self
                     .channels
                     .iter()
                     .map(|(c, v)| {
@@ -641,10 +639,14 @@ impl Manager {
                             (None, true) => "safe".to_string(),
                             (None, false) => "blend".to_string(),
                         };
-                        (c.clone(), who, v.cycle)
+                        ChannelStat {
+                            channel: c.clone(),
+                            winner: who,
+                            cycle: v.cycle,
+                        }
                     })
                     .collect();
-                v.sort();
+                v.sort_by(|a, b| a.channel.cmp(&b.channel));
                 v
             },
         }
@@ -894,14 +896,12 @@ impl Manager {
         if let Some(rest) = text.strip_prefix("channel.") {
             return self.query_channel(text, rest);
         }
-        let (skill, rest) = text.split_once('.').ok_or_else(|| ControlError::BadPath {
+        let path = OutputPath::parse(text).map_err(|e| ControlError::BadPath {
             path: text.into(),
-            reason: "expected skill.output[.field][index]".into(),
+            reason: e.reason,
         })?;
-        let split = rest.find(['.', '[']).unwrap_or(rest.len());
-        let (output, field) = (&rest[..split], &rest[split..]);
-        let (topic, f, slot) = self.resolve_path(skill, output, field, text)?;
-        self.open_reader(skill, output)?;
+        let (topic, f, slot) = self.resolve_path(&path.skill, &path.output, &path.field, text)?;
+        self.open_reader(&path.skill, &path.output)?;
         let reader = self
             .readers
             .get_mut(&topic)

@@ -24,7 +24,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use skillfab_proto::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
-use skillfab_proto::control::EventKind;
+use skillfab_proto::control::{EventKind, SkillFigures};
 use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::domain::Domain;
 use skillfab_proto::header::now_ns;
@@ -232,16 +232,13 @@ pub(crate) struct IoPort {
     pub(crate) last: u64,
 }
 
-/// A skill's run counters from the board.
-pub(crate) struct Figures {
-    pub(crate) runs: u64,
-    pub(crate) skips: u64,
-    pub(crate) failures: u64,
-    pub(crate) compute_us_mean: f64,
-    pub(crate) compute_us_last: f64,
-    pub(crate) last_cycle: u64,
-    pub(crate) last_start_ns: u64,
-    pub(crate) last_end_ns: u64,
+/// Why a skill leaves the registry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum DropReason {
+    /// It said goodbye on the board (a clean exit).
+    Left,
+    /// Its process is gone without a goodbye (crash, `kill -9`).
+    Died,
 }
 
 /// The latest arbitration of a channel, as the manager last read it from the board.
@@ -896,7 +893,7 @@ impl Manager {
                         }
                     }
                 }
-                SlotState::Leaving => self.drop_slot(i, "left"),
+                SlotState::Leaving => self.drop_slot(i, DropReason::Left),
                 _ => {}
             }
         }
@@ -943,7 +940,7 @@ impl Manager {
                     .as_ref()
                     .is_some_and(|e| e.decl.name == decl.name && !pid_alive(e.decl.pid))
         }) {
-            self.drop_slot(j, "died");
+            self.drop_slot(j, DropReason::Died);
         }
         let live = self.skills.iter().flatten().map(|e| &e.decl);
         if let Err(e) = graph::check_join(live, &decl) {
@@ -990,7 +987,7 @@ impl Manager {
 
     /// Removes slot `i`: its skill left or died. Its pending run in this cycle (and whatever
     /// depended on it) is taken off the counter so the cycle does not wait for it.
-    fn drop_slot(&mut self, i: usize, why: &str) {
+    fn drop_slot(&mut self, i: usize, why: DropReason) {
         if let Some(mut run) = self.running.take() {
             let n = self.cancel_all(&mut run, vec![i]);
             if n > 0 {
@@ -1000,7 +997,7 @@ impl Manager {
         }
         let slot = self.board.slot(i);
         if let Some(e) = self.skills[i].take() {
-            if why == "died" {
+            if why == DropReason::Died {
                 self.deaths += 1;
                 tracing::warn!(skill = %e.decl.name, pid = e.decl.pid, "skill died");
                 self.outbox.push(EventKind::SkillDied {
@@ -1042,7 +1039,7 @@ impl Manager {
             }
             let pid = slot.pid.load(Ordering::Acquire);
             if pid != 0 && !pid_alive(pid) {
-                self.drop_slot(i, "died");
+                self.drop_slot(i, DropReason::Died);
                 died = true;
             }
         }
@@ -1055,11 +1052,11 @@ impl Manager {
     }
 
     /// A slot's run counters, as read from the board.
-    pub(crate) fn figures(&self, s: usize) -> Figures {
+    pub(crate) fn figures(&self, s: usize) -> SkillFigures {
         let slot = self.board.slot(s);
         let runs = slot.runs.load(Ordering::Acquire);
         let total = slot.compute_ns_total.load(Ordering::Acquire);
-        Figures {
+        SkillFigures {
             runs,
             skips: slot.skips.load(Ordering::Acquire),
             failures: slot.failures.load(Ordering::Acquire),
@@ -1081,24 +1078,14 @@ impl Manager {
             .order
             .iter()
             .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
-            .map(|(s, e)| {
-                let f = self.figures(s);
-                SkillReport {
-                    name: e.decl.name.clone(),
-                    kind: e.decl.kind.clone(),
-                    mode: e.decl.mode.to_string(),
-                    active: e.active,
-                    priority: e.decl.priority,
-                    pid: e.decl.pid,
-                    runs: f.runs,
-                    skips: f.skips,
-                    failures: f.failures,
-                    compute_us_mean: f.compute_us_mean,
-                    compute_us_last: f.compute_us_last,
-                    last_cycle: f.last_cycle,
-                    last_start_ns: f.last_start_ns,
-                    last_end_ns: f.last_end_ns,
-                }
+            .map(|(s, e)| SkillReport {
+                name: e.decl.name.clone(),
+                kind: e.decl.kind.clone(),
+                mode: e.decl.mode.to_string(),
+                active: e.active,
+                priority: e.decl.priority,
+                pid: e.decl.pid,
+                figures: self.figures(s),
             })
             .collect();
         Report {

@@ -22,16 +22,7 @@ pub struct CycleStats {
     work_pending: u64,
 }
 
-/// Percentiles in microseconds.
-#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
-pub struct Percentiles {
-    /// Median.
-    pub p50: f64,
-    /// 99th percentile.
-    pub p99: f64,
-    /// Largest seen.
-    pub max: f64,
-}
+pub use skillfab_proto::control::Percentiles;
 
 impl CycleStats {
     /// Records a finished cycle.
@@ -113,22 +104,9 @@ pub struct SkillReport {
     pub priority: i32,
     /// Process id.
     pub pid: u32,
-    /// Completed runs.
-    pub runs: u64,
-    /// Cycles it could not run in (an input missing).
-    pub skips: u64,
-    /// Failed runs (error or panic).
-    pub failures: u64,
-    /// Mean compute time of a run (µs).
-    pub compute_us_mean: f64,
-    /// Compute time of the last run (µs).
-    pub compute_us_last: f64,
-    /// Cycle of the last run.
-    pub last_cycle: u64,
-    /// Monotonic clock (ns) at the start of the last run.
-    pub last_start_ns: u64,
-    /// Monotonic clock (ns) at the end of the last run.
-    pub last_end_ns: u64,
+    /// Its run figures (flattened: `runs`, `skips`, `failures`, `compute_us_mean`, … in JSON).
+    #[serde(flatten)]
+    pub figures: skillfab_proto::control::SkillFigures,
 }
 
 /// What `skillfab up --json` prints.

@@ -9,7 +9,7 @@ use serde_json::{Value as Json, json};
 use skillfab_client::Client;
 use skillfab_proto::control::{EventKind, MonitorMode};
 use skillfab_proto::domain::Domain;
-pub use skillfab_proto::json::{event_json, param_json, skill_json, value_json};
+pub use skillfab_proto::json::{event_json, param_json, skill_json, stats_json, value_json};
 use skillfab_proto::log::{Level, LogReader};
 use skillfab_proto::param::ParamValue;
 use std::time::Duration;
@@ -239,8 +239,8 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
                     s.mode,
                     s.state,
                     s.priority,
-                    s.runs,
-                    s.compute_us_mean,
+                    s.figures.runs,
+                    s.figures.compute_us_mean,
                     params.join(" ")
                 ));
             }
@@ -343,30 +343,26 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
                 s.cycles,
                 if s.running { "running" } else { "stopped" },
                 s.overruns,
-                s.latency_us.0,
-                s.latency_us.1,
-                s.latency_us.2,
+                s.latency_us.p50,
+                s.latency_us.p99,
+                s.latency_us.max,
                 s.deaths,
                 s.events
             );
-            for (channel, who, cycle) in &s.channels {
-                human.push_str(&format!("\n  channel {channel:<10} {who} (cycle {cycle})"));
+            for ch in &s.channels {
+                human.push_str(&format!(
+                    "\n  channel {:<10} {} (cycle {})",
+                    ch.channel, ch.winner, ch.cycle
+                ));
             }
-            for (name, runs, skips, fails, us) in &s.skills {
-                human.push_str(&format!("\n  {name:<16} runs {runs:>8} skips {skips:>6} failures {fails:>6} compute {us:.1} µs"));
+            for k in &s.skills {
+                let f = &k.figures;
+                human.push_str(&format!(
+                    "\n  {:<16} runs {:>8} skips {:>6} failures {:>6} compute {:.1} µs",
+                    k.name, f.runs, f.skips, f.failures, f.compute_us_mean
+                ));
             }
-            let skills: Vec<Json> = s
-                .skills
-                .iter()
-                .map(|(n, r, sk, f, us)| json!({"name": n, "runs": r, "skips": sk, "failures": f, "compute_us_mean": us}))
-                .collect();
-            print(
-                human,
-                json!({"cycles": s.cycles, "running": s.running, "overruns": s.overruns,
-                       "latency_us": {"p50": s.latency_us.0, "p99": s.latency_us.1, "max": s.latency_us.2},
-                       "deaths": s.deaths, "events": s.events, "skills": skills,
-                       "channels": s.channels.iter().map(|(c, w, k)| json!({"channel": c, "winner": w, "cycle": k})).collect::<Vec<_>>()}),
-            );
+            print(human, stats_json(&s));
         }
         CtlCmd::Run => {
             c.run()?;

@@ -14,7 +14,7 @@ use anyhow::{Context, bail};
 use serde::Serialize;
 use skillfab_client::Client;
 use skillfab_manager::launch::find_program;
-use skillfab_proto::control::{EventKind, MonitorMode};
+use skillfab_proto::control::{EventKind, MonitorMode, SkillState};
 use skillfab_proto::domain::Domain;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -198,7 +198,7 @@ fn connect(net: &Network) -> anyhow::Result<Client> {
         if let Ok(c) = Client::connect(&net.domain)
             && let Ok(list) = c.list()
             && list.len() == SKILLS.len() + 1
-            && list.iter().all(|s| s.state != "starting")
+            && list.iter().all(|s| s.state != SkillState::Starting)
         {
             return Ok(c);
         }

@@ -3,7 +3,7 @@
 //! [`App::on_key`], which returns the [`Command`]s for the worker.
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
-use skillfab_proto::control::{SkillInfo, Stats};
+use skillfab_proto::control::{SkillInfo, SkillState, Stats};
 use skillfab_proto::log::{Level, LogLine};
 use skillfab_proto::value::Value;
 use std::collections::VecDeque;
@@ -326,7 +326,7 @@ impl App {
             }
             KeyCode::Char('a') => {
                 let s = self.selected_skill()?;
-                let (name, on) = (s.name.clone(), s.state != "active");
+                let (name, on) = (s.name.clone(), s.state != SkillState::Active);
                 self.connected().then_some(Command::Activate(name, on))
             }
             KeyCode::Char('e') => {

@@ -22,7 +22,7 @@ use anyhow::Context;
 use app::{Dir, PortView, Snapshot};
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 use skillfab_client::{Client, ClientError};
-use skillfab_proto::control::SkillInfo;
+use skillfab_proto::control::{PortInfo, SkillInfo};
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::LogReader;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
@@ -275,7 +275,12 @@ fn read_ports(
                 Err(e) => Err(e),
             }
         };
-    for (port, topic, ty) in &s.inputs {
+    for PortInfo {
+        port,
+        topic,
+        type_name: ty,
+    } in &s.inputs
+    {
         let (source, value) = if let Some(channel) = topic.strip_prefix("channel/") {
             let path = format!("channel.{channel}.command");
             let v = read(&path)?;
@@ -284,8 +289,8 @@ fn read_ports(
             match skills.iter().find_map(|p| {
                 p.outputs
                     .iter()
-                    .find(|(_, t, _)| t == topic)
-                    .map(|(o, _, _)| format!("{}.{o}", p.name))
+                    .find(|o| o.topic == *topic)
+                    .map(|o| format!("{}.{}", p.name, o.port))
             }) {
                 Some(path) => {
                     let v = read(&path)?;
@@ -305,7 +310,12 @@ fn read_ports(
             value,
         });
     }
-    for (port, topic, ty) in &s.outputs {
+    for PortInfo {
+        port,
+        topic,
+        type_name: ty,
+    } in &s.outputs
+    {
         let path = format!("{}.{port}", s.name);
         out.push(PortView {
             dir: Dir::Out,

@@ -6,42 +6,49 @@ use super::view::{bar_strip, compact, render};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent};
-use skillfab_proto::control::{SkillInfo, Stats};
+use skillfab_proto::control::{
+    ChannelStat, Percentiles, PortInfo, SkillFigures, SkillInfo, SkillState, Stats,
+};
 use skillfab_proto::decl::Mode;
 use skillfab_proto::log::{Level, LogLine};
 use skillfab_proto::param::{ParamKind, ParamSpec, ParamValue};
 use skillfab_proto::value::Value;
 
-fn skill(name: &str, mode: Mode, state: &str, runs: u64, last: u64) -> SkillInfo {
+fn skill(name: &str, mode: Mode, state: SkillState, runs: u64, last: u64) -> SkillInfo {
     SkillInfo {
         name: name.into(),
         kind: name.into(),
         mode,
-        state: state.into(),
+        state,
         priority: 0,
         pid: 4000 + runs as u32 % 1000,
         params: Vec::new(),
         values: Vec::new(),
         inputs: Vec::new(),
         outputs: Vec::new(),
-        runs,
-        skips: 0,
-        failures: 0,
-        last_cycle: last,
-        compute_us_last: 3.2,
-        compute_us_mean: 2.87,
+        figures: SkillFigures {
+            runs,
+            last_cycle: last,
+            compute_us_last: 3.2,
+            compute_us_mean: 2.87,
+            ..SkillFigures::default()
+        },
     }
 }
 
-fn port(p: &str, ty: &str) -> (String, String, String) {
-    (p.into(), p.into(), ty.into())
+fn port(p: &str, ty: &str) -> PortInfo {
+    PortInfo {
+        port: p.into(),
+        topic: p.into(),
+        type_name: ty.into(),
+    }
 }
 
 /// The hello network (ticker → scale → smooth) plus a sonar-like device, as a snapshot.
 fn hello() -> Snapshot {
-    let mut ticker = skill("ticker", Mode::Sync, "active", 1234, 1234);
+    let mut ticker = skill("ticker", Mode::Sync, SkillState::Active, 1234, 1234);
     ticker.outputs = vec![port("tick", "skillfab.Tick")];
-    let mut scale = skill("scale", Mode::Sync, "active", 1234, 1234);
+    let mut scale = skill("scale", Mode::Sync, SkillState::Active, 1234, 1234);
     scale.inputs = vec![port("tick", "skillfab.Tick")];
     scale.outputs = vec![port("scaled", "skillfab.Scaled")];
     scale.params = vec![ParamSpec {
@@ -53,9 +60,9 @@ fn hello() -> Snapshot {
         doc: "Factor applied to the tick.".into(),
     }];
     scale.values = vec![("gain".into(), ParamValue::Float(3.0))];
-    let mut smooth = skill("smooth", Mode::Async, "inactive", 600, 1100);
+    let mut smooth = skill("smooth", Mode::Async, SkillState::Inactive, 600, 1100);
     smooth.inputs = vec![port("scaled", "skillfab.Scaled")];
-    let mut sonar = skill("sonar", Mode::Sync, "active", 1234, 1233);
+    let mut sonar = skill("sonar", Mode::Sync, SkillState::Active, 1234, 1233);
     sonar.kind = "denning".into();
     sonar.outputs = vec![port("sonar", "denning.Sonar")];
     Snapshot {
@@ -64,11 +71,19 @@ fn hello() -> Snapshot {
             cycles: 1234,
             running: true,
             overruns: 1,
-            latency_us: (190.5, 387.0, 1210.0),
+            latency_us: Percentiles {
+                p50: 190.5,
+                p99: 387.0,
+                max: 1210.0,
+            },
             skills: Vec::new(),
             deaths: 0,
             events: 17,
-            channels: vec![("drive".into(), "avoid".into(), 1234)],
+            channels: vec![ChannelStat {
+                channel: "drive".into(),
+                winner: "avoid".into(),
+                cycle: 1234,
+            }],
         },
         latencies: (0..300)
             .map(|i| {

@@ -7,7 +7,7 @@ use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Borders, Cell, Paragraph, Row, Sparkline, Table, TableState};
-use skillfab_proto::control::SkillInfo;
+use skillfab_proto::control::{SkillInfo, SkillState};
 use skillfab_proto::log::Level;
 use skillfab_proto::value::Value;
 
@@ -114,11 +114,11 @@ fn dim() -> Style {
     Style::default().fg(Color::DarkGray)
 }
 
-fn state_style(state: &str) -> Style {
+fn state_style(state: SkillState) -> Style {
     match state {
-        "active" => Style::default().fg(Color::Green),
-        "starting" => Style::default().fg(Color::Yellow),
-        _ => dim(),
+        SkillState::Active => Style::default().fg(Color::Green),
+        SkillState::Starting => Style::default().fg(Color::Yellow),
+        SkillState::Inactive => dim(),
     }
 }
 
@@ -167,9 +167,9 @@ fn manager_bar(app: &App, f: &mut Frame, area: Rect) {
                 " · cycle {} · overruns {}{deaths} · latency p50 {} p99 {} max {}",
                 st.cycles,
                 st.overruns,
-                micros(st.latency_us.0),
-                micros(st.latency_us.1),
-                micros(st.latency_us.2)
+                micros(st.latency_us.p50),
+                micros(st.latency_us.p99),
+                micros(st.latency_us.max)
             )));
         }
         (Link::Down(why), _) => spans.push(Span::styled(
@@ -223,10 +223,10 @@ fn latency(app: &App, f: &mut Frame, area: Rect) {
 }
 
 fn age(s: &SkillInfo, cycle: u64) -> String {
-    if s.last_cycle == 0 {
+    if s.figures.last_cycle == 0 {
         "-".into()
     } else {
-        format!("{} cyc", cycle.saturating_sub(s.last_cycle))
+        format!("{} cyc", cycle.saturating_sub(s.figures.last_cycle))
     }
 }
 
@@ -246,11 +246,11 @@ fn skills_table(app: &App, f: &mut Frame, area: Rect) {
                 Cell::from(s.name.clone()),
                 Cell::from(s.kind.clone()),
                 Cell::from(s.mode.to_string()),
-                Cell::from(s.state.clone()).style(state_style(&s.state)),
+                Cell::from(s.state.as_str()).style(state_style(s.state)),
                 Cell::from(s.priority.to_string()),
-                Cell::from(s.runs.to_string()),
-                Cell::from(s.failures.to_string()),
-                Cell::from(micros(s.compute_us_mean)),
+                Cell::from(s.figures.runs.to_string()),
+                Cell::from(s.figures.failures.to_string()),
+                Cell::from(micros(s.figures.compute_us_mean)),
                 Cell::from(age(s, cycle)),
                 Cell::from(if app.io_logged(&s.name) { "io" } else { "" }),
             ])
@@ -292,7 +292,7 @@ fn channel_line(app: &App, f: &mut Frame, area: Rect) {
                 .stats
                 .channels
                 .iter()
-                .map(|(c, w, k)| format!("{c} → {w} (cycle {k})"))
+                .map(|c| format!("{} → {} (cycle {})", c.channel, c.winner, c.cycle))
                 .collect();
             format!(" channels: {}", parts.join(" · "))
         }
@@ -325,7 +325,7 @@ fn detail_pane(app: &App, f: &mut Frame, area: Rect) {
         s.state,
         s.priority,
         s.pid,
-        micros(s.compute_us_last)
+        micros(s.figures.compute_us_last)
     );
     let block = Block::default().borders(Borders::ALL).title(title);
     let inner = block.inner(area);

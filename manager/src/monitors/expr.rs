@@ -17,20 +17,8 @@
 //! comparisons take numbers; `and`/`or`/`not` take conditions. A path without `min`/`max`
 //! must name one number; inside them it names an array or a range.
 
-use serde::{Deserialize, Serialize};
-
-/// A reference to a value of a skill's output.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub struct PathRef {
-    /// As written.
-    pub text: String,
-    /// Skill instance.
-    pub skill: String,
-    /// Output port.
-    pub output: String,
-    /// Field path inside the message (may be empty).
-    pub field: String,
-}
+/// A reference to a value of a skill's output (the one path parser is proto's).
+pub use skillfab_proto::value::OutputPath as PathRef;
 
 /// Arithmetic operators.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -273,31 +261,9 @@ impl Parser {
         self.atom()
     }
     fn path(&mut self, text: String, at: usize) -> Result<PathRef, ExprError> {
-        let mut parts = text.splitn(3, '.');
-        let skill = parts.next().unwrap_or_default().to_string();
-        let second = parts.next().unwrap_or_default();
-        let (output, tail) = match second.find('[') {
-            Some(i) => (&second[..i], &second[i..]),
-            None => (second, ""),
-        };
-        if skill.is_empty() || output.is_empty() {
-            return Err(ExprError {
-                position: at,
-                message: format!("'{text}' is not skill.output[.field]"),
-            });
-        }
-        let mut field = tail.to_string();
-        if let Some(rest) = parts.next() {
-            if !field.is_empty() {
-                field.push('.');
-            }
-            field.push_str(rest);
-        }
-        Ok(PathRef {
-            text: text.clone(),
-            skill,
-            output: output.to_string(),
-            field,
+        PathRef::parse(&text).map_err(|e| ExprError {
+            position: at,
+            message: e.reason,
         })
     }
     fn atom(&mut self) -> Result<Expr, ExprError> {

@@ -1,7 +1,7 @@
 //! The fabric's values and events as JSON: what `skillfab ctl --json`, the fabric log and the
 //! C and Python clients print and parse.
 
-use crate::control::{Event, EventKind, SkillInfo};
+use crate::control::{Event, EventKind, PortInfo, SkillInfo, Stats};
 use crate::param::ParamValue;
 use crate::value::Value;
 use serde_json::{Value as Json, json};
@@ -114,14 +114,28 @@ pub fn skill_json(s: &SkillInfo) -> Json {
                    "max": p.max.as_ref().map(param_json), "doc": p.doc})
         })
         .collect();
-    let ports = |p: &[(String, String, String)]| -> Vec<Json> {
+    let ports = |p: &[PortInfo]| -> Vec<Json> {
         p.iter()
-            .map(|(port, topic, ty)| json!({"port": port, "topic": topic, "type": ty}))
+            .map(|p| json!({"port": p.port, "topic": p.topic, "type": p.type_name}))
             .collect()
     };
-    json!({"name": s.name, "kind": s.kind, "mode": s.mode.to_string(), "state": s.state,
+    let f = &s.figures;
+    json!({"name": s.name, "kind": s.kind, "mode": s.mode.to_string(), "state": s.state.as_str(),
            "priority": s.priority, "pid": s.pid, "params": params, "inputs": ports(&s.inputs),
-           "outputs": ports(&s.outputs), "runs": s.runs, "skips": s.skips, "failures": s.failures,
-           "last_cycle": s.last_cycle, "compute_us_last": s.compute_us_last,
-           "compute_us_mean": s.compute_us_mean})
+           "outputs": ports(&s.outputs), "runs": f.runs, "skips": f.skips, "failures": f.failures,
+           "last_cycle": f.last_cycle, "compute_us_last": f.compute_us_last,
+           "compute_us_mean": f.compute_us_mean})
+}
+
+/// Cycle statistics as JSON (what `skillfab ctl --json stats` prints).
+pub fn stats_json(s: &Stats) -> Json {
+    let l = &s.latency_us;
+    json!({"cycles": s.cycles, "running": s.running, "overruns": s.overruns,
+           "latency_us": {"p50": l.p50, "p99": l.p99, "max": l.max},
+           "skills": s.skills.iter().map(|k| json!({"name": k.name, "runs": k.figures.runs,
+               "skips": k.figures.skips, "failures": k.figures.failures,
+               "compute_us_mean": k.figures.compute_us_mean})).collect::<Vec<_>>(),
+           "deaths": s.deaths, "events": s.events,
+           "channels": s.channels.iter().map(|c| json!({"channel": c.channel, "winner": c.winner,
+               "cycle": c.cycle})).collect::<Vec<_>>()})
 }

@@ -153,6 +153,41 @@ fn perr(reason: String) -> PathError {
     PathError { reason }
 }
 
+/// A reference to a value of a skill's output, `skill.output[.field][index]`: the one parser
+/// of such paths (value queries, monitor expressions).
+#[derive(Debug, Clone, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub struct OutputPath {
+    /// As written.
+    pub text: String,
+    /// Skill instance.
+    pub skill: String,
+    /// Output port.
+    pub output: String,
+    /// Field path inside the message, for [`resolve`] (empty: the whole message).
+    pub field: String,
+}
+
+impl OutputPath {
+    /// Splits `text` into skill, output and field path. The field path is not checked here:
+    /// that needs the output's schema ([`resolve`]).
+    pub fn parse(text: &str) -> Result<OutputPath, PathError> {
+        let text = text.trim();
+        let bad = || perr(format!("'{text}' is not skill.output[.field][index]"));
+        let (skill, rest) = text.split_once('.').ok_or_else(bad)?;
+        let split = rest.find(['.', '[']).unwrap_or(rest.len());
+        let (output, field) = (&rest[..split], &rest[split..]);
+        if skill.is_empty() || output.is_empty() {
+            return Err(bad());
+        }
+        Ok(OutputPath {
+            text: text.to_string(),
+            skill: skill.to_string(),
+            output: output.to_string(),
+            field: field.strip_prefix('.').unwrap_or(field).to_string(),
+        })
+    }
+}
+
 /// A path resolved against a schema: where the value is and what it is.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FieldPath {
@@ -283,6 +318,22 @@ mod tests {
         unsafe {
             std::slice::from_raw_parts((v as *const T).cast::<u8>(), std::mem::size_of::<T>())
                 .to_vec()
+        }
+    }
+
+    #[test]
+    fn output_paths_split_into_skill_output_and_field() {
+        let p = |t: &str| OutputPath::parse(t).map(|p| (p.skill, p.output, p.field));
+        let own = |a: &str, b: &str, c: &str| Ok((a.to_string(), b.to_string(), c.to_string()));
+        assert_eq!(p("denning.sonar"), own("denning", "sonar", ""));
+        assert_eq!(
+            p("denning.sonar.range[3]"),
+            own("denning", "sonar", "range[3]")
+        );
+        assert_eq!(p("cam.image[0..3]"), own("cam", "image", "[0..3]"));
+        assert_eq!(p(" a.b[1].x.y "), own("a", "b", "[1].x.y"));
+        for bad in ["", "denning", ".sonar", "denning.", "denning.[0]"] {
+            assert!(p(bad).is_err(), "{bad:?}");
         }
     }
 

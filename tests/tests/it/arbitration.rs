@@ -144,8 +144,8 @@ fn the_higher_priority_wins_and_a_runtime_priority_change_flips_it_next_cycle() 
     let v = c.query("channel.drive").unwrap().0;
     assert_eq!(translate(&v), 1.0);
     let stats = c.stats().unwrap();
-    assert_eq!(stats.channels[0].0, "drive");
-    assert_eq!(stats.channels[0].1, "lo");
+    assert_eq!(stats.channels[0].channel, "drive");
+    assert_eq!(stats.channels[0].winner, "lo");
 }
 
 #[test]
@@ -175,7 +175,7 @@ fn deactivating_or_killing_the_winner_hands_the_channel_over() {
         .into_iter()
         .find(|s| s.name == "dev")
         .unwrap();
-    assert_eq!(dev.failures, 0);
+    assert_eq!(dev.figures.failures, 0);
 }
 
 #[test]
@@ -215,7 +215,7 @@ fn nobody_proposing_yields_the_safe_command() {
         field(&v, "command").to_string(),
         r#"{"translate": 0, "rotate": 0}"#
     );
-    assert_eq!(c.stats().unwrap().channels[0].1, "safe");
+    assert_eq!(c.stats().unwrap().channels[0].winner, "safe");
     // Cycles go on: a proposer that does not propose does not stall the device.
     let k = c.stats().unwrap().cycles;
     t.wait_until("cycles without proposals", || {
@@ -299,8 +299,8 @@ fn a_quiet_proposer_downstream_of_the_device_does_not_cancel_the_others() {
     });
     assert_never_loses(&mut c, "steady", 3000);
     let s = c.stats().unwrap();
-    let steady = s.skills.iter().find(|k| k.0 == "steady").unwrap();
-    assert_eq!(steady.3, 0, "no failed runs: {steady:?}");
+    let steady = s.skills.iter().find(|k| k.name == "steady").unwrap();
+    assert_eq!(steady.figures.failures, 0, "no failed runs: {steady:?}");
 }
 
 #[test]

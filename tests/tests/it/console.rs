@@ -8,6 +8,7 @@
 
 use nix::pty::{Winsize, openpty};
 use skillfab_client::Client;
+use skillfab_proto::control::SkillState;
 use skillfab_proto::param::ParamValue;
 use skillfab_tests::{TestDomain, WAIT};
 use std::io::{Read, Write};
@@ -166,7 +167,7 @@ fn keys_drive_the_fabric() {
             .list()
             .unwrap()
             .iter()
-            .any(|s| s.name == "scale" && s.state == "inactive")
+            .any(|s| s.name == "scale" && s.state == SkillState::Inactive)
     });
     con.wait_for("scale deactivated");
 
@@ -220,7 +221,7 @@ fn keys_drive_the_fabric() {
             .list()
             .unwrap()
             .iter()
-            .any(|s| s.name == "scale" && s.state == "active")
+            .any(|s| s.name == "scale" && s.state == SkillState::Active)
     });
 
     // v: the skill's own log lines, every level (the skill applied the new gain).

@@ -7,6 +7,67 @@ use serde::{Deserialize, Serialize};
 
 use super::MonitorMode;
 
+/// One skill's run figures, as the board counts them: the one shape they take from the
+/// manager's engine to the wire, the console and the run report.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct SkillFigures {
+    /// Completed runs.
+    pub runs: u64,
+    /// Cycles it could not run in (an input missing).
+    pub skips: u64,
+    /// Failed runs (error or panic).
+    pub failures: u64,
+    /// Mean compute time of a run (µs).
+    pub compute_us_mean: f64,
+    /// Compute time of the last run (µs).
+    pub compute_us_last: f64,
+    /// Cycle of the last run (0: none).
+    pub last_cycle: u64,
+    /// Monotonic clock (ns) at the start of the last run.
+    pub last_start_ns: u64,
+    /// Monotonic clock (ns) at the end of the last run.
+    pub last_end_ns: u64,
+}
+
+/// Where a registered skill stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum SkillState {
+    /// Registered; its ports are not open yet, so cycles do not plan with it.
+    Starting,
+    /// Run in every cycle its inputs allow.
+    Active,
+    /// Registered and ready, not run.
+    Inactive,
+}
+
+impl SkillState {
+    /// Its name in text and JSON: `starting`, `active`, `inactive`.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            SkillState::Starting => "starting",
+            SkillState::Active => "active",
+            SkillState::Inactive => "inactive",
+        }
+    }
+}
+
+impl std::fmt::Display for SkillState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.as_str())
+    }
+}
+
+/// A declared port, as listed.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PortInfo {
+    /// The port's name in the skill.
+    pub port: String,
+    /// The topic it reads or writes.
+    pub topic: String,
+    /// The message type name.
+    pub type_name: String,
+}
+
 /// A skill as listed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SkillInfo {
@@ -16,8 +77,8 @@ pub struct SkillInfo {
     pub kind: String,
     /// Scheduling mode.
     pub mode: Mode,
-    /// `active`, `inactive` or `starting` (registered, ports not open yet).
-    pub state: String,
+    /// Where it stands.
+    pub state: SkillState,
     /// Arbitration priority.
     pub priority: i32,
     /// Process id.
@@ -26,22 +87,12 @@ pub struct SkillInfo {
     pub params: Vec<ParamSpec>,
     /// Their current values.
     pub values: Vec<(String, ParamValue)>,
-    /// Input ports: (port, topic, type name).
-    pub inputs: Vec<(String, String, String)>,
-    /// Output ports: (port, topic, type name).
-    pub outputs: Vec<(String, String, String)>,
-    /// Completed runs.
-    pub runs: u64,
-    /// Skipped cycles.
-    pub skips: u64,
-    /// Failed runs.
-    pub failures: u64,
-    /// Cycle of the last run (0: none).
-    pub last_cycle: u64,
-    /// Compute time of the last run (µs).
-    pub compute_us_last: f64,
-    /// Mean compute time (µs).
-    pub compute_us_mean: f64,
+    /// Input ports.
+    pub inputs: Vec<PortInfo>,
+    /// Output ports.
+    pub outputs: Vec<PortInfo>,
+    /// Its run figures.
+    pub figures: SkillFigures,
 }
 
 /// An installed monitor.
@@ -61,6 +112,37 @@ pub struct MonitorInfo {
     pub fired: u64,
 }
 
+/// Percentiles in microseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Percentiles {
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest seen.
+    pub max: f64,
+}
+
+/// One skill's line in [`Stats`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SkillStat {
+    /// Instance name.
+    pub name: String,
+    /// Its run figures.
+    pub figures: SkillFigures,
+}
+
+/// One actuator channel's line in [`Stats`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelStat {
+    /// The channel.
+    pub channel: String,
+    /// The winner of its last command, or `blend` / `safe`.
+    pub winner: String,
+    /// The cycle of its last command.
+    pub cycle: u64,
+}
+
 /// Cycle statistics.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Stats {
@@ -70,16 +152,16 @@ pub struct Stats {
     pub running: bool,
     /// Overruns.
     pub overruns: u64,
-    /// Latency percentiles (µs): p50, p99, max.
-    pub latency_us: (f64, f64, f64),
-    /// Per skill: (name, runs, skips, failures, mean compute µs).
-    pub skills: Vec<(String, u64, u64, u64, f64)>,
+    /// Cycle latency (start → last expected run done).
+    pub latency_us: Percentiles,
+    /// Per skill, in registration order.
+    pub skills: Vec<SkillStat>,
     /// Skills that died.
     pub deaths: u64,
     /// Events published so far.
     pub events: u64,
-    /// Per actuator channel: (channel, winner or `blend`/`safe`, cycle of the last command).
-    pub channels: Vec<(String, String, u64)>,
+    /// Per actuator channel.
+    pub channels: Vec<ChannelStat>,
 }
 
 /// What the manager answers.

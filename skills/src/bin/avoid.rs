@@ -1,4 +1,4 @@
-//! The `avoid` skill (see `skills::nav`).
+//! The `avoid` skill (see `skills/src/nav/avoid.rs`).
 fn main() -> std::process::ExitCode {
     skill_sdk::main::<skills::nav::Avoid>()
 }

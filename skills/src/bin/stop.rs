@@ -1,4 +1,4 @@
-//! The `stop` skill (see `skills::nav`).
+//! The `stop` skill (see `skills/src/nav/stop.rs`).
 fn main() -> std::process::ExitCode {
     skill_sdk::main::<skills::nav::Stop>()
 }

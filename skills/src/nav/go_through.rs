@@ -1,0 +1,108 @@
+//! `go_through`: driving through a located opening.
+
+use super::*;
+
+/// Parameters of [`GoThrough`].
+#[derive(Params, Debug, Clone)]
+pub struct GoThroughParams {
+    /// Forward speed (m/s).
+    #[param(default = 0.3, min = 0.0, max = 1.0)]
+    pub speed: f64,
+    /// Steering gain (rad/s per rad).
+    #[param(default = 1.5, min = 0.0, max = 10.0)]
+    pub gain: f64,
+    /// Line up on the door's axis this far before the opening (m).
+    #[param(default = 1.0, min = 0.3, max = 3.0)]
+    pub approach: f64,
+    /// Centring gain between the door posts (rad per m of imbalance).
+    #[param(default = 0.8, min = 0.0, max = 10.0)]
+    pub centre: f64,
+}
+
+/// Inputs of [`GoThrough`].
+#[derive(Inputs)]
+pub struct GoIn<'a> {
+    /// The opening.
+    pub door: Input<'a, Door>,
+    /// Odometry.
+    pub odometry: Input<'a, Odometry>,
+    /// The ring (centring between the posts).
+    pub sonar: Input<'a, Sonar>,
+}
+
+/// Drive through a located opening: to a point `approach` before it on its axis, then along
+/// the axis (a carrot 0.6 m ahead on it), centred between the posts by the side sonars, and
+/// on. Pushing without moving (a post) backs it off to line up again.
+#[derive(Default)]
+pub struct GoThrough {
+    lined_up: bool,
+    /// Cycles spent commanding forward motion without moving.
+    stuck: u32,
+    /// Cycles of backing off left.
+    backing: u32,
+}
+
+impl Skill for GoThrough {
+    type Params = GoThroughParams;
+    type Inputs<'a> = GoIn<'a>;
+    type Outputs<'a> = DriveOut<'a>;
+    const PRIORITY: i32 = 6;
+    fn compute(&mut self, ctx: &Ctx<GoThroughParams>, i: GoIn, o: &mut DriveOut) -> SkillResult {
+        let (d, od, s, p) = (*i.door, *i.odometry, *i.sonar, ctx.params);
+        if !d.found {
+            return Ok(());
+        }
+        if self.backing > 0 {
+            self.backing -= 1;
+            o.drive.set(Drive {
+                translate: -0.15,
+                rotate: 0.0,
+            });
+            return Ok(());
+        }
+        let (c, sn) = (d.heading.cos(), d.heading.sin());
+        // Along-axis and cross-axis position relative to the door centre.
+        let along = (od.x - d.x) * c + (od.y - d.y) * sn;
+        let cross = -(od.x - d.x) * sn + (od.y - d.y) * c;
+        let start = (d.x - p.approach * c, d.y - p.approach * sn);
+        if !self.lined_up && (od.x - start.0).hypot(od.y - start.1) < 0.25 {
+            self.lined_up = true;
+        }
+        // Off the axis before the wall: line up again.
+        if self.lined_up && along < -0.2 && cross.abs() > 0.35 {
+            self.lined_up = false;
+        }
+        let goal = if self.lined_up || along > 0.3 {
+            let ahead = along + 0.6;
+            (d.x + ahead * c, d.y + ahead * sn)
+        } else {
+            start
+        };
+        let want = (goal.1 - od.y).atan2(goal.0 - od.x);
+        let mut err = wrap(want - od.theta);
+        if self.lined_up && (-0.9..0.5).contains(&along) {
+            // Between the posts: steer away from the nearer one.
+            let left = min_in(&s, 0.5, 2.4).min(0.8);
+            let right = min_in(&s, -2.4, -0.5).min(0.8);
+            err += p.centre * (left - right) / 2.0;
+        }
+        let rotate = (p.gain * err).clamp(-1.0, 1.0);
+        let translate = if err.abs() < 0.8 {
+            p.speed * err.cos().powi(2)
+        } else {
+            0.0
+        };
+        if translate > 0.1 && od.v.abs() < 0.02 {
+            self.stuck += 1;
+        } else {
+            self.stuck = 0;
+        }
+        if self.stuck > 80 {
+            self.stuck = 0;
+            self.backing = 100;
+            self.lined_up = false;
+        }
+        o.drive.set(Drive { translate, rotate });
+        Ok(())
+    }
+}

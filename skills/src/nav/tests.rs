@@ -1,0 +1,304 @@
+//! The navigation skills through the SDK's harness, on scripted sonar rings.
+
+use super::*;
+use skill_sdk::harness::Harness;
+
+fn ring(f: impl Fn(f64) -> f64) -> Sonar {
+    let mut s = Sonar {
+        range: [0.0; SONARS],
+        age_ms: [10.0; SONARS],
+    };
+    for i in 0..SONARS {
+        s.range[i] = f(sonar_angle(i));
+    }
+    s
+}
+
+#[test]
+fn avoid_turns_away_from_the_near_side_and_is_quiet_in_the_open() {
+    let mut h = Harness::<Avoid>::new();
+    h.input("sonar", ring(|_| 5.0));
+    assert!(
+        h.step().unwrap().output::<Drive>("drive").is_none(),
+        "nothing near: no proposal"
+    );
+    // An obstacle ahead and to the right: turn left (positive rotate).
+    let mut h = Harness::<Avoid>::new();
+    h.input(
+        "sonar",
+        ring(|a| if (-1.0..0.3).contains(&a) { 0.3 } else { 4.0 }),
+    );
+    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    assert!(d.rotate > 0.0, "{d:?}");
+    let mut h = Harness::<Avoid>::new();
+    h.input(
+        "sonar",
+        ring(|a| if (-0.3..1.0).contains(&a) { 0.3 } else { 4.0 }),
+    );
+    assert!(h.step().unwrap().output::<Drive>("drive").unwrap().rotate < 0.0);
+    // A lowered safe distance lets it pass close obstacles.
+    let mut h = Harness::<Avoid>::new();
+    h.set_param("safe_distance=0.2").unwrap();
+    h.input("sonar", ring(|_| 0.3));
+    assert!(h.step().unwrap().output::<Drive>("drive").is_none());
+}
+
+#[test]
+fn home_converges_on_its_goal() {
+    // Integrate the proposals with a unicycle: the robot ends near the goal.
+    let mut h = Harness::<Home>::new();
+    let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 2.0f64);
+    let goal = (4.0, 3.0);
+    for _ in 0..2000 {
+        let range = (goal.0 - x).hypot(goal.1 - y);
+        let bearing = wrap((goal.1 - y).atan2(goal.0 - x) - th);
+        h.input(
+            "target",
+            Target {
+                seen: true,
+                visible: true,
+                id: 7,
+                x: goal.0,
+                y: goal.1,
+                range,
+                bearing,
+            },
+        );
+        let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        th += d.rotate * 0.05;
+        x += d.translate * 0.05 * th.cos();
+        y += d.translate * 0.05 * th.sin();
+    }
+    let left = (goal.0 - x).hypot(goal.1 - y);
+    assert!(
+        left < 1.5 && left > 1.2,
+        "stops at its stop distance: {left}"
+    );
+}
+
+#[test]
+fn barcode_track_places_the_sighting_in_the_odometry_frame() {
+    let mut h = Harness::<BarcodeTrack>::new();
+    let mut b = Barcodes {
+        count: 1,
+        ..Barcodes::default()
+    };
+    b.id[0] = 7;
+    b.bearing[0] = PI / 2.0;
+    b.range[0] = 2.0;
+    h.input("barcodes", b);
+    h.input(
+        "odometry",
+        Odometry {
+            x: 1.0,
+            y: 1.0,
+            theta: 0.0,
+            v: 0.0,
+            w: 0.0,
+        },
+    );
+    let t = *h.step().unwrap().output::<Target>("target").unwrap();
+    assert!(t.seen && t.visible);
+    assert!(
+        (t.x - 1.0).abs() < 1e-9 && (t.y - 3.0).abs() < 1e-9,
+        "{t:?}"
+    );
+    // Out of view, it is remembered and re-aimed from the new pose.
+    h.input("barcodes", Barcodes::default());
+    h.input(
+        "odometry",
+        Odometry {
+            x: 1.0,
+            y: 1.0,
+            theta: PI / 2.0,
+            v: 0.0,
+            w: 0.0,
+        },
+    );
+    let t = *h.step().unwrap().output::<Target>("target").unwrap();
+    assert!(t.seen && !t.visible && t.bearing.abs() < 1e-9 && (t.range - 2.0).abs() < 1e-9);
+}
+
+/// A pass of the robot along `path` (x, y, heading per cycle) in `world`, with the
+/// simulator's sonar model read group by group as the device reports it; `each` gets
+/// the pose as odometry.
+fn pass<S: Skill>(
+    h: &mut Harness<S>,
+    world: &str,
+    path: impl Iterator<Item = (f64, f64, f64)>,
+    mut each: impl FnMut(&mut Harness<S>, &Odometry),
+) {
+    use denning_sim::sim::Sim;
+    use denning_sim::world::World;
+    let mut sim = Sim::new(World::parse(world, "test").unwrap(), 3);
+    let mut s = Sonar {
+        range: [f64::NAN; SONARS],
+        age_ms: [f64::INFINITY; SONARS],
+    };
+    for (k, (x, y, th)) in path.enumerate() {
+        sim.pose = [x, y, th];
+        for i in 0..SONARS {
+            s.age_ms[i] += 10.0;
+            if i % 3 == k % 3 {
+                s.range[i] = sim.sonar(i).unwrap_or(f64::INFINITY);
+                s.age_ms[i] = 0.0;
+            }
+        }
+        let od = Odometry {
+            x,
+            y,
+            theta: th,
+            v: 0.3,
+            w: 0.0,
+        };
+        h.input("sonar", s);
+        each(h, &od);
+    }
+}
+
+/// A wall along x = 2 with a 1.2 m opening from y = 0.4 to 1.6, the barcode south of it.
+const DOOR_WORLD: &str = "name = 'door'\nstart = [0.0, 0.0, 0.0]\n\
+    [[wall]]\nfrom = [2.0, -3.0]\nto = [2.0, 0.4]\n\
+    [[wall]]\nfrom = [2.0, 1.6]\nto = [2.0, 4.0]\n\
+    [[barcode]]\nid = 7\nat = [1.95, -0.4]\n";
+
+/// The door's barcode at `code`, seen before and out of view now, from pose `od`.
+fn remembered(code: (f64, f64), od: &Odometry) -> Target {
+    let (dx, dy) = (code.0 - od.x, code.1 - od.y);
+    Target {
+        seen: true,
+        visible: false,
+        id: 7,
+        x: code.0,
+        y: code.1,
+        range: dx.hypot(dy),
+        bearing: wrap(dy.atan2(dx) - od.theta),
+    }
+}
+
+#[test]
+fn door_locate_finds_the_opening_from_a_pass_along_the_wall() {
+    let mut h = Harness::<DoorLocate>::new();
+    let code = (1.95, -0.4);
+    // Drive north 1 m from the wall, past the barcode and the opening.
+    let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
+    let mut last = Door::default();
+    pass(&mut h, DOOR_WORLD, path, |h, od| {
+        h.input("odometry", *od);
+        h.input("target", remembered(code, od));
+        last = *h.step().unwrap().output::<Door>("door").unwrap();
+    });
+    assert!(last.found, "{last:?}");
+    assert!(
+        (last.x - 2.0).abs() < 0.1 && (last.y - 1.0).abs() < 0.15,
+        "the opening's centre: {last:?}"
+    );
+    assert!(last.heading.abs() < 0.05, "through the wall: {last:?}");
+    assert!((last.width - 1.2).abs() < 0.3, "its width: {last:?}");
+}
+
+#[test]
+fn door_locate_sees_no_door_in_a_plain_wall() {
+    let mut h = Harness::<DoorLocate>::new();
+    let world = "name = 'wall'\nstart = [0.0, 0.0, 0.0]\n\
+        [[wall]]\nfrom = [2.0, -3.0]\nto = [2.0, 4.0]\n";
+    let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
+    pass(&mut h, world, path, |h, od| {
+        h.input("odometry", *od);
+        h.input("target", remembered((1.95, -0.4), od));
+        let d = *h.step().unwrap().output::<Door>("door").unwrap();
+        assert!(!d.found, "no opening, no door: {d:?}");
+    });
+}
+
+#[test]
+fn wall_follow_keeps_its_distance_and_turns_away_from_a_wall_ahead() {
+    // Parallel to a wall 1 m away on the right: turn right toward 0.5 m.
+    let mut h = Harness::<WallFollow>::new();
+    let world = "name = 'wall'\nstart = [0.0, 0.0, 0.0]\n\
+        [[wall]]\nfrom = [-5.0, -1.36]\nto = [5.0, -1.36]\n\
+        [[wall]]\nfrom = [3.0, -5.0]\nto = [3.0, 5.0]\n";
+    let mut d = Drive::default();
+    pass(&mut h, world, (0..3).map(|_| (0.0, 0.0, 0.0)), |h, _| {
+        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    });
+    assert!(
+        d.translate > 0.0 && d.rotate < 0.0,
+        "toward the wall: {d:?}"
+    );
+    // Heading into the wall at 40°: turn away (left).
+    pass(&mut h, world, (0..3).map(|_| (0.0, -0.5, -0.7)), |h, _| {
+        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    });
+    assert!(d.rotate > 0.0, "away from the wall: {d:?}");
+    // The wall ahead (x = 3) close: turn left on the spot.
+    pass(&mut h, world, (0..3).map(|_| (2.2, -0.5, 0.0)), |h, _| {
+        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    });
+    assert!(d.translate == 0.0 && d.rotate > 0.0, "{d:?}");
+    // The same on the left side, mirrored.
+    h.set_param("side=-1").unwrap();
+    let mirrored = "name = 'wall'\nstart = [0.0, 0.0, 0.0]\n\
+        [[wall]]\nfrom = [-5.0, 1.36]\nto = [5.0, 1.36]\n";
+    pass(&mut h, mirrored, (0..3).map(|_| (0.0, 0.0, 0.0)), |h, _| {
+        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    });
+    assert!(d.rotate > 0.0, "toward the wall on the left: {d:?}");
+}
+
+#[test]
+fn wander_drives_on_and_bounces_off_what_is_ahead() {
+    let mut h = Harness::<Wander>::new();
+    h.input("sonar", ring(|_| 5.0));
+    h.input("odometry", Odometry::default());
+    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    assert!(d.translate >= 0.0);
+    // Something close ahead: the next heading is the open side (here: behind).
+    let mut h = Harness::<Wander>::new();
+    h.set_param("look=0").unwrap();
+    h.input("sonar", ring(|a| if a.abs() < 2.0 { 0.5 } else { 5.0 }));
+    h.input("odometry", Odometry::default());
+    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    assert!(
+        d.translate == 0.0 && d.rotate.abs() > 0.5,
+        "turns around: {d:?}"
+    );
+}
+
+#[test]
+fn stop_proposes_standing_still() {
+    let mut h = Harness::<Stop>::new();
+    assert_eq!(
+        *h.step().unwrap().output::<Drive>("drive").unwrap(),
+        Drive::default()
+    );
+}
+
+#[test]
+fn go_through_heads_for_the_axis_then_through() {
+    let mut h = Harness::<GoThrough>::new();
+    let door = Door {
+        found: true,
+        x: 3.0,
+        y: 0.0,
+        heading: 0.0,
+        width: 1.2,
+    };
+    h.input("door", door);
+    h.input("sonar", ring(|_| 5.0));
+    h.input(
+        "odometry",
+        Odometry {
+            x: 0.0,
+            y: 1.0,
+            theta: 0.0,
+            v: 0.0,
+            w: 0.0,
+        },
+    );
+    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    assert!(
+        d.rotate < 0.0,
+        "turns toward the approach point below: {d:?}"
+    );
+}

@@ -22,7 +22,7 @@ pub struct DeviceOptions {
 /// [`Actuation`](crate::actuation::Actuation) whose `safe()` is sent when nobody proposes.
 pub trait Device: Default + 'static {
     /// Parameters (derive `Params`), or [`crate::params::NoParams`].
-    type Params: Params;
+    type Params: Params + Default;
     /// Sensor outputs (derive `Outputs`), or `()`.
     type Outputs<'a>: OutputSet<'a>;
     /// Channels served (derive `Inputs` over `Command<'a, T>` fields), or `()`.

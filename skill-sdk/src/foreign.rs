@@ -8,17 +8,19 @@
 //! listed there, and its bytes have exactly the Rust layout (the generated C header and Python
 //! classes are checked against it).
 //!
-//! A process runs one skill, so the declaration lives in a process-wide cell that the
-//! runtime's static hooks read; [`run`] may be called once per process.
+//! [`run`] builds the runtime's unit from the declaration by value and starts it through the
+//! same start-up path as a Rust skill; a process runs one skill, so [`run`] may be called once
+//! per process.
 
 use crate::SdkError;
 use crate::decl::{Mode, PortDecl, PortKind};
 use crate::params::{ParamError, ParamSpec, ParamValue, Params, check_bounds};
 use crate::ports::{ErasedInput, ErasedOutput, InputMeta, InputSource, PortMaker};
-use crate::runtime::{Common, Io, Link, SkillArgs, Unit, guarded, step_skill};
+use crate::runtime::{Common, Io, Link, SkillArgs, Unit, guarded, start, step_skill};
 use crate::schema::{FieldKind, MessageSchema, Prim};
 use crate::skill::{Ctx, SkillError, SkillResult};
-use std::sync::{Mutex, OnceLock};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A boxed runtime input port.
 pub type ErasedInputBox = Box<dyn ErasedInput>;
@@ -293,30 +295,9 @@ pub enum RunError {
     Sdk(#[from] SdkError),
 }
 
-/// What the runtime's static hooks read: the declaration without its body.
-struct Declared {
-    mode: Mode,
-    priority: i32,
-    inputs: Vec<PortDecl>,
-    outputs: Vec<PortDecl>,
-    params: Vec<ParamSpec>,
-    /// Which message type each input and output is.
-    input_types: Vec<&'static MessageType>,
-    output_types: Vec<&'static MessageType>,
-    /// Which outputs' types have a bool anywhere (only those are normalised after a run).
-    output_bools: Vec<bool>,
-}
-
-static DECLARED: OnceLock<Declared> = OnceLock::new();
-static BODY: Mutex<Option<Body>> = Mutex::new(None);
-
-fn declared() -> &'static Declared {
-    // `run` fills the cell before the runtime calls any hook.
-    #[allow(clippy::expect_used)]
-    DECLARED
-        .get()
-        .expect("foreign skill declared before the runtime starts")
-}
+/// Whether a foreign skill ran in this process: one skill per process (its tracing, log
+/// stream and signal handling are the process's).
+static RAN: AtomicBool = AtomicBool::new(false);
 
 /// Runs `skill` as this process's skill with command-line `args` (the program name first,
 /// then the usual skill options: `--name`, `--domain`, `--param`, …) until SIGINT/SIGTERM.
@@ -324,55 +305,30 @@ pub fn run(mut skill: ForeignSkill, args: Vec<String>) -> Result<(), RunError> {
     let body = skill.body.take().ok_or_else(|| RunError::NoBody {
         kind: skill.kind.clone(),
     })?;
-    let types = |ports: &[PortDecl]| {
-        ports
-            .iter()
-            .filter_map(|p| message_type(skill.registry, &p.schema.type_name).ok())
-            .collect::<Vec<_>>()
-    };
-    let declared = Declared {
-        mode: skill.mode,
-        priority: skill.priority,
-        input_types: types(&skill.inputs),
-        output_types: types(&skill.outputs),
-        output_bools: skill
-            .outputs
-            .iter()
-            .map(|p| p.schema.fields.iter().any(|f| contains_bool(&f.ty)))
-            .collect(),
-        inputs: skill.inputs,
-        outputs: skill.outputs,
-        params: skill.params,
-    };
-    DECLARED.set(declared).map_err(|_| RunError::AlreadyRan)?;
-    *BODY.lock().unwrap_or_else(|e| e.into_inner()) = Some(body);
     let args = <SkillArgs as clap::Parser>::try_parse_from(args)
         .map_err(|e| RunError::Args(e.render().to_string()))?;
-    crate::runtime::init_tracing();
-    let _forward = crate::domain::Domain::new(&args.domain).ok().and_then(|d| {
-        let name = args.name.clone().unwrap_or_else(|| skill.kind.clone());
-        crate::logs::forward(&d, &name)
-    });
-    crate::runtime::run::<ForeignUnit>(args, &skill.kind)?;
-    Ok(())
+    if RAN.swap(true, Ordering::AcqRel) {
+        return Err(RunError::AlreadyRan);
+    }
+    let kind = skill.kind.clone();
+    let unit = ForeignUnit::new(skill, body);
+    start(unit, &args, &[], &kind).map_err(|(_, e)| RunError::Sdk(e))
 }
 
-/// Parameter values of a foreign skill, in declaration order.
+/// Parameter values of a foreign skill, in declaration order, with their declaration.
 #[derive(Debug, Clone)]
 pub struct ForeignParams {
+    specs: Arc<[ParamSpec]>,
     values: Vec<ParamValue>,
 }
 
-impl Default for ForeignParams {
-    /// The declared defaults.
-    fn default() -> Self {
-        ForeignParams {
-            values: Self::specs().iter().map(|s| s.default).collect(),
-        }
-    }
-}
-
 impl ForeignParams {
+    /// The declared defaults of `specs`.
+    fn defaults(specs: Arc<[ParamSpec]>) -> ForeignParams {
+        let values = specs.iter().map(|s| s.default).collect();
+        ForeignParams { specs, values }
+    }
+
     /// The value of parameter `idx`.
     pub fn at(&self, idx: usize) -> Option<ParamValue> {
         self.values.get(idx).copied()
@@ -380,29 +336,27 @@ impl ForeignParams {
 }
 
 impl Params for ForeignParams {
-    fn specs() -> Vec<ParamSpec> {
-        DECLARED.get().map(|d| d.params.clone()).unwrap_or_default()
+    fn specs(&self) -> Vec<ParamSpec> {
+        self.specs.to_vec()
     }
     fn get(&self, name: &str) -> Option<ParamValue> {
-        let i = DECLARED.get()?.params.iter().position(|s| s.name == name)?;
+        let i = self.specs.iter().position(|s| s.name == name)?;
         self.at(i)
     }
     fn set_unchecked(&mut self, name: &str, value: ParamValue) -> Result<(), ParamError> {
-        let specs = &declared().params;
-        let i = specs
+        let i = self
+            .specs
             .iter()
             .position(|s| s.name == name)
             .ok_or_else(|| ParamError::Unknown {
                 param: name.to_string(),
             })?;
-        let spec = &specs[i];
-        self.values[i] = value
-            .coerce(spec.kind)
-            .ok_or_else(|| ParamError::WrongType {
-                param: name.to_string(),
-                expected: spec.kind,
-                got: value,
-            })?;
+        let kind = self.specs[i].kind;
+        self.values[i] = value.coerce(kind).ok_or_else(|| ParamError::WrongType {
+            param: name.to_string(),
+            expected: kind,
+            got: value,
+        })?;
         Ok(())
     }
 }
@@ -414,6 +368,8 @@ pub struct ForeignRun<'a> {
     /// The instance name.
     pub name: &'a str,
     params: &'a ForeignParams,
+    /// The message type of each input, to view its samples as bytes.
+    input_types: &'a [&'static MessageType],
     inputs: &'a dyn InputSource,
     outputs: &'a mut [ErasedOutput],
     error: Option<String>,
@@ -422,9 +378,8 @@ pub struct ForeignRun<'a> {
 impl<'a> ForeignRun<'a> {
     /// The bytes and cycle bookkeeping of input `idx` (`None`: no sample yet, or no such input).
     pub fn input(&self, idx: usize) -> Option<(&'a [u8], InputMeta)> {
-        let d = declared();
         let (any, meta) = self.inputs.get(idx)?;
-        let bytes = (d.input_types.get(idx)?.bytes)(any)?;
+        let bytes = (self.input_types.get(idx)?.bytes)(any)?;
         Some((bytes, meta))
     }
 
@@ -489,60 +444,91 @@ fn contains_bool(kind: &FieldKind) -> bool {
     }
 }
 
-/// The runtime's view of the process's foreign skill.
+/// The runtime's unit of a foreign skill: its declaration and body, by value.
 struct ForeignUnit {
-    body: Option<Body>,
+    mode: Mode,
+    priority: i32,
+    inputs: Vec<PortDecl>,
+    outputs: Vec<PortDecl>,
+    params: Arc<[ParamSpec]>,
+    /// Which message type each input and output is.
+    input_types: Vec<&'static MessageType>,
+    output_types: Vec<&'static MessageType>,
+    /// Which outputs' types have a bool anywhere (only those are normalised after a run).
+    output_bools: Vec<bool>,
+    body: Body,
+}
+
+impl ForeignUnit {
+    fn new(skill: ForeignSkill, body: Body) -> ForeignUnit {
+        // One type per port: `ForeignSkill::input`/`output` accepted only registered types.
+        let types = |ports: &[PortDecl]| {
+            ports
+                .iter()
+                .filter_map(|p| message_type(skill.registry, &p.schema.type_name).ok())
+                .collect::<Vec<_>>()
+        };
+        ForeignUnit {
+            mode: skill.mode,
+            priority: skill.priority,
+            input_types: types(&skill.inputs),
+            output_types: types(&skill.outputs),
+            output_bools: skill
+                .outputs
+                .iter()
+                .map(|p| p.schema.fields.iter().any(|f| contains_bool(&f.ty)))
+                .collect(),
+            inputs: skill.inputs,
+            outputs: skill.outputs,
+            params: skill.params.into(),
+            body,
+        }
+    }
 }
 
 impl Unit for ForeignUnit {
     type Params = ForeignParams;
-    fn mode() -> Mode {
-        declared().mode
+    fn mode(&self) -> Mode {
+        self.mode
     }
-    fn priority() -> i32 {
-        declared().priority
+    fn priority(&self) -> i32 {
+        self.priority
     }
-    fn create() -> Self {
-        ForeignUnit {
-            body: BODY.lock().unwrap_or_else(|e| e.into_inner()).take(),
-        }
+    fn default_params(&self) -> ForeignParams {
+        ForeignParams::defaults(self.params.clone())
     }
-    fn input_ports() -> Vec<PortDecl> {
-        declared().inputs.clone()
+    fn input_ports(&self) -> Vec<PortDecl> {
+        self.inputs.clone()
     }
-    fn output_ports() -> Vec<PortDecl> {
-        declared().outputs.clone()
+    fn output_ports(&self) -> Vec<PortDecl> {
+        self.outputs.clone()
     }
-    // One type per port: `ForeignSkill::input`/`output` accepted only registered types.
-    fn make_inputs(m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
-        let d = declared();
-        d.input_types
-            .iter()
-            .enumerate()
-            .map(|(i, t)| (t.input)(m, i))
-            .collect()
+    fn make_inputs(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        let inputs = self.input_types.iter().enumerate();
+        inputs.map(|(i, t)| (t.input)(m, i)).collect()
     }
-    fn make_outputs(m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
-        let d = declared();
-        d.output_types
-            .iter()
-            .enumerate()
-            .map(|(i, t)| (t.output)(m, i))
-            .collect()
+    fn make_outputs(&self, m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
+        let outputs = self.output_types.iter().enumerate();
+        outputs.map(|(i, t)| (t.output)(m, i)).collect()
     }
     fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<ForeignParams>) {
-        let Some(body) = self.body.as_mut() else {
-            return;
-        };
-        let d = declared();
+        let ForeignUnit {
+            mode,
+            inputs,
+            outputs: decls,
+            input_types,
+            output_bools,
+            body,
+            ..
+        } = self;
         step_skill(
             link,
             io,
             common,
-            d.mode,
+            *mode,
             |src, outputs, ctx: &Ctx<'_, ForeignParams>| {
                 // As for a Rust skill, a run needs a sample on every input.
-                if (0..d.inputs.len()).any(|i| src.get(i).is_none()) {
+                if (0..inputs.len()).any(|i| src.get(i).is_none()) {
                     return crate::board::RunStatus::Skipped;
                 }
                 guarded(ctx.cycle, || {
@@ -550,6 +536,7 @@ impl Unit for ForeignUnit {
                         cycle: ctx.cycle,
                         name: ctx.name,
                         params: ctx.params,
+                        input_types,
                         inputs: src,
                         outputs: &mut *outputs,
                         error: None,
@@ -560,8 +547,10 @@ impl Unit for ForeignUnit {
                     if let Some(e) = error {
                         return Err(SkillError::msg(e));
                     }
-                    for ((o, decl), bools) in
-                        outputs.iter_mut().zip(&d.outputs).zip(&d.output_bools)
+                    for ((o, decl), bools) in outputs
+                        .iter_mut()
+                        .zip(decls.iter())
+                        .zip(output_bools.iter())
                     {
                         if *bools && o.is_written() {
                             sanitize_message(&decl.schema, o.bytes_mut(false));

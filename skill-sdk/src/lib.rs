@@ -43,13 +43,13 @@ pub mod harness;
 pub mod logs;
 pub mod params;
 pub mod ports;
-pub mod runtime;
+mod runtime;
 pub mod skill;
 
 // The wire types the SDK is built on, under the names its modules use.
 pub(crate) use skillfab_proto::{board, decl, domain, header, names, schema, services, value};
 
-pub use runtime::{device_main, main};
+pub use runtime::{DeviceArgs, SkillArgs, device_main, init_tracing, main};
 pub use skillfab_proto::Message;
 
 /// Errors of the SDK: a skill's start-up, declaration and ports.

@@ -84,7 +84,7 @@ struct Sink {
 static SINK: OnceLock<Sink> = OnceLock::new();
 
 /// The tracing layer that forwards events to the log stream (installed by
-/// [`init_tracing`](crate::runtime::init_tracing); inert until [`forward`] runs).
+/// [`init_tracing`](crate::init_tracing); inert until [`forward`] runs).
 #[derive(Debug, Default)]
 pub struct ForwardLayer;
 

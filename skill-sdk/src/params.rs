@@ -9,9 +9,9 @@ pub use skillfab_proto::param::{
 };
 
 /// A parameter struct. Derive it; do not implement it by hand.
-pub trait Params: Default + Clone + Send + 'static {
+pub trait Params: Clone + Send + 'static {
     /// Every declared parameter.
-    fn specs() -> Vec<ParamSpec>;
+    fn specs(&self) -> Vec<ParamSpec>;
     /// The current value of `name`.
     fn get(&self, name: &str) -> Option<ParamValue>;
     /// Stores a value without bound checks (generated); use [`Params::set`].
@@ -19,7 +19,8 @@ pub trait Params: Default + Clone + Send + 'static {
 
     /// Sets `name` after checking its type and bounds. On error nothing changes.
     fn set(&mut self, name: &str, value: ParamValue) -> Result<(), ParamError> {
-        let spec = Self::specs()
+        let spec = self
+            .specs()
             .into_iter()
             .find(|s| s.name == name)
             .ok_or_else(|| ParamError::Unknown {
@@ -40,7 +41,8 @@ pub trait Params: Default + Clone + Send + 'static {
                 text: assignment.to_string(),
             })?;
         let name = name.trim();
-        let spec = Self::specs()
+        let spec = self
+            .specs()
             .into_iter()
             .find(|s| s.name == name)
             .ok_or_else(|| ParamError::Unknown {
@@ -56,7 +58,7 @@ pub trait Params: Default + Clone + Send + 'static {
 
     /// Every parameter with its current value.
     fn values(&self) -> Vec<(String, ParamValue)> {
-        Self::specs()
+        self.specs()
             .into_iter()
             .filter_map(|s| self.get(&s.name).map(|v| (s.name, v)))
             .collect()
@@ -68,7 +70,7 @@ pub trait Params: Default + Clone + Send + 'static {
 pub struct NoParams;
 
 impl Params for NoParams {
-    fn specs() -> Vec<ParamSpec> {
+    fn specs(&self) -> Vec<ParamSpec> {
         Vec::new()
     }
     fn get(&self, _: &str) -> Option<ParamValue> {

@@ -36,7 +36,7 @@ use std::fmt;
 /// ```
 pub trait Skill: Default + 'static {
     /// Parameters (derive `Params`), or [`crate::params::NoParams`].
-    type Params: Params;
+    type Params: Params + Default;
     /// Inputs (derive `Inputs`), or `()`.
     type Inputs<'a>: InputSet<'a>;
     /// Outputs (derive `Outputs`), or `()`.

@@ -227,7 +227,7 @@ fn params(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
             fn default() -> Self { Self { #(#defaults),* } }
         }
         impl ::skill_sdk::params::Params for #ident {
-            fn specs() -> ::std::vec::Vec<::skill_sdk::params::ParamSpec> { vec![#(#specs),*] }
+            fn specs(&self) -> ::std::vec::Vec<::skill_sdk::params::ParamSpec> { vec![#(#specs),*] }
             fn get(&self, name: &str) -> ::core::option::Option<::skill_sdk::params::ParamValue> {
                 match name { #(#gets)* _ => None }
             }

@@ -1,0 +1,260 @@
+//! A device's cycle (the paper's dskill): at cycle start the latest buffered sample is
+//! published at once; once every proposer the manager expects has settled, each channel is
+//! arbitrated, the commands go to the device's body and out on the command topics, and the
+//! run is finished.
+
+use super::serve::Link;
+use super::skill_unit::{RunRecord, RuntimeInputs, commit_outputs, finish_run, guarded};
+use super::{Common, Io, Unit};
+use crate::SdkError;
+use crate::board::{Board, MAX_CHANNELS, MAX_SLOTS, RunStatus, Slot};
+use crate::decl::{Mode, PortDecl, SkillDecl};
+use crate::device::{Device, DeviceOptions};
+use crate::header::{SampleHeader, now_ns};
+use crate::ports::{Candidate, ErasedInput, ErasedOutput, InputSet, OutputSet, PortMaker};
+use crate::skill::Ctx;
+use std::collections::HashMap;
+use std::sync::atomic::Ordering;
+
+/// The wrapper that runs a [`Device`].
+pub(crate) struct DeviceUnit<D: Device> {
+    device: D,
+    /// Where its hardware is (`--port`, `--baud`), for [`Device::init`].
+    options: DeviceOptions,
+    /// Last cycle whose sample phase ran.
+    sampled: u64,
+    /// Proposer names by slot, with the slot generation they belong to: a name is decoded
+    /// from the board's declaration once per registration, not once per cycle.
+    names: HashMap<u32, (u32, String)>,
+}
+
+/// A proposer that settled in the cycle: its slot, priority and name.
+type Settled = (u32, i32, String);
+
+impl<D: Device> DeviceUnit<D> {
+    pub(crate) fn new(device: D, options: DeviceOptions) -> DeviceUnit<D> {
+        DeviceUnit {
+            device,
+            options,
+            sampled: 0,
+            names: HashMap::new(),
+        }
+    }
+
+    /// Cycle start: the body writes its latest buffered sample, which is sent at once.
+    fn sample(&mut self, link: &Link<'_>, io: &mut Io, common: &Common<D::Params>, k: u64) {
+        let me = link.board.slot(link.idx);
+        self.sampled = k;
+        me.last_start_ns.store(now_ns(), Ordering::Relaxed);
+        let status = {
+            let mut out = <D::Outputs<'_> as OutputSet<'_>>::bind(&mut io.outputs);
+            let ctx = Ctx {
+                params: &common.params,
+                cycle: k,
+                name: &common.name,
+            };
+            let device = &mut self.device;
+            guarded(k, || device.sample(&ctx, &mut out))
+        };
+        let mask = commit_outputs(&mut io.outputs, status, header(link, k));
+        me.published_mask.store(mask, Ordering::Relaxed);
+    }
+
+    /// The proposers of each channel in cycle `k`, once every one the manager expects has
+    /// settled: its proposal for k is in, or it finished k without proposing (it then wakes
+    /// the device), or it was cancelled. `None` while one may still propose.
+    fn settled(
+        &mut self,
+        board: &Board,
+        me: &Slot,
+        io: &mut Io,
+        k: u64,
+    ) -> Option<Vec<Vec<Settled>>> {
+        let mut channels = Vec::new();
+        for c in 0..io.inputs.len().min(MAX_CHANNELS) {
+            let mask = me.channel_proposers[c].load(Ordering::Acquire);
+            let mut settled = Vec::new();
+            for s in (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0) {
+                let p = board.slot(s);
+                if p.expected_cycle.load(Ordering::Acquire) != k {
+                    continue;
+                }
+                let proposed = io.inputs[c]
+                    .as_channel()
+                    .is_some_and(|ch| ch.has_proposal(s as u32, k));
+                let done = proposed
+                    || p.done_cycle.load(Ordering::Acquire) == k
+                    || p.cancelled_cycle.load(Ordering::Acquire) == k;
+                if !done {
+                    return None;
+                }
+                let name = self.name_of(p, s as u32);
+                settled.push((s as u32, p.priority.load(Ordering::Acquire), name));
+            }
+            channels.push(settled);
+        }
+        Some(channels)
+    }
+
+    /// The instance name of the skill in slot `s` (cached per registration).
+    fn name_of(&mut self, p: &Slot, s: u32) -> String {
+        let generation = p.generation.load(Ordering::Acquire);
+        match self.names.get(&s) {
+            Some((g, n)) if *g == generation => n.clone(),
+            _ => {
+                let n = postcard::from_bytes::<SkillDecl>(&p.read_decl())
+                    .map(|d| d.name)
+                    .unwrap_or_else(|_| format!("slot{s}"));
+                self.names.insert(s, (generation, n.clone()));
+                n
+            }
+        }
+    }
+
+    /// Picks each channel's command of cycle `k` among its settled proposers and records the
+    /// winner and contributors on the board (the manager reports them).
+    fn arbitrate(me: &Slot, io: &mut Io, channels: &[Vec<Settled>], k: u64) {
+        for (c, settled) in channels.iter().enumerate() {
+            let Some(ch) = io.inputs[c].as_channel() else {
+                continue;
+            };
+            let candidates: Vec<Candidate<'_>> = settled
+                .iter()
+                .map(|(slot, priority, name)| Candidate {
+                    slot: *slot,
+                    priority: *priority,
+                    name,
+                })
+                .collect();
+            let arb = ch.arbitrate(k, &candidates);
+            me.channel_winner[c].store(arb.winner.map_or(0, |w| w + 1), Ordering::Relaxed);
+            me.channel_mask[c].store(
+                arb.weights.iter().fold(0u64, |m, (s, _)| m | (1 << s)),
+                Ordering::Relaxed,
+            );
+            me.channel_cycle[c].store(k, Ordering::Release);
+        }
+    }
+
+    /// Hands the cycle's commands to the body and publishes them on the command topics.
+    fn command(
+        &mut self,
+        link: &Link<'_>,
+        io: &mut Io,
+        common: &Common<D::Params>,
+        k: u64,
+    ) -> RunStatus {
+        let status = {
+            let src = RuntimeInputs {
+                inputs: &io.inputs,
+                cycle: k,
+            };
+            match <D::Commands<'_> as InputSet<'_>>::fetch(&src) {
+                None => RunStatus::Skipped,
+                Some(cmds) => {
+                    let ctx = Ctx {
+                        params: &common.params,
+                        cycle: k,
+                        name: &common.name,
+                    };
+                    let device = &mut self.device;
+                    guarded(k, || device.command(&ctx, cmds))
+                }
+            }
+        };
+        let header = header(link, k);
+        for i in io.inputs.iter_mut() {
+            if let Some(ch) = i.as_channel()
+                && let Err(e) = ch.publish(header)
+            {
+                tracing::warn!(cycle = k, error = %e, "command not published");
+            }
+        }
+        status
+    }
+}
+
+/// The sample header of this unit's samples in cycle `k`, stamped now.
+fn header(link: &Link<'_>, k: u64) -> SampleHeader {
+    SampleHeader {
+        cycle: k,
+        stamp_ns: now_ns(),
+        slot: link.idx as u32,
+        reserved: 0,
+    }
+}
+
+impl<D: Device> Unit for DeviceUnit<D> {
+    type Params = D::Params;
+    fn mode(&self) -> Mode {
+        Mode::Sync
+    }
+    fn priority(&self) -> i32 {
+        0
+    }
+    fn default_params(&self) -> D::Params {
+        D::Params::default()
+    }
+    fn init(&mut self) -> Result<(), SdkError> {
+        self.device
+            .init(&self.options)
+            .map_err(|e| SdkError::DeviceInit {
+                reason: e.to_string(),
+            })
+    }
+    fn input_ports(&self) -> Vec<PortDecl> {
+        <D::Commands<'static> as InputSet<'static>>::ports()
+    }
+    fn output_ports(&self) -> Vec<PortDecl> {
+        <D::Outputs<'static> as OutputSet<'static>>::ports()
+    }
+    fn make_inputs(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        <D::Commands<'static> as InputSet<'static>>::make(m)
+    }
+    fn make_outputs(&self, m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
+        <D::Outputs<'static> as OutputSet<'static>>::make(m)
+    }
+
+    /// Cycle k: at the start, publish the latest sample at once; then, when every proposer
+    /// the manager expects in k has finished (or was cancelled), arbitrate each channel, hand
+    /// the commands to the body, publish them, and finish the cycle's run.
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<D::Params>) {
+        let board = link.board;
+        let me = board.slot(link.idx);
+        let k = board.header().cycle.load(Ordering::Acquire);
+        if k <= common.last_cycle || me.expected_cycle.load(Ordering::Acquire) != k {
+            return;
+        }
+        if self.sampled < k {
+            self.sample(link, io, common, k);
+        }
+        let Some(channels) = self.settled(board, me, io, k) else {
+            return;
+        };
+        // A proposer publishes its proposal before it marks its run done, but the proposal
+        // may have landed after the poll of this wake-up: receive again now that everyone has
+        // settled, or a proposal made in time would count as none.
+        for i in io.inputs.iter_mut() {
+            if let Err(e) = i.poll() {
+                tracing::warn!(cycle = k, error = %e, "proposals not received");
+            }
+        }
+        let start = now_ns();
+        Self::arbitrate(me, io, &channels, k);
+        let status = self.command(link, io, common, k);
+        let end = now_ns();
+        common.last_cycle = k;
+        finish_run(
+            link,
+            RunRecord {
+                k,
+                status,
+                mask: me.published_mask.load(Ordering::Relaxed),
+                outputs: io.outputs.len(),
+                start,
+                end,
+                sync: true,
+            },
+        );
+    }
+}

@@ -1,0 +1,394 @@
+//! Turns a unit — a [`Skill`], a [`Device`] or a skill declared at run time — into a process:
+//! arguments, registration, cycles, shutdown. Private to the SDK: authors call
+//! [`crate::main`] / [`crate::device_main`], other languages go through [`crate::foreign`].
+//!
+//! The life of a skill process:
+//! 1. parse `--name/--domain/--param/--priority/--inactive/--remap` (devices also
+//!    `--port/--baud/--policy`), validate parameters;
+//! 2. wait for the domain's manager (launch order does not matter);
+//! 3. register: claim a board slot, write the declaration, wake the manager, wait for its
+//!    answer (a refusal, e.g. a type mismatch, ends the process with that error);
+//! 4. open the data ports, tell the manager it is ready, and serve cycles: a sync skill runs when the manager expects it in
+//!    cycle k and every same-cycle input carries cycle k; an async skill runs whenever an
+//!    input changed (or once per cycle without inputs). Outputs are sent, then the topic's
+//!    listeners are woken directly; the run is stamped on the board; the manager is woken
+//!    only by the run that completes the cycle, or by a run that passed nothing on;
+//! 5. on SIGINT/SIGTERM leave the slot cleanly; if the manager goes away, go back to 2.
+
+//! ## Layout
+//! - here: the arguments, the [`Unit`] trait (a unit declares itself by value), the one
+//!   start-up path [`start`], the declaration and the registration loop;
+//! - `serve`: waiting for the manager, registering, and the wait loop of a registered unit;
+//! - `skill_unit`: a skill's run (shared by Rust and foreign skills): inputs due, body,
+//!   outputs sent, the run stamped on the board;
+//! - `device_unit`: a device's cycle: sample at once, then arbitrate and command.
+
+mod device_unit;
+mod serve;
+mod skill_unit;
+
+pub(crate) use skill_unit::{guarded, step_skill};
+
+use crate::SdkError;
+use crate::board::SlotState;
+use crate::decl::{Mode, Policy, PortDecl, PortKind, SkillDecl};
+use crate::device::{Device, DeviceOptions};
+use crate::domain::{DOMAIN_ENV, Domain};
+use crate::names;
+use crate::params::Params;
+use crate::ports::{ErasedInput, ErasedOutput, PortMaker};
+use crate::services;
+use crate::skill::Skill;
+use clap::Parser;
+use device_unit::DeviceUnit;
+pub(crate) use serve::Link;
+use serve::{End, Registration, register, serve, wait_for_board};
+use skill_unit::SkillUnit;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// How often a skill checks that its manager is still there: a manager that stops wakes its
+/// skills itself, so this only bounds how long a skill outlives a manager that crashed. It
+/// is a wake-up of every skill process, so it is rare (a tenth of the wake-ups of a skill
+/// cycling at 100 Hz when it was 100 ms).
+const LIVENESS_TICK: Duration = Duration::from_secs(1);
+/// How often a skill looks for a manager that is not there yet.
+const BOARD_POLL: Duration = Duration::from_millis(20);
+
+/// Options every skill binary accepts.
+#[derive(Parser, Debug, Clone)]
+#[command(about = "A skillfab skill process")]
+pub struct SkillArgs {
+    /// Instance name, unique in the domain (default: the program name).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Fabric domain.
+    #[arg(long, env = DOMAIN_ENV, default_value = "default")]
+    pub domain: String,
+    /// Parameter value, checked against its declared type and bounds (repeatable).
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
+    /// Arbitration priority (default: the skill's declared priority).
+    #[arg(long, allow_negative_numbers = true)]
+    pub priority: Option<i32>,
+    /// Register inactive; a sequencer activates it later.
+    #[arg(long)]
+    pub inactive: bool,
+    /// Wire a port to another topic, or a proposal/channel to another channel (repeatable).
+    #[arg(long = "remap", value_name = "PORT=TOPIC")]
+    pub remaps: Vec<String>,
+}
+
+/// Options every device binary accepts: a skill's, and where its hardware is and how its
+/// channels are arbitrated.
+#[derive(Parser, Debug, Clone)]
+#[command(about = "A skillfab device process")]
+pub struct DeviceArgs {
+    #[command(flatten)]
+    pub skill: SkillArgs,
+    /// The serial port (a tty, or a simulator's pty link).
+    #[arg(long)]
+    pub port: Option<String>,
+    /// The baud rate.
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Arbitration policy of a channel: `priority` or `blend` (repeatable).
+    #[arg(long = "policy", value_name = "CHANNEL=POLICY")]
+    pub policies: Vec<String>,
+}
+
+/// A skill binary's whole `main`: `fn main() -> ExitCode { skill_sdk::main::<MySkill>() }`.
+pub fn main<S: Skill>() -> ExitCode {
+    let args = SkillArgs::parse();
+    exit_code(start(SkillUnit(S::default()), &args, &[], &program_name()))
+}
+
+/// A device binary's whole `main`: `fn main() -> ExitCode { skill_sdk::device_main::<MyDevice>() }`.
+pub fn device_main<D: Device>() -> ExitCode {
+    let args = DeviceArgs::parse();
+    let options = DeviceOptions {
+        port: args.port.clone(),
+        baud: args.baud,
+    };
+    let unit = DeviceUnit::new(D::default(), options);
+    exit_code(start(unit, &args.skill, &args.policies, &program_name()))
+}
+
+/// The program's file name: a skill's kind (and its default instance name).
+fn program_name() -> String {
+    std::env::args()
+        .next()
+        .and_then(|a| {
+            std::path::Path::new(&a)
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+        })
+        .unwrap_or_else(|| "skill".to_string())
+}
+
+fn exit_code(result: Result<(), (String, SdkError)>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err((kind, e)) => {
+            eprintln!("{kind}: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The one start-up path of every unit (Rust skills, devices, skills declared in C or
+/// Python): tracing, the log stream, then [`run`] until SIGINT/SIGTERM. The error comes back
+/// with the unit's kind, for the caller to report.
+pub(crate) fn start<U: Unit>(
+    unit: U,
+    args: &SkillArgs,
+    policies: &[String],
+    kind: &str,
+) -> Result<(), (String, SdkError)> {
+    init_tracing();
+    // The skill's log lines go to the domain's log stream too (console, `ctl logs`).
+    let _forward = Domain::new(&args.domain).ok().and_then(|d| {
+        let name = args.name.clone().unwrap_or_else(|| kind.to_string());
+        crate::logs::forward(&d, &name)
+    });
+    run(unit, args, policies, kind).map_err(|e| (kind.to_string(), e))
+}
+
+/// Installs the tracing subscriber (`RUST_LOG`, default `info`) and quiets iceoryx2's own
+/// logger to errors (`IOX2_LOG_LEVEL` overrides). Events that pass the filter go to stderr
+/// and, once [`crate::logs::forward`] ran (skill processes), to the domain's log stream.
+pub fn init_tracing() {
+    use std::io::IsTerminal;
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::registry()
+        .with(filter)
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_ansi(std::io::stderr().is_terminal())
+                .with_writer(std::io::stderr),
+        )
+        .with(crate::logs::ForwardLayer)
+        .try_init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+}
+
+/// What the runtime drives: a skill, a device, or a skill declared at run time. A unit
+/// declares itself by value, so a declaration made at run time (C, Python) needs no global.
+pub(crate) trait Unit: 'static {
+    /// Parameters.
+    type Params: Params;
+    /// Scheduling mode.
+    fn mode(&self) -> Mode;
+    /// Default priority.
+    fn priority(&self) -> i32;
+    /// The parameters' declared defaults.
+    fn default_params(&self) -> Self::Params;
+    /// Input ports (for a device: its channels).
+    fn input_ports(&self) -> Vec<PortDecl>;
+    /// Output ports.
+    fn output_ports(&self) -> Vec<PortDecl>;
+    /// Runtime input ports.
+    fn make_inputs(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError>;
+    /// Runtime output ports.
+    fn make_outputs(&self, m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError>;
+    /// Runs whatever is due now.
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<Self::Params>);
+    /// Once, before registration.
+    fn init(&mut self) -> Result<(), SdkError> {
+        Ok(())
+    }
+}
+
+/// Parameters and cycle bookkeeping shared by skills and devices.
+pub(crate) struct Common<P> {
+    params: P,
+    /// Generation of the last parameter snapshot applied.
+    param_gen: u64,
+    /// Last cycle this unit finished (ran, skipped or failed) for.
+    last_cycle: u64,
+    name: String,
+}
+
+/// A unit's runtime ports.
+pub(crate) struct Io {
+    inputs: Vec<Box<dyn ErasedInput>>,
+    outputs: Vec<ErasedOutput>,
+    /// Indexes of the outputs that are proposals.
+    proposals: Vec<usize>,
+}
+
+/// Builds the declaration of `unit` from its arguments (`policies`: a device's `--policy`).
+fn declare<U: Unit>(
+    unit: &U,
+    args: &SkillArgs,
+    policies: &[String],
+    kind: &str,
+) -> Result<(SkillDecl, U::Params), SdkError> {
+    let name = args.name.clone().unwrap_or_else(|| kind.to_string());
+    names::check_name("skill", &name, false)?;
+    let mut params = unit.default_params();
+    for a in &args.params {
+        params.assign(a)?;
+    }
+    let mut inputs = unit.input_ports();
+    let mut outputs = unit.output_ports();
+    for r in &args.remaps {
+        let (port, topic) = r
+            .split_once('=')
+            .ok_or_else(|| SdkError::UnknownPort { port: r.clone() })?;
+        names::check_name("topic", topic, true)?;
+        let mut found = false;
+        for p in inputs
+            .iter_mut()
+            .chain(outputs.iter_mut())
+            .filter(|p| p.port == port)
+        {
+            p.topic = match p.kind {
+                PortKind::Data => topic.to_string(),
+                _ => names::channel_topic(topic),
+            };
+            found = true;
+        }
+        if !found {
+            return Err(SdkError::UnknownPort {
+                port: port.to_string(),
+            });
+        }
+    }
+    for a in policies {
+        let (port, policy) = a
+            .split_once('=')
+            .ok_or_else(|| SdkError::UnknownPort { port: a.clone() })?;
+        let policy = match policy {
+            "priority" => Policy::Priority,
+            "blend" => Policy::Blend,
+            other => {
+                return Err(SdkError::BadPolicy {
+                    policy: other.to_string(),
+                });
+            }
+        };
+        let p = inputs
+            .iter_mut()
+            .find(|p| p.port == port && matches!(p.kind, PortKind::Channel(_)))
+            .ok_or_else(|| SdkError::UnknownPort {
+                port: port.to_string(),
+            })?;
+        p.kind = PortKind::Channel(policy);
+    }
+    let decl = SkillDecl {
+        name,
+        kind: kind.to_string(),
+        mode: unit.mode(),
+        priority: args.priority.unwrap_or(unit.priority()),
+        start_active: !args.inactive,
+        pid: std::process::id(),
+        inputs,
+        outputs,
+        params: params.specs(),
+        param_values: params.values(),
+    };
+    Ok((decl, params))
+}
+
+/// Runs `unit` until SIGINT/SIGTERM.
+fn run<U: Unit>(
+    mut unit: U,
+    args: &SkillArgs,
+    policies: &[String],
+    kind: &str,
+) -> Result<(), SdkError> {
+    let (decl, params) = declare(&unit, args, policies, kind)?;
+    let domain = Domain::new(&args.domain)?;
+    let span = tracing::info_span!("skill", name = %decl.name, domain = %domain);
+    let _enter = span.enter();
+    let node = services::node(&domain, &decl.name)?;
+    let trigger = services::listener(&node, &names::skill_trigger(&decl.name))?;
+    let wake = services::notifier(&node, &names::manager_wake())?;
+
+    let mut io: Option<Io> = None;
+    let listeners = decl
+        .inputs
+        .iter()
+        .map(|p| services::listener(&node, &names::topic(&p.topic)))
+        .collect::<Result<Vec<_>, _>>()?;
+    unit.init()?;
+    let mut common = Common {
+        params,
+        param_gen: 0,
+        last_cycle: 0,
+        name: decl.name.clone(),
+    };
+    let mut decl = decl;
+    loop {
+        let Some(board) = wait_for_board(&node, &domain)? else {
+            return Ok(());
+        };
+        // A new manager learns the values the previous one set.
+        decl.param_values = common.params.values();
+        let encoded = postcard::to_allocvec(&decl).map_err(skillfab_proto::Error::from)?;
+        let idx = match register(&node, &board, &decl, &encoded, &trigger, &wake)? {
+            Registration::Accepted(idx) => idx,
+            Registration::ManagerGone => continue,
+            Registration::Terminated => return Ok(()),
+        };
+        tracing::info!(slot = idx, "registered");
+        if io.is_none() {
+            io = Some(Io {
+                inputs: unit.make_inputs(&PortMaker {
+                    node: Some(&node),
+                    ports: decl.inputs.clone(),
+                })?,
+                outputs: unit.make_outputs(&PortMaker {
+                    node: Some(&node),
+                    ports: decl.outputs.clone(),
+                })?,
+                proposals: decl
+                    .outputs
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.kind == PortKind::Proposal)
+                    .map(|(i, _)| i)
+                    .collect(),
+            });
+        }
+        let Some(io) = io.as_mut() else {
+            continue;
+        };
+        if !board
+            .slot(idx)
+            .transition(SlotState::Accepted, SlotState::Ready)
+        {
+            continue;
+        }
+        let _ = wake.notify();
+        common.last_cycle = 0;
+        common.param_gen = 0;
+        let link = Link {
+            node: &node,
+            board: &board,
+            idx,
+            trigger: &trigger,
+            listeners: &listeners,
+            wake: &wake,
+        };
+        match serve(&link, io, &mut unit, &mut common)? {
+            End::Terminated => {
+                let slot = board.slot(idx);
+                if slot.pid.load(Ordering::Acquire) == std::process::id() {
+                    slot.set_state(SlotState::Leaving);
+                    let _ = wake.notify();
+                }
+                tracing::info!("leaving");
+                return Ok(());
+            }
+            End::ManagerGone => {
+                tracing::warn!("manager gone; waiting for a new one");
+            }
+        }
+    }
+}

@@ -1,0 +1,239 @@
+//! A skill's run, shared by Rust skills and skills declared at run time: whether one is due,
+//! the body, the outputs sent, the run stamped on the board.
+
+use super::serve::Link;
+use super::{Common, Io, Unit};
+use crate::SdkError;
+use crate::board::RunStatus;
+use crate::decl::{Mode, PortDecl};
+use crate::header::{SampleHeader, now_ns};
+use crate::params::Params;
+use crate::ports::{
+    ErasedInput, ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker,
+};
+use crate::skill::{Ctx, Skill, SkillResult};
+use std::any::Any;
+use std::sync::atomic::Ordering;
+
+/// The wrapper that runs a [`Skill`].
+pub(crate) struct SkillUnit<S: Skill>(pub(crate) S);
+
+pub(crate) struct RuntimeInputs<'a> {
+    pub(crate) inputs: &'a [Box<dyn ErasedInput>],
+    pub(crate) cycle: u64,
+}
+
+impl InputSource for RuntimeInputs<'_> {
+    fn get(&self, idx: usize) -> Option<(&dyn Any, InputMeta)> {
+        let port = self.inputs.get(idx)?;
+        let h = port.latest_header()?;
+        Some((
+            port.latest_any()?,
+            InputMeta {
+                cycle: h.cycle,
+                age: self.cycle.saturating_sub(h.cycle),
+                source: (h.slot != u32::MAX).then_some(h.slot),
+            },
+        ))
+    }
+}
+
+/// Outcome of running a body once (error or panic logged).
+pub(crate) fn guarded(cycle: u64, body: impl FnOnce() -> SkillResult) -> RunStatus {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
+        Ok(Ok(())) => RunStatus::Ok,
+        Ok(Err(e)) => {
+            tracing::warn!(cycle, error = %e, "run failed");
+            RunStatus::Failed
+        }
+        Err(_) => {
+            tracing::error!(cycle, "run panicked");
+            RunStatus::Failed
+        }
+    }
+}
+
+/// Sends the written outputs of a successful run (or drops them); returns the sent mask.
+pub(crate) fn commit_outputs(
+    outputs: &mut [ErasedOutput],
+    status: RunStatus,
+    header: SampleHeader,
+) -> u64 {
+    let mut mask = 0u64;
+    for (i, o) in outputs.iter_mut().enumerate() {
+        if status != RunStatus::Ok {
+            o.discard();
+            continue;
+        }
+        match o.commit(header) {
+            Ok(true) => mask |= 1 << i,
+            Ok(false) => {}
+            Err(e) => tracing::warn!(cycle = header.cycle, error = %e, "publish failed"),
+        }
+    }
+    mask
+}
+
+/// Stamps a finished run on the board and, for a sync unit, takes it off the cycle's counter
+/// (waking the manager if that finished the cycle or the run passed nothing on).
+/// One finished run, as stamped on the board.
+pub(crate) struct RunRecord {
+    pub(crate) k: u64,
+    pub(crate) status: RunStatus,
+    /// Outputs sent.
+    pub(crate) mask: u64,
+    /// Number of outputs.
+    pub(crate) outputs: usize,
+    pub(crate) start: u64,
+    pub(crate) end: u64,
+    /// Whether the cycle waits for this unit.
+    pub(crate) sync: bool,
+}
+
+pub(crate) fn finish_run(link: &Link<'_>, r: RunRecord) {
+    let RunRecord {
+        k,
+        status,
+        mask,
+        outputs,
+        start,
+        end,
+        sync,
+    } = r;
+    let slot = link.board.slot(link.idx);
+    let counter = match status {
+        RunStatus::Ok => &slot.runs,
+        RunStatus::Skipped => &slot.skips,
+        _ => &slot.failures,
+    };
+    counter.fetch_add(1, Ordering::Relaxed);
+    slot.compute_ns_total
+        .fetch_add(end - start, Ordering::Relaxed);
+    slot.last_compute_ns.store(end - start, Ordering::Relaxed);
+    slot.published_mask.store(mask, Ordering::Relaxed);
+    slot.status.store(status as u32, Ordering::Relaxed);
+    slot.last_end_ns.store(now_ns(), Ordering::Relaxed);
+    slot.done_cycle.store(k, Ordering::Release);
+    if sync {
+        let all = if outputs >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << outputs) - 1
+        };
+        let finished = link.board.complete(k, 1);
+        if finished || status != RunStatus::Ok || mask != all {
+            let _ = link.wake.notify();
+        }
+    }
+}
+
+impl<S: Skill> Unit for SkillUnit<S> {
+    type Params = S::Params;
+    fn mode(&self) -> Mode {
+        S::MODE
+    }
+    fn priority(&self) -> i32 {
+        S::PRIORITY
+    }
+    fn default_params(&self) -> S::Params {
+        S::Params::default()
+    }
+    fn input_ports(&self) -> Vec<PortDecl> {
+        <S::Inputs<'static> as InputSet<'static>>::ports()
+    }
+    fn output_ports(&self) -> Vec<PortDecl> {
+        <S::Outputs<'static> as OutputSet<'static>>::ports()
+    }
+    fn make_inputs(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        <S::Inputs<'static> as InputSet<'static>>::make(m)
+    }
+    fn make_outputs(&self, m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
+        <S::Outputs<'static> as OutputSet<'static>>::make(m)
+    }
+
+    fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<S::Params>) {
+        let skill = &mut self.0;
+        step_skill(link, io, common, S::MODE, |src, outputs, ctx| {
+            match <S::Inputs<'_> as InputSet<'_>>::fetch(src) {
+                None => RunStatus::Skipped,
+                Some(input) => {
+                    let mut out = <S::Outputs<'_> as OutputSet<'_>>::bind(outputs);
+                    guarded(ctx.cycle, || skill.compute(ctx, input, &mut out))
+                }
+            }
+        });
+    }
+}
+
+/// One run of a skill, if one is due: a sync skill runs when the manager expects it in cycle
+/// k and every same-cycle input carries cycle k; an async one when an input changed (or once
+/// per cycle without inputs). `run` runs the body on the inputs and outputs; the outputs of a
+/// successful run are sent, the run stamped, and proposals not made are announced.
+pub(crate) fn step_skill<P: Params>(
+    link: &Link<'_>,
+    io: &mut Io,
+    common: &mut Common<P>,
+    mode: Mode,
+    run: impl FnOnce(&dyn InputSource, &mut [ErasedOutput], &Ctx<'_, P>) -> RunStatus,
+) {
+    let board = link.board;
+    let slot = board.slot(link.idx);
+    let k = board.header().cycle.load(Ordering::Acquire);
+    let inputs = &mut io.inputs;
+    let due = match mode {
+        Mode::Sync => {
+            let fresh = slot.fresh_mask.load(Ordering::Acquire);
+            k > common.last_cycle
+                && slot.expected_cycle.load(Ordering::Acquire) == k
+                && inputs.iter().enumerate().all(|(i, p)| {
+                    fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
+                })
+        }
+        Mode::Async if inputs.is_empty() => k > common.last_cycle,
+        Mode::Async => inputs.iter().any(|p| p.is_fresh()),
+    };
+    if !due {
+        return;
+    }
+    let start = now_ns();
+    slot.last_start_ns.store(start, Ordering::Relaxed);
+    let status = {
+        let src = RuntimeInputs { inputs, cycle: k };
+        let ctx = Ctx {
+            params: &common.params,
+            cycle: k,
+            name: &common.name,
+        };
+        run(&src, &mut io.outputs, &ctx)
+    };
+    let end = now_ns();
+    let header = SampleHeader {
+        cycle: k,
+        stamp_ns: end,
+        slot: link.idx as u32,
+        reserved: 0,
+    };
+    let mask = commit_outputs(&mut io.outputs, status, header);
+    for i in io.inputs.iter_mut() {
+        i.consume();
+    }
+    common.last_cycle = k;
+    finish_run(
+        link,
+        RunRecord {
+            k,
+            status,
+            mask,
+            outputs: io.outputs.len(),
+            start,
+            end,
+            sync: mode == Mode::Sync,
+        },
+    );
+    // A proposal not made: the device waiting for it learns from the board, once woken.
+    for &i in &io.proposals {
+        if mask & (1 << i) == 0 {
+            io.outputs[i].wake();
+        }
+    }
+}

@@ -5,9 +5,11 @@
 //! runs either; `skillfab manager …` and `skillfab up …` run that binary.
 //!
 //! ## Layout
-//! - [`engine`]: the cycle engine (registry, readiness, deadlines, liveness, stats).
+//! - [`engine`]: the cycle engine: the loop and report (`mod.rs`), the cycle state machine
+//!   (`cycle.rs`), registration and liveness (`registry.rs`), end-of-cycle reads (`observe.rs`).
 //! - [`graph`]: wiring checks and the per-cycle plan, pure.
-//! - [`control`]: the control plane (requests, events); [`monitors`]: conditions on live
+//! - [`control`]: the control plane (requests, events), one file per family of requests;
+//!   [`monitors`]: conditions on live
 //!   outputs, with their expression language.
 //! - [`stats`]: latency percentiles and the run report.
 //! - [`recorder`]: the fabric log (parameter changes, I/O samples) as JSON lines or MCAP.

@@ -1,0 +1,157 @@
+//! The control thread: the clients' side of the manager (request server, events publisher,
+//! client wake-ups), so talking to clients never holds up a cycle.
+
+use super::*;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::server::Server;
+use skillfab_proto::board::pid_alive;
+use skillfab_proto::control;
+use std::collections::HashMap;
+
+/// The control thread's ports: the clients' side of the manager.
+pub(super) struct ClientSide {
+    _node: Node<ipc::Service>,
+    server: Server<ipc::Service, [u8], (), [u8], ()>,
+    events: Publisher<ipc::Service, [u8], ()>,
+    events_notifier: Notifier<ipc::Service>,
+    listener: Listener<ipc::Service>,
+    wake_engine: Notifier<ipc::Service>,
+    /// One notifier per client that asked something: wakes it when its answer is in.
+    clients: HashMap<String, Notifier<ipc::Service>>,
+    pending: HashMap<u64, Pending>,
+    next_id: u64,
+}
+
+impl ClientSide {
+    pub(super) fn open(domain: &Domain) -> Result<ClientSide, SdkError> {
+        let node = services::node(domain, "skillfab-control")?;
+        let server = services::control_service(&node)?
+            .server_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| transport("control server", e))?;
+        let events = services::events_service(&node)?
+            .publisher_builder()
+            .initial_max_slice_len(services::EVENT_MAX_BYTES)
+            .allocation_strategy(AllocationStrategy::Static)
+            .create()
+            .map_err(|e| transport("events publisher", e))?;
+        Ok(ClientSide {
+            events_notifier: services::notifier(&node, &names::events())?,
+            listener: services::listener(&node, &names::control())?,
+            wake_engine: services::notifier(&node, &names::manager_wake())?,
+            server,
+            events,
+            _node: node,
+            clients: HashMap::new(),
+            pending: HashMap::new(),
+            next_id: 0,
+        })
+    }
+
+    pub(super) fn serve(
+        &mut self,
+        to_engine: &Sender<Incoming>,
+        from_engine: &Receiver<Outgoing>,
+        stop: &AtomicBool,
+    ) {
+        let mut last_sweep = std::time::Instant::now();
+        while !stop.load(Ordering::Acquire) {
+            // Signals are the engine's business; this thread only waits for pokes.
+            let _ = self
+                .listener
+                .timed_wait(|_| {}, std::time::Duration::from_millis(500));
+            let mut forwarded = false;
+            loop {
+                let request = match self.server.receive() {
+                    Ok(Some(r)) => r,
+                    Ok(None) => break,
+                    Err(e) => {
+                        tracing::warn!(error = ?e, "control receive failed");
+                        break;
+                    }
+                };
+                self.next_id += 1;
+                let (client, request_body) = match control::decode_request(request.payload()) {
+                    Ok(env) => (Some(env.client), Ok(env.request)),
+                    Err(e) => (None, Err(e)),
+                };
+                self.pending.insert(self.next_id, request);
+                let _ = to_engine.send(Incoming {
+                    id: self.next_id,
+                    client,
+                    request: request_body,
+                });
+                forwarded = true;
+            }
+            if forwarded {
+                let _ = self.wake_engine.notify();
+            }
+            while let Ok(out) = from_engine.try_recv() {
+                match out {
+                    Outgoing::Answer {
+                        id,
+                        client,
+                        response,
+                    } => {
+                        if let Some(req) = self.pending.remove(&id) {
+                            self.answer(&req, client.as_deref(), &response);
+                        }
+                    }
+                    Outgoing::Events(events) => self.publish(&events),
+                }
+            }
+            if last_sweep.elapsed() > std::time::Duration::from_secs(1) {
+                last_sweep = std::time::Instant::now();
+                self.clients
+                    .retain(|c, _| client_pid(c).is_none_or(pid_alive));
+            }
+        }
+    }
+
+    fn answer(&mut self, request: &Pending, client: Option<&str>, response: &Response) {
+        // The client's wake-up service exists while it waits: open it (never create it).
+        if let Some(c) = client
+            && !self.clients.contains_key(c)
+        {
+            match services::notifier_existing(&self._node, &names::client(c)) {
+                Ok(n) => {
+                    self.clients.insert(c.to_string(), n);
+                }
+                Err(e) => tracing::debug!(client = c, error = %e, "client has no wake-up service"),
+            }
+        }
+        let bytes = control::encode_response(response);
+        let sent = request
+            .loan_slice_uninit(bytes.len())
+            .map(|r| r.write_from_slice(&bytes))
+            .map_err(|e| format!("{e:?}"))
+            .and_then(|r| r.send().map_err(|e| format!("{e:?}")));
+        if let Err(e) = sent {
+            tracing::warn!(error = %e, "control answer failed");
+        }
+        if let Some(n) = client.and_then(|c| self.clients.get(c)) {
+            let _ = n.notify();
+        }
+    }
+
+    fn publish(&mut self, events: &[Event]) {
+        for event in events {
+            let sent = control::encode_event_within(event, services::EVENT_MAX_BYTES)
+                .ok_or_else(|| format!("larger than {} bytes", services::EVENT_MAX_BYTES))
+                .and_then(|b| {
+                    self.events
+                        .loan_slice_uninit(b.len())
+                        .map(|s| s.write_from_slice(&b))
+                        .map_err(|e| format!("{e:?}"))
+                })
+                .and_then(|s| s.send().map_err(|e| format!("{e:?}")));
+            if let Err(e) = sent {
+                tracing::warn!(seq = event.seq, error = %e, "event not published");
+            }
+        }
+        let _ = self.events_notifier.notify();
+    }
+}

@@ -1,0 +1,83 @@
+//! `list`, `stats`: the registered skills and the cycle statistics.
+
+use super::*;
+use skillfab_proto::control::{ChannelStat, PortInfo, SkillInfo, SkillStat, SkillState, Stats};
+
+impl Manager {
+    /// Every registered skill, in registration order.
+    pub(super) fn list(&self) -> Vec<SkillInfo> {
+        let ports = |p: &[skillfab_proto::decl::PortDecl]| {
+            p.iter()
+                .map(|p| PortInfo {
+                    port: p.port.clone(),
+                    topic: p.topic.clone(),
+                    type_name: p.schema.type_name.clone(),
+                })
+                .collect()
+        };
+        self.order
+            .iter()
+            .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
+            .map(|(s, e)| SkillInfo {
+                name: e.decl.name.clone(),
+                kind: e.decl.kind.clone(),
+                mode: e.decl.mode,
+                state: if !e.ready {
+                    SkillState::Starting
+                } else if e.active {
+                    SkillState::Active
+                } else {
+                    SkillState::Inactive
+                },
+                priority: e.decl.priority,
+                pid: e.decl.pid,
+                params: e.decl.params.clone(),
+                values: e.values.clone(),
+                inputs: ports(&e.decl.inputs),
+                outputs: ports(&e.decl.outputs),
+                figures: self.figures(s),
+            })
+            .collect()
+    }
+
+    /// Cycle statistics, per-skill figures and channel winners.
+    pub(super) fn stats_info(&self) -> Stats {
+        let l = self.stats.latency_us();
+        Stats {
+            cycles: self.cycle,
+            running: !self.paused,
+            overruns: self.stats.overruns,
+            latency_us: l,
+            skills: self
+                .list()
+                .into_iter()
+                .map(|s| SkillStat {
+                    name: s.name,
+                    figures: s.figures,
+                })
+                .collect(),
+            deaths: self.deaths,
+            events: self.events_published,
+            channels: {
+                let mut v: Vec<ChannelStat> = self
+                    .channels
+                    .iter()
+                    .map(|(c, v)| {
+                        let who = match (&v.winner, v.weights.is_empty()) {
+                            (Some(w), _) => w.clone(),
+                            (None, true) => "safe".to_string(),
+                            (None, false) => "blend".to_string(),
+                        };
+                        ChannelStat {
+                            channel: c.clone(),
+                            winner: who,
+                            cycle: v.cycle,
+                        }
+                    })
+                    .collect();
+                v.sort_by(|a, b| a.channel.cmp(&b.channel));
+                v
+            },
+        }
+    }
+}

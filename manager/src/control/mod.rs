@@ -1,0 +1,276 @@
+//! The manager's side of the control plane: serves requests, publishes events.
+//!
+//! A control thread owns the client-facing ports (request server, events publisher, client
+//! wake-ups) and forwards requests to the engine over a channel; the engine carries them out
+//! between cycles, so a request never races a cycle, and hands answers and events back. Every
+//! refusal is a precise [`ControlError`]. A `step` request is answered when its cycles are
+//! done. Events get consecutive sequence numbers in the order the engine queued them.
+
+mod client_side;
+mod list;
+mod logging;
+mod monitors;
+mod params;
+mod query;
+
+use crate::engine::Manager;
+use crate::monitors::Monitor;
+use client_side::ClientSide;
+use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::node::Node;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use skillfab_proto::board::pid_alive;
+use skillfab_proto::control::{ControlError, Event, ParamErrorText, Reply, Request, Response};
+use skillfab_proto::domain::Domain;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::param::ParamError;
+use skillfab_proto::{Error as SdkError, names, services};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::thread::JoinHandle;
+
+pub(super) type Pending = ActiveRequest<ipc::Service, [u8], (), [u8], ()>;
+
+/// Most cycle latencies one `Latencies` answer carries (a console's history).
+const MAX_LATENCIES: usize = 1024;
+
+/// A request handed from the control thread to the engine.
+pub(crate) struct Incoming {
+    pub(super) id: u64,
+    pub(super) client: Option<String>,
+    pub(super) request: Result<Request, ControlError>,
+}
+
+/// What the engine hands back to the control thread.
+pub(crate) enum Outgoing {
+    Answer {
+        id: u64,
+        client: Option<String>,
+        response: Response,
+    },
+    Events(Vec<Event>),
+}
+
+/// The engine's end of the control plane. Requests are received, and answers and events
+/// sent, on a thread of their own: talking to clients can block (a client that leaves while
+/// its connection is being set up makes iceoryx2 wait), and that must never hold up a cycle.
+pub struct ControlPlane {
+    from_clients: Receiver<Incoming>,
+    to_clients: Sender<Outgoing>,
+    /// Wakes the control thread (an event on `skillfab/control`).
+    poke: Notifier<ipc::Service>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+    seq: u64,
+    /// `step` requests waiting for their cycles.
+    steps: Vec<(u64, Option<String>)>,
+}
+
+fn transport(what: &str, e: impl std::fmt::Debug) -> SdkError {
+    SdkError::Transport {
+        what: what.to_string(),
+        detail: format!("{e:?}"),
+    }
+}
+
+/// A client id is `<pid>-<n>`; the pid tells whether it still lives.
+fn client_pid(client: &str) -> Option<u32> {
+    client.split('-').next()?.parse().ok()
+}
+
+impl ControlPlane {
+    /// Opens the control and events services on a new thread; returns once they exist.
+    pub fn new(domain: &Domain, node: &Node<ipc::Service>) -> Result<ControlPlane, SdkError> {
+        let (to_engine, from_clients) = channel();
+        let (to_clients, from_engine) = channel();
+        let (ready_tx, ready_rx) = channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let (d, st) = (domain.clone(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name("control".into())
+            .spawn(move || {
+                let _span = tracing::info_span!("control", domain = %d).entered();
+                match ClientSide::open(&d) {
+                    Ok(mut side) => {
+                        let _ = ready_tx.send(Ok(()));
+                        side.serve(&to_engine, &from_engine, &st);
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                    }
+                }
+            })
+            .map_err(|e| transport("control thread", e))?;
+        ready_rx
+            .recv()
+            .map_err(|e| transport("control thread start", e))??;
+        Ok(ControlPlane {
+            from_clients,
+            to_clients,
+            poke: services::notifier(node, &names::control())?,
+            stop,
+            thread: Some(thread),
+            seq: 0,
+            steps: Vec::new(),
+        })
+    }
+
+    /// Carries out every request that arrived.
+    pub fn serve(&mut self, m: &mut Manager) {
+        let mut answered = false;
+        while let Ok(inc) = self.from_clients.try_recv() {
+            let response = match inc.request {
+                Err(e) => Err(e),
+                Ok(Request::Step(n)) if n > 0 => {
+                    m.stop_at = Some(m.in_progress() + n);
+                    m.set_paused(false);
+                    self.steps.push((inc.id, inc.client));
+                    continue;
+                }
+                Ok(request) => m.handle(inc.client.as_deref().unwrap_or("?"), request),
+            };
+            if let Err(e) = &response {
+                tracing::info!(client = inc.client.as_deref().unwrap_or("?"), error = %e, "request refused");
+            }
+            let _ = self.to_clients.send(Outgoing::Answer {
+                id: inc.id,
+                client: inc.client,
+                response,
+            });
+            answered = true;
+        }
+        if answered {
+            let _ = self.poke.notify();
+        }
+    }
+
+    /// Hands queued events and finished `step` answers to the control thread.
+    pub fn flush(&mut self, m: &mut Manager) {
+        let mut poke = false;
+        if !m.outbox.is_empty() {
+            let events = std::mem::take(&mut m.outbox)
+                .into_iter()
+                .map(|kind| {
+                    self.seq += 1;
+                    Event {
+                        seq: self.seq,
+                        cycle: m.cycle,
+                        time_ns: now_ns(),
+                        kind,
+                    }
+                })
+                .collect();
+            m.events_published = self.seq;
+            let _ = self.to_clients.send(Outgoing::Events(events));
+            poke = true;
+        }
+        if m.stop_at.is_none() && !self.steps.is_empty() {
+            for (id, client) in std::mem::take(&mut self.steps) {
+                let _ = self.to_clients.send(Outgoing::Answer {
+                    id,
+                    client,
+                    response: Ok(Reply::Stepped(m.cycle)),
+                });
+            }
+            poke = true;
+        }
+        if poke {
+            let _ = self.poke.notify();
+        }
+    }
+
+    /// Drops the monitors of clients whose process is gone.
+    pub fn forget_dead_clients(&mut self, m: &mut Manager) {
+        let before = m.monitors.len();
+        m.monitors
+            .retain(|mon| client_pid(&mon.client).is_none_or(pid_alive));
+        if m.monitors.len() != before {
+            tracing::info!(
+                removed = before - m.monitors.len(),
+                "monitors of departed clients removed"
+            );
+        }
+    }
+}
+
+impl Drop for ControlPlane {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        let _ = self.poke.notify();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn param_err(skill: &str, e: ParamError) -> ControlError {
+    ControlError::Param {
+        skill: skill.to_string(),
+        error: ParamErrorText::from(e),
+    }
+}
+
+/// Request dispatch: one handler per request, in the files of this module by concern
+/// (`list`: skills and stats; `params`: activation, parameters, priorities; `query`: values;
+/// `monitors`; `logging`: the fabric log).
+impl Manager {
+    fn slot_of(&self, name: &str) -> Result<usize, ControlError> {
+        self.order
+            .iter()
+            .copied()
+            .find(|&s| self.skills[s].as_ref().is_some_and(|e| e.decl.name == name))
+            .ok_or_else(|| ControlError::UnknownSkill(name.to_string()))
+    }
+
+    /// The cycle in progress, or the last one done.
+    pub(crate) fn in_progress(&self) -> u64 {
+        self.board
+            .header()
+            .cycle
+            .load(Ordering::Acquire)
+            .max(self.cycle)
+    }
+
+    /// Carries out one request.
+    pub(crate) fn handle(&mut self, client: &str, request: Request) -> Response {
+        match request {
+            Request::List => Ok(Reply::Skills(self.list())),
+            Request::Activate(names) => self.set_active(&names, true),
+            Request::Deactivate(names) => self.set_active(&names, false),
+            Request::SetParam {
+                skill,
+                param,
+                value,
+            } => self.set_param(client, &skill, &param, value),
+            Request::GetParam { skill, param } => self.get_param(&skill, param),
+            Request::Query(path) => self.query(&path),
+            Request::AddMonitor { expr, mode, hold } => self.add_monitor(client, expr, mode, hold),
+            Request::RemoveMonitor(id) => self.remove_monitor(id),
+            Request::ListMonitors => Ok(Reply::Monitors(
+                self.monitors.iter().map(Monitor::info).collect(),
+            )),
+            Request::Run => {
+                self.stop_at = None;
+                self.set_paused(false);
+                Ok(Reply::Done)
+            }
+            Request::Stop => {
+                self.stop_at = None;
+                self.set_paused(true);
+                Ok(Reply::Done)
+            }
+            Request::Step(_) => Ok(Reply::Stepped(self.cycle)),
+            Request::Stats => Ok(Reply::Stats(self.stats_info())),
+            Request::Latencies(n) => Ok(Reply::Latencies {
+                cycle: self.cycle,
+                latency_us: self.stats.recent_us((n as usize).min(MAX_LATENCIES)),
+            }),
+            Request::SetIoLog { skill, on } => self.set_io_log(client, &skill, on),
+            Request::Logging => Ok(self.logging()),
+            Request::SetPriority { skill, priority } => self.set_priority(client, skill, priority),
+        }
+    }
+}

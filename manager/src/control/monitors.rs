@@ -1,0 +1,74 @@
+//! `monitor`, `unmonitor`: conditions on live outputs, evaluated every cycle.
+
+use super::query::check_numeric;
+use super::*;
+use crate::monitors::expr;
+use crate::monitors::{Monitor, Resolved};
+use skillfab_proto::control::MonitorMode;
+
+impl Manager {
+    /// Parses and type-checks a monitor expression against the outputs it reads; installs it.
+    pub(super) fn add_monitor(
+        &mut self,
+        client: &str,
+        expr: String,
+        mode: MonitorMode,
+        hold: u32,
+    ) -> Response {
+        let parsed = expr::parse(&expr).map_err(|error| ControlError::BadExpression {
+            expr: expr.clone(),
+            error,
+        })?;
+        let mut paths = Vec::new();
+        for p in expr::paths(&parsed) {
+            let aggregate = !parsed_is_scalar_use(&parsed, p);
+            let (topic, field, slot) = self.resolve_path(&p.skill, &p.output, &p.field, &p.text)?;
+            check_numeric(&field, aggregate).map_err(|reason| ControlError::BadPath {
+                path: p.text.clone(),
+                reason,
+            })?;
+            self.open_reader(&p.skill, &p.output)?;
+            paths.push(Resolved {
+                path: p.clone(),
+                topic,
+                field,
+                slot,
+            });
+        }
+        let id = self.next_monitor;
+        self.next_monitor += 1;
+        self.monitors.push(Monitor::new(
+            id,
+            expr,
+            parsed,
+            mode,
+            hold,
+            client.to_string(),
+            paths,
+        ));
+        Ok(Reply::MonitorAdded(id))
+    }
+
+    /// Removes one of the monitors.
+    pub(super) fn remove_monitor(&mut self, id: u64) -> Response {
+        let before = self.monitors.len();
+        self.monitors.retain(|m| m.id != id);
+        if self.monitors.len() == before {
+            return Err(ControlError::UnknownMonitor(id));
+        }
+        Ok(Reply::Done)
+    }
+}
+
+/// Whether path `p` is used as a plain number (not inside min()/max()).
+fn parsed_is_scalar_use(e: &expr::Expr, p: &expr::PathRef) -> bool {
+    use expr::Expr::*;
+    match e {
+        Path(q) => q == p,
+        Min(_) | Max(_) | Num(_) | Bool(_) => false,
+        Neg(x) | Not(x) => parsed_is_scalar_use(x, p),
+        Arith(_, l, r) | Cmp(_, l, r) | And(l, r) | Or(l, r) => {
+            parsed_is_scalar_use(l, p) || parsed_is_scalar_use(r, p)
+        }
+    }
+}

@@ -1,0 +1,153 @@
+//! `activate`/`deactivate`, `set`/`get` of parameters, `priority`.
+
+use super::*;
+use skillfab_proto::control::{EventKind, ParamArg};
+use skillfab_proto::param::{ParamValue, check_bounds};
+
+impl Manager {
+    /// Activates or deactivates every named skill, or none (an unknown name refuses all).
+    pub(super) fn set_active(&mut self, names: &[String], active: bool) -> Response {
+        let slots = names
+            .iter()
+            .map(|n| self.slot_of(n))
+            .collect::<Result<Vec<_>, _>>()?;
+        for s in slots {
+            let Some(e) = self.skills[s].as_mut() else {
+                continue;
+            };
+            if e.active == active {
+                continue;
+            }
+            // Takes effect at the next cycle start (the plan writes it to the board), so a
+            // skill deactivated mid-cycle still finishes the run the cycle counts on.
+            e.active = active;
+            let skill = e.decl.name.clone();
+            self.dirty = true;
+            tracing::info!(%skill, active, "activation changed");
+            self.outbox.push(if active {
+                EventKind::SkillActivated { skill }
+            } else {
+                EventKind::SkillDeactivated { skill }
+            });
+        }
+        Ok(Reply::Done)
+    }
+
+    /// Sets a parameter after checking its type and bounds; logged and announced.
+    pub(super) fn set_param(
+        &mut self,
+        client: &str,
+        skill: &str,
+        param: &str,
+        arg: ParamArg,
+    ) -> Response {
+        let s = self.slot_of(skill)?;
+        let e = self.skills[s]
+            .as_mut()
+            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        let spec = e
+            .decl
+            .params
+            .iter()
+            .find(|p| p.name == param)
+            .ok_or_else(|| {
+                param_err(
+                    skill,
+                    ParamError::Unknown {
+                        param: param.into(),
+                    },
+                )
+            })?;
+        let value = match arg {
+            ParamArg::Text(t) => ParamValue::parse(spec.kind, &t).ok_or_else(|| {
+                param_err(
+                    skill,
+                    ParamError::Unparsable {
+                        param: param.into(),
+                        expected: spec.kind,
+                        text: t.clone(),
+                    },
+                )
+            })?,
+            ParamArg::Value(v) => v.coerce(spec.kind).ok_or_else(|| {
+                param_err(
+                    skill,
+                    ParamError::WrongType {
+                        param: param.into(),
+                        expected: spec.kind,
+                        got: v,
+                    },
+                )
+            })?,
+        };
+        check_bounds(spec, value).map_err(|err| param_err(skill, err))?;
+        let old = e
+            .values
+            .iter()
+            .find(|(n, _)| n == param)
+            .map_or(spec.default, |(_, v)| *v);
+        match e.values.iter_mut().find(|(n, _)| n == param) {
+            Some(slot) => slot.1 = value,
+            None => e.values.push((param.to_string(), value)),
+        }
+        let bytes = postcard::to_allocvec(&e.values)
+            .map_err(|err| ControlError::Refused(err.to_string()))?;
+        self.board
+            .slot(s)
+            .write_params(&bytes)
+            .map_err(|err| ControlError::Refused(err.to_string()))?;
+        tracing::info!(skill, param, %old, new = %value, by = client, cycle = self.cycle, "parameter changed");
+        if let Some(r) = &self.recorder {
+            r.param(self.in_progress(), skill, param, old, value, client);
+        }
+        self.outbox.push(EventKind::ParamChanged {
+            skill: skill.to_string(),
+            param: param.to_string(),
+            old,
+            new: value,
+            by: client.to_string(),
+        });
+        Ok(Reply::Done)
+    }
+
+    /// A parameter's current value.
+    pub(super) fn get_param(&self, skill: &str, param: String) -> Response {
+        let s = self.slot_of(skill)?;
+        let e = self.skills[s]
+            .as_ref()
+            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        e.values
+            .iter()
+            .find(|(n, _)| *n == param)
+            .map(|(_, v)| Reply::Param(*v))
+            .ok_or_else(|| param_err(skill, ParamError::Unknown { param }))
+    }
+
+    /// A skill's arbitration priority, from the next cycle start.
+    pub(super) fn set_priority(&mut self, client: &str, skill: String, priority: i32) -> Response {
+        let s = self.slot_of(&skill)?;
+        if let Some(e) = self.skills[s].as_mut() {
+            let old = e.decl.priority;
+            e.decl.priority = priority;
+            if old != priority {
+                // Written to the board at the next cycle start: arbitration changes
+                // from the next cycle.
+                self.dirty = true;
+                if let Some(r) = &self.recorder {
+                    r.line(
+                            "priority",
+                            Some(self.in_progress()),
+                            serde_json::json!({"skill": skill, "old": old, "new": priority, "by": client}),
+                        );
+                }
+                self.outbox.push(EventKind::PriorityChanged {
+                    skill,
+                    old,
+                    new: priority,
+                    by: client.to_string(),
+                });
+            }
+        }
+        Ok(Reply::Done)
+    }
+}

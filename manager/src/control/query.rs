@@ -1,0 +1,194 @@
+//! `query`: the latest value of an output (or a channel's arbitration) through its schema.
+
+use super::*;
+use skillfab_proto::services::RawReader;
+use skillfab_proto::value::{self, FieldPath, OutputPath, Value};
+
+impl Manager {
+    /// Topic and field of `skill.output[.field]`.
+    pub(super) fn resolve_path(
+        &self,
+        skill: &str,
+        output: &str,
+        field: &str,
+        text: &str,
+    ) -> Result<(String, FieldPath, Option<u32>), ControlError> {
+        let bad = |reason: String| ControlError::BadPath {
+            path: text.to_string(),
+            reason,
+        };
+        let s = self.slot_of(skill)?;
+        let e = self.skills[s]
+            .as_ref()
+            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        let port = e
+            .decl
+            .outputs
+            .iter()
+            .find(|p| p.port == output)
+            .ok_or_else(|| {
+                let names: Vec<&str> = e.decl.outputs.iter().map(|p| p.port.as_str()).collect();
+                bad(format!(
+                    "skill '{skill}' has no output '{output}' (outputs: {})",
+                    names.join(", ")
+                ))
+            })?;
+        let f = value::resolve(&port.schema, field).map_err(|err| bad(err.reason))?;
+        // Every proposer publishes on its channel's topic: read this skill's own proposals.
+        let slot = (port.kind == skillfab_proto::decl::PortKind::Proposal).then_some(s as u32);
+        Ok((port.topic.clone(), f, slot))
+    }
+
+    /// Opens (once) an untyped reader of the output's topic.
+    pub(super) fn open_reader(&mut self, skill: &str, output: &str) -> Result<(), ControlError> {
+        let s = self.slot_of(skill)?;
+        let Some(port) = self.skills[s]
+            .as_ref()
+            .and_then(|e| e.decl.outputs.iter().find(|p| p.port == output))
+        else {
+            return Err(ControlError::UnknownSkill(skill.to_string()));
+        };
+        if !self.readers.contains_key(&port.topic) {
+            let reader = RawReader::open(&self.node, &port.topic, &port.schema)
+                .map_err(|e| ControlError::Refused(e.to_string()))?;
+            self.readers.insert(port.topic.clone(), reader);
+        }
+        Ok(())
+    }
+
+    /// `channel.<name>[.command[.field]]`: the channel's last arbitration and command.
+    pub(super) fn query_channel(&mut self, text: &str, rest: &str) -> Response {
+        let (name, sub) = match rest.split_once('.') {
+            Some((n, s)) => (n, Some(s)),
+            None => (rest, None),
+        };
+        let view = self
+            .channels
+            .get(name)
+            .cloned()
+            .ok_or_else(|| ControlError::BadPath {
+                path: text.into(),
+                reason: format!("no channel '{name}' has been arbitrated (channels: {})", {
+                    let mut c: Vec<&str> = self.channels.keys().map(String::as_str).collect();
+                    c.sort();
+                    c.join(", ")
+                }),
+            })?;
+        let schema = self
+            .order
+            .iter()
+            .filter_map(|&s| self.skills[s].as_ref())
+            .flat_map(|e| e.decl.inputs.iter())
+            .find(|p| {
+                p.channel_name() == Some(name)
+                    && matches!(p.kind, skillfab_proto::decl::PortKind::Channel(_))
+            })
+            .map(|p| p.schema.clone())
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        let topic = skillfab_proto::names::command_topic(name);
+        if !self.readers.contains_key(&topic) {
+            let r = RawReader::open(&self.node, &topic, &schema)
+                .map_err(|e| ControlError::Refused(e.to_string()))?;
+            self.readers.insert(topic.clone(), r);
+        }
+        let field = match sub {
+            None => "",
+            Some(s) => s
+                .strip_prefix("command")
+                .ok_or_else(|| ControlError::BadPath {
+                    path: text.into(),
+                    reason: "a channel has '.command[.field]' and nothing else".into(),
+                })?,
+        };
+        let f = value::resolve(&schema, field).map_err(|e| ControlError::BadPath {
+            path: text.into(),
+            reason: e.reason,
+        })?;
+        let reader = self
+            .readers
+            .get_mut(&topic)
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        reader
+            .poll()
+            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        let command = reader
+            .latest()
+            .and_then(|(b, h)| Some((f.read(b)?, h.cycle)));
+        if sub.is_some() {
+            let (value, cycle) = command.ok_or_else(|| ControlError::NoValue(text.into()))?;
+            return Ok(Reply::Value { value, cycle });
+        }
+        let value = Value::Struct(vec![
+            ("channel".into(), Value::Text(name.into())),
+            ("device".into(), Value::Text(view.device.clone())),
+            ("policy".into(), Value::Text(view.policy.to_string())),
+            (
+                "winner".into(),
+                view.winner.clone().map_or(Value::Null, Value::Text),
+            ),
+            (
+                "weights".into(),
+                Value::Struct(
+                    view.weights
+                        .iter()
+                        .map(|(n, w)| (n.clone(), Value::Float(*w)))
+                        .collect(),
+                ),
+            ),
+            // The latest command may be from a later cycle than the arbitration record.
+            (
+                "command_cycle".into(),
+                command.as_ref().map_or(Value::Null, |c| Value::UInt(c.1)),
+            ),
+            ("command".into(), command.map_or(Value::Null, |c| c.0)),
+        ]);
+        Ok(Reply::Value {
+            value,
+            cycle: view.cycle,
+        })
+    }
+
+    /// The latest value at `skill.output[.field][index]` (or `channel.…`), with its cycle.
+    pub(super) fn query(&mut self, path: &str) -> Response {
+        let text = path.trim();
+        if let Some(rest) = text.strip_prefix("channel.") {
+            return self.query_channel(text, rest);
+        }
+        let path = OutputPath::parse(text).map_err(|e| ControlError::BadPath {
+            path: text.into(),
+            reason: e.reason,
+        })?;
+        let (topic, f, slot) = self.resolve_path(&path.skill, &path.output, &path.field, text)?;
+        self.open_reader(&path.skill, &path.output)?;
+        let reader = self
+            .readers
+            .get_mut(&topic)
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        reader
+            .poll()
+            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        let (bytes, header) = reader
+            .latest_of(slot)
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        let value = f
+            .read(bytes)
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        Ok(Reply::Value {
+            value,
+            cycle: header.cycle,
+        })
+    }
+}
+
+/// A plain path must name one number; inside min()/max() an array or range of numbers.
+pub(super) fn check_numeric(f: &FieldPath, aggregate: bool) -> Result<(), String> {
+    use skillfab_proto::schema::FieldKind;
+    let prim = |k: &FieldKind| matches!(k, FieldKind::Prim(_));
+    match (aggregate, &f.kind, f.count) {
+        (false, k, None) if prim(k) => Ok(()),
+        (false, _, _) => Err("names more than one number: use min() or max(), or index it".into()),
+        (true, k, Some(_)) if prim(k) => Ok(()),
+        (true, FieldKind::Array { elem, .. }, None) if prim(elem) => Ok(()),
+        (true, _, _) => Err("min()/max() need an array or a range of numbers".into()),
+    }
+}

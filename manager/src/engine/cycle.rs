@@ -1,0 +1,280 @@
+//! The cycle state machine: plan, start, resolve what can no longer run, finish (the
+//! paper's do-periodic-step, do-next-skill and cleanup).
+
+use super::*;
+
+impl Manager {
+    /// Drives the cycle state machine as far as it can go now.
+    pub(super) fn advance(&mut self) -> Result<(), ManagerError> {
+        loop {
+            if let Some(k) = self.running.as_ref().map(|r| r.k) {
+                self.resolve();
+                if self.board.remaining(k) == 0 {
+                    self.finish(false);
+                } else if self
+                    .running
+                    .as_ref()
+                    .is_some_and(|r| Instant::now() >= r.deadline)
+                {
+                    self.check_liveness();
+                    if self.board.remaining(k) == 0 {
+                        self.finish(false);
+                    } else {
+                        let unfinished = self.board.remaining(k);
+                        tracing::warn!(cycle = k, unfinished, "cycle overrun");
+                        self.outbox.push(EventKind::CycleOverrun { unfinished });
+                        self.finish(true);
+                    }
+                } else {
+                    return Ok(());
+                }
+            }
+            if self.stop_at.is_some_and(|t| self.cycle >= t) {
+                self.stop_at = None;
+                self.set_paused(true);
+            }
+            if self.paused || self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
+                return Ok(());
+            }
+            if !self.started {
+                let missing: Vec<String> = self
+                    .config
+                    .wait_for
+                    .iter()
+                    .filter(|n| {
+                        !self
+                            .skills
+                            .iter()
+                            .flatten()
+                            .any(|e| e.ready && &e.decl.name == *n)
+                    })
+                    .cloned()
+                    .collect();
+                if !missing.is_empty() {
+                    if self.created.elapsed() > self.config.wait_timeout {
+                        return Err(ManagerError::MissingSkills {
+                            missing,
+                            waited: self.config.wait_timeout,
+                        });
+                    }
+                    return Ok(());
+                }
+                self.started = true;
+                self.next_start = Instant::now();
+            }
+            let now = Instant::now();
+            match self.config.pace {
+                Pace::Period(p) => {
+                    if now < self.next_start {
+                        return Ok(());
+                    }
+                    self.next_start += p;
+                    if self.next_start < now {
+                        self.next_start = now;
+                    }
+                }
+                Pace::FreeRun => {
+                    if self.plan.expected.is_empty() && !self.dirty {
+                        if now < self.next_start {
+                            return Ok(());
+                        }
+                        self.next_start = now + IDLE_FREE_RUN;
+                    }
+                }
+            }
+            self.start_cycle();
+        }
+    }
+
+    pub(super) fn replan(&mut self) {
+        let nodes: Vec<PlanNode<'_>> = self
+            .order
+            .iter()
+            .filter_map(|&s| {
+                self.skills[s]
+                    .as_ref()
+                    .filter(|e| e.ready)
+                    .map(|e| PlanNode {
+                        slot: s,
+                        decl: &e.decl,
+                        active: e.active,
+                    })
+            })
+            .collect();
+        self.plan = graph::plan(&nodes);
+        for &(slot, mask) in &self.plan.fresh_masks {
+            self.board
+                .slot(slot)
+                .fresh_mask
+                .store(mask, Ordering::Release);
+        }
+        for &s in &self.order {
+            if let Some(e) = &self.skills[s] {
+                let slot = self.board.slot(s);
+                slot.active.store(u32::from(e.active), Ordering::Release);
+                slot.priority.store(e.decl.priority, Ordering::Release);
+            }
+        }
+        for ch in &self.plan.channels {
+            if ch.index < skillfab_proto::board::MAX_CHANNELS {
+                self.board.slot(ch.device).channel_proposers[ch.index]
+                    .store(ch.proposers, Ordering::Release);
+            }
+            // Read the commands from now on (queries find the latest one).
+            let topic = names::command_topic(&ch.channel);
+            let schema = self.skills[ch.device]
+                .as_ref()
+                .and_then(|e| e.decl.inputs.get(ch.index))
+                .map(|p| p.schema.clone());
+            if let Some(schema) = schema
+                && !self.readers.contains_key(&topic)
+            {
+                match RawReader::open(&self.node, &topic, &schema) {
+                    Ok(r) => {
+                        self.readers.insert(topic, r);
+                    }
+                    Err(e) => tracing::warn!(%topic, error = %e, "cannot read commands"),
+                }
+            }
+        }
+        self.dirty = false;
+    }
+
+    pub(super) fn start_cycle(&mut self) {
+        if self.dirty {
+            self.replan();
+        }
+        let k = self.cycle + 1;
+        for &s in &self.plan.expected {
+            self.board
+                .slot(s)
+                .expected_cycle
+                .store(k, Ordering::Release);
+        }
+        self.board.arm(k, self.plan.expected.len() as u32);
+        let start_ns = now_ns();
+        let h = self.board.header();
+        h.cycle_start_ns.store(start_ns, Ordering::Release);
+        h.cycle.store(k, Ordering::Release);
+        self.running = Some(Running {
+            k,
+            start_ns,
+            deadline: Instant::now() + self.config.deadline(),
+            expected: self.plan.expected.clone(),
+            processed: [false; MAX_SLOTS],
+            cancelled: [false; MAX_SLOTS],
+        });
+        for &s in &self.plan.sources {
+            if let Some(e) = &self.skills[s]
+                && let Err(err) = e.trigger.notify()
+            {
+                tracing::warn!(skill = %e.decl.name, error = ?err, "could not wake skill");
+            }
+        }
+    }
+
+    /// Looks at runs of the current cycle that finished without passing everything on, and
+    /// takes the consumers that can no longer run off the completion counter.
+    pub(super) fn resolve(&mut self) {
+        let Some(mut run) = self.running.take() else {
+            return;
+        };
+        let mut cancel = Vec::new();
+        for &s in &run.expected {
+            let slot = self.board.slot(s);
+            if run.processed[s] || slot.done_cycle.load(Ordering::Acquire) != run.k {
+                continue;
+            }
+            run.processed[s] = true;
+            let status = RunStatus::from_u32(slot.status.load(Ordering::Acquire));
+            let mask = slot.published_mask.load(Ordering::Acquire);
+            if let Some(per_output) = self.plan.consumers.get(&s) {
+                for (o, consumers) in per_output.iter().enumerate() {
+                    if status != RunStatus::Ok || mask & (1 << o) == 0 {
+                        cancel.extend_from_slice(consumers);
+                    }
+                }
+            }
+        }
+        let n = self.cancel_all(&mut run, cancel);
+        if n > 0 {
+            self.board.complete(run.k, n);
+        }
+        self.running = Some(run);
+    }
+
+    /// Marks `start` and everything downstream of it as unable to run in this cycle; returns
+    /// how many expected runs that removed.
+    pub(super) fn cancel_all(&self, run: &mut Running, mut todo: Vec<usize>) -> u32 {
+        let mut n = 0;
+        while let Some(s) = todo.pop() {
+            if run.cancelled[s]
+                || !run.expected.contains(&s)
+                || self.board.slot(s).done_cycle.load(Ordering::Acquire) == run.k
+            {
+                continue;
+            }
+            run.cancelled[s] = true;
+            n += 1;
+            self.board
+                .slot(s)
+                .cancelled_cycle
+                .store(run.k, Ordering::Release);
+            // A device waiting for this skill's proposal must look again.
+            for ch in self
+                .plan
+                .channels
+                .iter()
+                .filter(|c| c.proposers & (1 << s) != 0)
+            {
+                if let Some(e) = &self.skills[ch.device] {
+                    let _ = e.trigger.notify();
+                }
+            }
+            if let Some(per_output) = self.plan.consumers.get(&s) {
+                todo.extend(per_output.iter().flatten());
+            }
+        }
+        n
+    }
+
+    pub(super) fn finish(&mut self, overrun: bool) {
+        let Some(run) = self.running.take() else {
+            return;
+        };
+        let end = run
+            .expected
+            .iter()
+            .map(|&s| self.board.slot(s))
+            .filter(|slot| slot.done_cycle.load(Ordering::Acquire) == run.k)
+            .map(|slot| slot.last_end_ns.load(Ordering::Acquire))
+            .max();
+        let latency = if overrun {
+            now_ns().saturating_sub(run.start_ns)
+        } else {
+            end.map_or(0, |e| e.saturating_sub(run.start_ns))
+        };
+        self.stats.record(latency, overrun);
+        self.cycle = run.k;
+        if !self.plan.channels.is_empty() {
+            self.read_channels(run.k);
+        }
+        if !self.monitors.is_empty() {
+            self.evaluate_monitors();
+        }
+        if !self.io_log.is_empty() {
+            self.log_io();
+        }
+    }
+
+    /// Starts or stops cycling.
+    pub(crate) fn set_paused(&mut self, paused: bool) {
+        if self.paused != paused {
+            self.paused = paused;
+            self.outbox.push(EventKind::Cycling { running: !paused });
+            if !paused {
+                self.next_start = Instant::now();
+            }
+        }
+    }
+}

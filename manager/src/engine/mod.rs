@@ -1,0 +1,503 @@
+//! The cycle engine (the paper's skill manager): registry, cycle plan, readiness, liveness.
+//!
+//! One loop on one thread, woken by its WaitSet: by skills (registration, leaving, the run
+//! that completes a cycle, a run that passed nothing on), by its own timers (period start,
+//! cycle deadline, liveness tick) and by SIGINT/SIGTERM.
+//!
+//! A cycle k: the manager marks the expected sync skills on the board, arms the completion
+//! counter with their number, publishes k and wakes only the sources (skills whose inputs are
+//! not produced in the same cycle). From there skills wake each other through their topics;
+//! each finished run stamps the board and takes one off the counter; the run that takes the
+//! last one off wakes the manager. A run that fails, is skipped or leaves an output unwritten
+//! wakes the manager too, which then takes its now-unrunnable consumers off the counter. A
+//! cycle whose deadline passes is counted as an overrun and closed; the next one starts on
+//! time. Cleanup between cycles is the re-arming of the counter.
+
+mod cycle;
+mod observe;
+mod registry;
+
+use crate::control::ControlPlane;
+use crate::graph::{self, Plan, PlanNode};
+use crate::monitors::Monitor;
+use crate::recorder::{IoSample, Recorder};
+use crate::stats::{CycleStats, Report, SkillReport};
+use iceoryx2::node::{Node, NodeView};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use skillfab_proto::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
+use skillfab_proto::control::{EventKind, SkillFigures};
+use skillfab_proto::decl::SkillDecl;
+use skillfab_proto::domain::Domain;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::param::ParamValue;
+use skillfab_proto::services::RawReader;
+use skillfab_proto::value::FieldPath;
+use skillfab_proto::{Error as SdkError, names, services};
+use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// How often the manager checks that registered processes are alive (and its longest sleep).
+/// A sync skill that dies mid-cycle is also found when the cycle's deadline passes; each
+/// check reads `/proc` for every skill, so it is not done every cycle.
+pub const LIVENESS_TICK: Duration = Duration::from_millis(200);
+/// How often the manager removes what dead processes of the domain left behind.
+const NODE_SWEEP: Duration = Duration::from_secs(1);
+/// Shortest cycle period in free-running mode while no skill is expected (avoids a busy loop).
+const IDLE_FREE_RUN: Duration = Duration::from_millis(1);
+
+/// How the manager paces cycles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// A new cycle every period (the deadline defaults to the period).
+    Period(Duration),
+    /// The next cycle starts as soon as the previous one finished.
+    FreeRun,
+}
+
+/// Manager settings.
+#[derive(Debug, Clone)]
+pub struct ManagerConfig {
+    /// The fabric's domain.
+    pub domain: Domain,
+    /// Cycle pacing.
+    pub pace: Pace,
+    /// Longest a cycle may take before it is closed as an overrun (default: the period, or
+    /// 1 s when free-running).
+    pub deadline: Option<Duration>,
+    /// Start with cycling stopped.
+    pub paused: bool,
+    /// Stop after this many cycles.
+    pub max_cycles: Option<u64>,
+    /// Do not start cycling until these skills have registered.
+    pub wait_for: Vec<String>,
+    /// How long to wait for them.
+    pub wait_timeout: Duration,
+    /// The fabric log (parameter changes, I/O samples); `None`: [`default_log_path`].
+    pub param_log: Option<PathBuf>,
+}
+
+/// Where a manager's fabric log goes by default: `<domain>-<unix seconds>-<pid>.jsonl` in
+/// [`log_dir`]. The file is created with the first record worth keeping (a manager whose
+/// parameters nobody changed leaves no file).
+pub fn default_log_path(domain: &Domain) -> PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    log_dir(domain).join(format!(
+        "{}-{secs}-{}.jsonl",
+        domain.name(),
+        std::process::id()
+    ))
+}
+
+/// The directory of fabric logs: `$SKILLFAB_LOG_DIR`, else `$XDG_STATE_HOME/skillfab/log`,
+/// else `~/.local/state/skillfab/log` (as `~/.ros/log` for ROS); with none of them set, the
+/// domain's root directory (removed with the domain).
+pub fn log_dir(domain: &Domain) -> PathBuf {
+    let var = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    var("SKILLFAB_LOG_DIR")
+        .or_else(|| var("XDG_STATE_HOME").map(|d| d.join("skillfab/log")))
+        .or_else(|| var("HOME").map(|d| d.join(".local/state/skillfab/log")))
+        .unwrap_or_else(|| domain.root_path())
+}
+
+impl ManagerConfig {
+    /// Defaults: 100 Hz, running.
+    pub fn new(domain: Domain) -> Self {
+        ManagerConfig {
+            domain,
+            pace: Pace::Period(Duration::from_millis(10)),
+            deadline: None,
+            paused: false,
+            max_cycles: None,
+            wait_for: Vec::new(),
+            wait_timeout: Duration::from_secs(30),
+            param_log: None,
+        }
+    }
+
+    fn deadline(&self) -> Duration {
+        self.deadline.unwrap_or(match self.pace {
+            Pace::Period(p) => p,
+            Pace::FreeRun => Duration::from_secs(1),
+        })
+    }
+}
+
+/// Why the manager stopped with an error.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ManagerError {
+    /// Board, node or service set-up failed.
+    #[error(transparent)]
+    Sdk(#[from] SdkError),
+    /// The WaitSet failed.
+    #[error("manager wait: {detail}")]
+    Wait {
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// Skills named in `wait_for` did not register in time.
+    #[error("skills did not register within {waited:?}: {}", missing.join(", "))]
+    MissingSkills {
+        /// Those still missing.
+        missing: Vec<String>,
+        /// How long the manager waited.
+        waited: Duration,
+    },
+}
+
+pub(crate) struct Entry {
+    pub(crate) decl: SkillDecl,
+    trigger: Notifier<ipc::Service>,
+    pub(crate) active: bool,
+    /// Its ports are open: cycles may count on it.
+    pub(crate) ready: bool,
+    /// Current parameter values (the skill applies them from the next cycle).
+    pub(crate) values: Vec<(String, ParamValue)>,
+}
+
+struct Running {
+    k: u64,
+    start_ns: u64,
+    deadline: Instant,
+    expected: Vec<usize>,
+    /// Slots whose completion the manager has looked at.
+    processed: [bool; MAX_SLOTS],
+    /// Slots taken off the counter because they cannot run this cycle.
+    cancelled: [bool; MAX_SLOTS],
+}
+
+/// The skill manager of one domain.
+pub struct Manager {
+    pub(crate) config: ManagerConfig,
+    pub(crate) board: Board,
+    pub(crate) node: Node<ipc::Service>,
+    pub(crate) skills: Vec<Option<Entry>>,
+    /// Slots in registration order (for reports).
+    pub(crate) order: Vec<usize>,
+    plan: Plan,
+    /// The plan must be recomputed before the next cycle.
+    pub(crate) dirty: bool,
+    /// Cycles completed.
+    pub(crate) cycle: u64,
+    running: Option<Running>,
+    next_start: Instant,
+    pub(crate) paused: bool,
+    /// Pause once this many cycles are done (`step`).
+    pub(crate) stop_at: Option<u64>,
+    started: bool,
+    created: Instant,
+    pub(crate) stats: CycleStats,
+    pub(crate) deaths: u64,
+    last_liveness: Instant,
+    last_node_sweep: Instant,
+    /// Events to publish at the end of this loop iteration.
+    pub(crate) outbox: Vec<EventKind>,
+    /// Installed monitors.
+    pub(crate) monitors: Vec<Monitor>,
+    pub(crate) next_monitor: u64,
+    /// Untyped readers of topics that monitors and queries read.
+    pub(crate) readers: HashMap<String, RawReader>,
+    /// Names that have registered before (a new registration is then a restart).
+    seen: HashSet<String>,
+    /// Requests and events; taken out while the loop runs.
+    control: Option<ControlPlane>,
+    /// Events published so far.
+    pub(crate) events_published: u64,
+    /// Last arbitration seen per channel.
+    pub(crate) channels: HashMap<String, ChannelView>,
+    /// The fabric log's writer (`None` if its file could not be opened).
+    pub(crate) recorder: Option<Recorder>,
+    /// Skills whose samples are logged, with their ports.
+    pub(crate) io_log: HashMap<String, Vec<IoPort>>,
+}
+
+/// A port whose samples go to the fabric log.
+pub(crate) struct IoPort {
+    pub(crate) dir: &'static str,
+    pub(crate) port: String,
+    pub(crate) topic: String,
+    pub(crate) type_name: String,
+    pub(crate) field: Arc<FieldPath>,
+    /// On a proposal topic, the proposer's slot.
+    pub(crate) slot: Option<u32>,
+    /// The cycle of the last sample logged (each sample once).
+    pub(crate) last: u64,
+}
+
+/// The latest arbitration of a channel, as the manager last read it from the board.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ChannelView {
+    pub(crate) device: String,
+    pub(crate) policy: skillfab_proto::decl::Policy,
+    pub(crate) cycle: u64,
+    pub(crate) winner: Option<String>,
+    pub(crate) weights: Vec<(String, f64)>,
+}
+
+impl Manager {
+    /// Creates the domain's board and the manager's iceoryx2 node.
+    pub fn new(config: ManagerConfig) -> Result<Manager, ManagerError> {
+        let node = services::node(&config.domain, "skillfab-manager")?;
+        // The control server exists before the board announces the manager to clients.
+        let control = ControlPlane::new(&config.domain, &node)?;
+        let board = Board::create(&config.domain.prefix())?;
+        let now = Instant::now();
+        let log_path = config
+            .param_log
+            .clone()
+            .unwrap_or_else(|| default_log_path(&config.domain));
+        let recorder = match Recorder::open(&log_path) {
+            Ok(r) => {
+                r.line(
+                    "start",
+                    None,
+                    serde_json::json!({"domain": config.domain.name(), "pid": std::process::id()}),
+                );
+                Some(r)
+            }
+            Err(e) => {
+                tracing::warn!(file = %log_path.display(), error = %e, "no fabric log");
+                None
+            }
+        };
+        Ok(Manager {
+            paused: config.paused,
+            config,
+            board,
+            node,
+            skills: (0..MAX_SLOTS).map(|_| None).collect(),
+            order: Vec::new(),
+            plan: Plan::default(),
+            dirty: true,
+            cycle: 0,
+            running: None,
+            next_start: now,
+            stop_at: None,
+            outbox: Vec::new(),
+            monitors: Vec::new(),
+            next_monitor: 1,
+            readers: HashMap::new(),
+            seen: HashSet::new(),
+            control: Some(control),
+            events_published: 0,
+            channels: HashMap::new(),
+            recorder,
+            io_log: HashMap::new(),
+            started: false,
+            created: now,
+            stats: CycleStats::default(),
+            deaths: 0,
+            last_liveness: now,
+            last_node_sweep: now,
+        })
+    }
+
+    /// Runs until SIGINT/SIGTERM, until `stop(cycles_done)` returns true, or until
+    /// `max_cycles` cycles are done; returns the report of the run.
+    pub fn run(&mut self, stop: &dyn Fn(u64) -> bool) -> Result<Report, ManagerError> {
+        let wait_err = |e: &dyn std::fmt::Debug| ManagerError::Wait {
+            detail: format!("{e:?}"),
+        };
+        let wake: Listener<ipc::Service> = services::listener(&self.node, &names::manager_wake())?;
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| wait_err(&e))?;
+        let _guard = waitset
+            .attach_notification(&wake)
+            .map_err(|e| wait_err(&e))?;
+        let mut control = self.control.take().ok_or_else(|| ManagerError::Wait {
+            detail: "the manager runs once".into(),
+        })?;
+        tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
+        let result = self.serve_loop(&waitset, &wake, &mut control, stop);
+        self.control = Some(control);
+        result
+    }
+
+    fn serve_loop(
+        &mut self,
+        waitset: &WaitSet<ipc::Service>,
+        wake: &Listener<ipc::Service>,
+        control: &mut ControlPlane,
+        stop: &dyn Fn(u64) -> bool,
+    ) -> Result<Report, ManagerError> {
+        let wait_err = |e: &dyn std::fmt::Debug| ManagerError::Wait {
+            detail: format!("{e:?}"),
+        };
+        loop {
+            let timeout = self.timeout(Instant::now());
+            let result = waitset
+                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout)
+                .map_err(|e| wait_err(&e))?;
+            // A wait cut short by a signal other than SIGINT/SIGTERM (a debugger attaching,
+            // SIGSTOP/SIGCONT) goes on.
+            let interrupted = match result {
+                WaitSetRunResult::TerminationRequest => true,
+                WaitSetRunResult::Interrupt => services::termination_requested(&self.node),
+                _ => false,
+            };
+            if interrupted || stop(self.cycle) {
+                break;
+            }
+            let awake = thread_cpu_ns();
+            // Drained after every wait, the timed-out ones too. iceoryx2 0.10's listener keeps
+            // a "notified" flag beside its socket: a notifier sends a datagram only when the
+            // flag was clear, and a drain clears it. A drain that races two notifiers can
+            // leave the flag set with the socket empty; from then on no notifier sends and
+            // the wait never fires again, so a listener drained only when it fired stays deaf
+            // for good (seen: every cycle closed by the 200 ms liveness tick). Draining on a
+            // timeout too clears the flag at the next tick at the latest; it costs one
+            // recvfrom (EAGAIN) per timed-out wait.
+            let _ = wake.try_wait(|_| {});
+            self.service_registry();
+            if self.last_liveness.elapsed() >= LIVENESS_TICK {
+                self.check_liveness();
+                control.forget_dead_clients(self);
+            }
+            control.serve(self);
+            self.advance()?;
+            control.flush(self);
+            self.stats.add_work(thread_cpu_ns().saturating_sub(awake));
+            if self.running.is_none() && self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
+                break;
+            }
+        }
+        Ok(self.report())
+    }
+
+    /// Lets skills that are leaving go, checks liveness once more, closes the board, and
+    /// when no other process of the domain is alive, removes the domain's files (shared
+    /// memory and iceoryx2 root). Returns whether it removed them.
+    pub fn shutdown(mut self) -> bool {
+        self.service_registry();
+        self.check_liveness();
+        self.board.close();
+        // Wake every skill: it finds the board closed and leaves now, not at its next
+        // liveness tick.
+        for e in self.skills.iter().flatten() {
+            let _ = e.trigger.notify();
+        }
+        let cleaned = self.node.try_cleanup_dead_nodes();
+        // The control thread's node is ours too: close it before looking for others.
+        drop(self.control.take());
+        self.readers.clear();
+        let others_alive = self.others_alive();
+        let (domain, cycles) = (self.config.domain.clone(), self.cycle);
+        drop(self);
+        if !others_alive {
+            domain.remove_all_files();
+        }
+        tracing::info!(
+            cycles,
+            dead_nodes_cleaned = cleaned.cleanups,
+            files_removed = !others_alive,
+            "manager down"
+        );
+        !others_alive
+    }
+
+    /// Whether an iceoryx2 node of the domain other than the manager's is alive.
+    fn others_alive(&self) -> bool {
+        let Ok(config) = self.config.domain.iceoryx_config() else {
+            return true;
+        };
+        let own = *self.node.id();
+        let mut alive = false;
+        let listed = Node::<ipc::Service>::list(&config, |state| {
+            if let NodeState::Alive(v) = &state
+                && *v.id() != own
+            {
+                alive = true;
+            }
+            CallbackProgression::Continue
+        });
+        alive || listed.is_err()
+    }
+
+    /// Cycles completed so far.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    fn timeout(&self, now: Instant) -> Duration {
+        let until = |t: Instant| t.saturating_duration_since(now);
+        let t = match &self.running {
+            Some(r) => until(r.deadline),
+            None if self.paused || !self.started => LIVENESS_TICK,
+            None => match self.config.pace {
+                Pace::Period(_) => until(self.next_start),
+                Pace::FreeRun if self.plan.expected.is_empty() => IDLE_FREE_RUN,
+                Pace::FreeRun => Duration::ZERO,
+            },
+        };
+        t.min(LIVENESS_TICK)
+    }
+
+    /// A slot's run counters, as read from the board.
+    pub(crate) fn figures(&self, s: usize) -> SkillFigures {
+        let slot = self.board.slot(s);
+        let runs = slot.runs.load(Ordering::Acquire);
+        let total = slot.compute_ns_total.load(Ordering::Acquire);
+        SkillFigures {
+            runs,
+            skips: slot.skips.load(Ordering::Acquire),
+            failures: slot.failures.load(Ordering::Acquire),
+            compute_us_mean: if runs == 0 {
+                0.0
+            } else {
+                total as f64 / runs as f64 / 1000.0
+            },
+            compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
+            last_cycle: slot.done_cycle.load(Ordering::Acquire),
+            last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
+            last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
+        }
+    }
+
+    /// Figures of the run so far.
+    pub fn report(&self) -> Report {
+        let skills = self
+            .order
+            .iter()
+            .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
+            .map(|(s, e)| SkillReport {
+                name: e.decl.name.clone(),
+                kind: e.decl.kind.clone(),
+                mode: e.decl.mode.to_string(),
+                active: e.active,
+                priority: e.decl.priority,
+                pid: e.decl.pid,
+                figures: self.figures(s),
+            })
+            .collect();
+        Report {
+            cycles: self.stats.cycles,
+            overruns: self.stats.overruns,
+            latency_us: self.stats.latency_us(),
+            manager_work_us: self.stats.work_us(),
+            skills,
+            deaths: self.deaths,
+        }
+    }
+}
+
+/// CPU time of the calling thread (ns): the manager's own work, not the time other
+/// processes held the core while it was awake.
+fn thread_cpu_ns() -> u64 {
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).map_or(0, |t| {
+        t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64
+    })
+}

@@ -1,0 +1,206 @@
+//! Registration and liveness: skills claiming slots, admitted or refused, leaving or found
+//! dead, and rejoining.
+
+use super::*;
+
+/// Why a skill leaves the registry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum DropReason {
+    /// It said goodbye on the board (a clean exit).
+    Left,
+    /// Its process is gone without a goodbye (crash, `kill -9`).
+    Died,
+}
+
+impl Manager {
+    pub(super) fn service_registry(&mut self) {
+        for i in 0..MAX_SLOTS {
+            match self.board.slot(i).state() {
+                SlotState::Pending => self.admit(i),
+                SlotState::Ready => {
+                    if let Some(e) = self.skills[i].as_mut().filter(|e| !e.ready) {
+                        e.ready = true;
+                        self.dirty = true;
+                        tracing::info!(skill = %e.decl.name, "skill ready");
+                        // Read its outputs from now on, so queries and monitors find the
+                        // latest sample (a late subscriber would only get it at the next send).
+                        let outputs = e.decl.outputs.clone();
+                        for p in outputs {
+                            if !self.readers.contains_key(&p.topic) {
+                                match RawReader::open(&self.node, &p.topic, &p.schema) {
+                                    Ok(r) => {
+                                        self.readers.insert(p.topic.clone(), r);
+                                    }
+                                    Err(err) => {
+                                        tracing::warn!(topic = %p.topic, error = %err, "cannot read topic")
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                SlotState::Leaving => self.drop_slot(i, DropReason::Left),
+                _ => {}
+            }
+        }
+    }
+
+    pub(super) fn refuse(&self, i: usize, name: Option<&str>, reason: &str) {
+        tracing::warn!(skill = name.unwrap_or("?"), %reason, "registration refused");
+        let slot = self.board.slot(i);
+        slot.write_msg(reason);
+        slot.set_state(SlotState::Refused);
+        if let Some(n) = name
+            && let Ok(t) = services::notifier(&self.node, &names::skill_trigger(n))
+        {
+            let _ = t.notify();
+        }
+    }
+
+    pub(super) fn admit(&mut self, i: usize) {
+        let slot = self.board.slot(i);
+        let decl: SkillDecl = match postcard::from_bytes(&slot.read_decl()) {
+            Ok(d) => d,
+            Err(e) => return self.refuse(i, None, &format!("malformed declaration: {e}")),
+        };
+        let checked = names::check_name("skill", &decl.name, false).and_then(|()| {
+            decl.inputs
+                .iter()
+                .chain(&decl.outputs)
+                .try_for_each(|p| names::check_name("topic", &p.topic, true))
+        });
+        if let Err(e) = checked {
+            return self.refuse(i, None, &e.to_string());
+        }
+        if decl.inputs.len() > 64 || decl.outputs.len() > 64 {
+            return self.refuse(
+                i,
+                Some(&decl.name),
+                "at most 64 inputs and 64 outputs per skill",
+            );
+        }
+        // A previous instance of the same name that died is replaced, not a duplicate.
+        if let Some(j) = (0..MAX_SLOTS).find(|&j| {
+            j != i
+                && self.skills[j]
+                    .as_ref()
+                    .is_some_and(|e| e.decl.name == decl.name && !pid_alive(e.decl.pid))
+        }) {
+            self.drop_slot(j, DropReason::Died);
+        }
+        let live = self.skills.iter().flatten().map(|e| &e.decl);
+        if let Err(e) = graph::check_join(live, &decl) {
+            return self.refuse(i, Some(&decl.name), &e.to_string());
+        }
+        let trigger = match services::notifier(&self.node, &names::skill_trigger(&decl.name)) {
+            Ok(t) => t,
+            Err(e) => return self.refuse(i, Some(&decl.name), &e.to_string()),
+        };
+        let slot = self.board.slot(i);
+        slot.reset_counters();
+        slot.generation.fetch_add(1, Ordering::Relaxed);
+        slot.active
+            .store(u32::from(decl.start_active), Ordering::Release);
+        slot.set_state(SlotState::Accepted);
+        let _ = trigger.notify();
+        tracing::info!(
+            skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
+            active = decl.start_active, "skill registered"
+        );
+        let restarted = !self.seen.insert(decl.name.clone());
+        if restarted && is_device(&decl) {
+            self.outbox.push(EventKind::DeviceBack {
+                device: decl.name.clone(),
+            });
+        }
+        self.outbox.push(EventKind::SkillRegistered {
+            skill: decl.name.clone(),
+            pid: decl.pid,
+            restarted,
+        });
+        let values = decl.param_values.clone();
+        self.skills[i] = Some(Entry {
+            values,
+            ready: false,
+            active: decl.start_active,
+            decl,
+            trigger,
+        });
+        self.order.retain(|&s| s != i);
+        self.order.push(i);
+        self.dirty = true;
+    }
+
+    /// Removes slot `i`: its skill left or died. Its pending run in this cycle (and whatever
+    /// depended on it) is taken off the counter so the cycle does not wait for it.
+    fn drop_slot(&mut self, i: usize, why: DropReason) {
+        if let Some(mut run) = self.running.take() {
+            let n = self.cancel_all(&mut run, vec![i]);
+            if n > 0 {
+                self.board.complete(run.k, n);
+            }
+            self.running = Some(run);
+        }
+        let slot = self.board.slot(i);
+        if let Some(e) = self.skills[i].take() {
+            if why == DropReason::Died {
+                self.deaths += 1;
+                tracing::warn!(skill = %e.decl.name, pid = e.decl.pid, "skill died");
+                self.outbox.push(EventKind::SkillDied {
+                    skill: e.decl.name.clone(),
+                    pid: e.decl.pid,
+                });
+                if is_device(&e.decl) {
+                    self.outbox.push(EventKind::DeviceLost {
+                        device: e.decl.name.clone(),
+                    });
+                }
+            } else {
+                tracing::info!(skill = %e.decl.name, "skill left");
+                self.outbox.push(EventKind::SkillLeft {
+                    skill: e.decl.name.clone(),
+                });
+            }
+            self.order.retain(|&s| s != i);
+            self.dirty = true;
+            // Stop reading its outputs: the manager must not keep a dead producer's topics
+            // alive. They are read again when a new producer is ready.
+            for p in &e.decl.outputs {
+                self.readers.remove(&p.topic);
+            }
+        }
+        slot.active.store(0, Ordering::Release);
+        slot.pid.store(0, Ordering::Release);
+        slot.set_state(SlotState::Free);
+    }
+
+    pub(super) fn check_liveness(&mut self) {
+        self.last_liveness = Instant::now();
+        let mut died = false;
+        for i in 0..MAX_SLOTS {
+            let slot = self.board.slot(i);
+            let state = slot.state();
+            if state == SlotState::Free || state == SlotState::Refused {
+                continue;
+            }
+            let pid = slot.pid.load(Ordering::Acquire);
+            if pid != 0 && !pid_alive(pid) {
+                self.drop_slot(i, DropReason::Died);
+                died = true;
+            }
+        }
+        // Frees the ports of dead processes (skills, or clients killed with Ctrl-C) so a
+        // restarted instance can take their place and no shared memory is left behind.
+        if died || self.last_node_sweep.elapsed() >= NODE_SWEEP {
+            self.last_node_sweep = Instant::now();
+            let _ = self.node.try_cleanup_dead_nodes();
+        }
+    }
+}
+
+/// Whether a registered unit is a device (it serves an actuator channel).
+fn is_device(d: &SkillDecl) -> bool {
+    d.inputs
+        .iter()
+        .any(|p| matches!(p.kind, skillfab_proto::decl::PortKind::Channel(_)))
+}

@@ -21,7 +21,7 @@
 //! The raw file is parsed first (unknown keys are errors), then resolved into a validated
 //! [`Launch`] with program paths found and parameters rendered.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -58,44 +58,70 @@ pub enum LaunchError {
     },
 }
 
-#[derive(Debug, Deserialize)]
+/// A launch file as written: the TOML format, before validation. Build one to write a launch
+/// file from a program (`toml::to_string`); [`Launch::parse`] validates one.
+#[derive(Debug, Default, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawLaunch {
+pub struct LaunchFile {
+    /// `[manager]`.
     #[serde(default)]
-    manager: RawManager,
+    pub manager: ManagerSection,
+    /// `[[process]]`, in start order.
     #[serde(default)]
-    process: Vec<RawProcess>,
+    pub process: Vec<ProcessEntry>,
 }
 
-#[derive(Debug, Default, Deserialize)]
+/// `[manager]` of a launch file.
+#[derive(Debug, Default, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawManager {
-    period_ms: Option<f64>,
-    deadline_ms: Option<f64>,
+pub struct ManagerSection {
+    /// Cycle period (ms); 0: free-running.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub period_ms: Option<f64>,
+    /// Cycle deadline (ms).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deadline_ms: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
+/// One `[[process]]` of a launch file.
+#[derive(Debug, Default, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawProcess {
-    name: String,
-    bin: String,
+pub struct ProcessEntry {
+    /// Instance name.
+    pub name: String,
+    /// Program: a bare name (next to skillfab, then `PATH`) or a path relative to the file.
+    pub bin: String,
+    /// Parameter values (`--param k=v`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub params: BTreeMap<String, toml::Value>,
+    /// Start active (default) or inactive.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub active: Option<bool>,
+    /// Arbitration priority.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub priority: Option<i32>,
+    /// Port → topic rewiring (`--remap`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub remap: BTreeMap<String, String>,
+    /// Further arguments, as given.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub args: Vec<String>,
+    /// Restart policy.
     #[serde(default)]
-    params: BTreeMap<String, toml::Value>,
-    active: Option<bool>,
-    priority: Option<i32>,
-    #[serde(default)]
-    remap: BTreeMap<String, String>,
-    #[serde(default)]
-    args: Vec<String>,
-    #[serde(default)]
-    restart: Restart,
-    max_restarts: Option<u32>,
-    backoff_ms: Option<u64>,
-    registers: Option<bool>,
+    pub restart: Restart,
+    /// Most restarts before giving up (default 5).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_restarts: Option<u32>,
+    /// First restart delay (ms, default 200; doubles each time).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backoff_ms: Option<u64>,
+    /// Whether it registers as a skill (default true; false: e.g. a simulator).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub registers: Option<bool>,
 }
 
 /// When a process that exited is started again.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Restart {
     /// Never.
@@ -180,7 +206,7 @@ impl Launch {
 
     /// Validates launch-file text; `base` is where relative program paths start.
     pub fn parse(text: &str, path: &Path, base: &Path) -> Result<Launch, LaunchError> {
-        let raw: RawLaunch = toml::from_str(text).map_err(|e| LaunchError::Parse {
+        let raw: LaunchFile = toml::from_str(text).map_err(|e| LaunchError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;

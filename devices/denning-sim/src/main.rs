@@ -10,6 +10,7 @@ use anyhow::{Context, bail};
 use clap::Parser;
 use denning::codec::{Command, Decoder, Packet};
 use denning_sim::sim::{Rng, Sim};
+use denning_sim::truth::TruthRecord;
 use denning_sim::world::World;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::pty::openpty;
@@ -138,7 +139,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
         None => None,
     };
     if let Some(t) = trajectory.as_mut() {
-        writeln!(t, "t,x,y,theta,v,w,stall,collisions,outside")?;
+        writeln!(t, "{}", TruthRecord::HEADER)?;
     }
     let mut sim = Sim::new(world, args.seed);
     let mut faults = Rng::new(args.seed.wrapping_mul(31).wrapping_add(7));
@@ -226,17 +227,19 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 }
             }
             if let Some(t) = trajectory.as_mut() {
-                let [x, y, th] = sim.pose;
-                writeln!(
-                    t,
-                    "{:.3},{x:.4},{y:.4},{th:.4},{:.3},{:.3},{},{},{}",
-                    sim.time,
-                    sim.vel[0],
-                    sim.vel[1],
-                    u8::from(sim.stall),
-                    sim.collisions,
-                    u8::from(sim.world.is_outside([x, y]))
-                )?;
+                let [x, y, theta] = sim.pose;
+                TruthRecord {
+                    t: sim.time,
+                    x,
+                    y,
+                    theta,
+                    v: sim.vel[0],
+                    w: sim.vel[1],
+                    stall: sim.stall,
+                    collisions: sim.collisions,
+                    outside: sim.world.is_outside([x, y]),
+                }
+                .write(t)?;
                 t.flush()?;
             }
         }

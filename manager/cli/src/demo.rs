@@ -11,9 +11,11 @@
 //!    and report.
 
 use anyhow::{Context, bail};
+use denning_sim::truth::TruthRecord;
+use denning_sim::world::World;
 use serde::Serialize;
 use skillfab_client::Client;
-use skillfab_manager::launch::find_program;
+use skillfab_manager::launch::{LaunchFile, ManagerSection, ProcessEntry, Restart, find_program};
 use skillfab_proto::control::{EventKind, MonitorMode, SkillState};
 use skillfab_proto::domain::Domain;
 use std::path::{Path, PathBuf};
@@ -56,7 +58,7 @@ pub struct RunOutcome {
     /// Sequencer steps: (what, cycle, simulated time).
     pub steps: Vec<(String, u64, f64)>,
     #[serde(skip)]
-    trajectory: Vec<[f64; 3]>,
+    trajectory: Vec<TruthRecord>,
 }
 
 /// What `--json` prints.
@@ -72,19 +74,9 @@ pub struct Summary {
     pub runs_detail: Vec<RunOutcome>,
 }
 
-/// The last ground-truth row of the simulator: (t, x, y, collisions, outside).
-fn truth(path: &Path, all: &mut Vec<[f64; 3]>) -> Option<(f64, f64, f64, u64, bool)> {
-    let text = std::fs::read_to_string(path).ok()?;
-    all.clear();
-    let mut last = None;
-    for line in text.lines().skip(1) {
-        let f: Vec<f64> = line.split(',').filter_map(|x| x.parse().ok()).collect();
-        if f.len() == 9 {
-            all.push([f[0], f[1], f[2]]);
-            last = Some((f[0], f[1], f[2], f[7] as u64, f[8] > 0.5));
-        }
-    }
-    last
+/// The simulator's newest ground-truth record.
+fn latest(path: &Path) -> Option<TruthRecord> {
+    TruthRecord::read(path).ok()?.pop()
 }
 
 struct Network {
@@ -140,31 +132,55 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             .with_context(|| format!("program '{name}' not found next to skillfab"))
     };
     let period_ms = 10.0 / opts.time_factor;
-    let mut launch = format!(
-        "[manager]\nperiod_ms = {period_ms}\ndeadline_ms = {}\n\
-         [[process]]\nname = \"denning-sim\"\nbin = {:?}\nregisters = false\n\
-         args = [\"--world\", {:?}, \"--link\", {:?}, \"--seed\", \"{seed}\", \"--time-factor\", \"{}\", \"--trajectory\", {:?}]\n\
-         [[process]]\nname = \"denning\"\nbin = {:?}\nargs = [\"--port\", {:?}]\nrestart = \"always\"\n",
-        (period_ms * 5.0).max(20.0),
-        program("denning-sim")?,
-        world,
-        link,
-        opts.time_factor,
-        traj,
-        program("denning")?,
-        link,
-    );
+    let text = |p: &Path| p.to_string_lossy().into_owned();
+    let mut launch = LaunchFile {
+        manager: ManagerSection {
+            period_ms: Some(period_ms),
+            deadline_ms: Some((period_ms * 5.0).max(20.0)),
+        },
+        process: vec![
+            ProcessEntry {
+                name: "denning-sim".into(),
+                bin: text(&program("denning-sim")?),
+                registers: Some(false),
+                args: vec![
+                    "--world".into(),
+                    text(&world),
+                    "--link".into(),
+                    text(&link),
+                    "--seed".into(),
+                    seed.to_string(),
+                    "--time-factor".into(),
+                    opts.time_factor.to_string(),
+                    "--trajectory".into(),
+                    text(&traj),
+                ],
+                ..ProcessEntry::default()
+            },
+            ProcessEntry {
+                name: "denning".into(),
+                bin: text(&program("denning")?),
+                args: vec!["--port".into(), text(&link)],
+                restart: Restart::Always,
+                ..ProcessEntry::default()
+            },
+        ],
+    };
     for s in SKILLS {
-        let extra = if s == "wander" {
-            format!("params = {{ seed = {seed} }}\n")
-        } else {
-            String::new()
-        };
-        launch.push_str(&format!(
-            "[[process]]\nname = \"{s}\"\nbin = {:?}\nactive = false\n{extra}",
-            program(s)?
-        ));
+        let mut params = std::collections::BTreeMap::new();
+        if s == "wander" {
+            // The seed varies the wandering between runs (an i64 in TOML).
+            params.insert("seed".to_string(), toml::Value::Integer(seed as i64));
+        }
+        launch.process.push(ProcessEntry {
+            name: s.into(),
+            bin: text(&program(s)?),
+            active: Some(false),
+            params,
+            ..ProcessEntry::default()
+        });
     }
+    let launch = toml::to_string(&launch).context("writing the launch file")?;
     let path = dir.join("exit-lab.toml");
     std::fs::write(&path, launch)?;
     let log = std::fs::File::create(dir.join("up.log"))?;
@@ -295,7 +311,6 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     let (net, traj) = start(opts, seed, run)?;
     let mut c = connect(&net)?;
     c.subscribe()?;
-    let mut rows = Vec::new();
     let mut out = RunOutcome {
         seed,
         world: opts
@@ -309,9 +324,9 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         steps: Vec::new(),
         trajectory: Vec::new(),
     };
-    let step = |c: &Client, out: &mut RunOutcome, what: &str, rows: &mut Vec<[f64; 3]>| {
+    let step = |c: &Client, out: &mut RunOutcome, what: &str| {
         let cycle = c.stats().map(|s| s.cycles).unwrap_or(0);
-        let t = truth(&traj, rows).map_or(0.0, |r| r.0);
+        let t = latest(&traj).map_or(0.0, |r| r.t);
         if opts.verbose {
             println!("  [cycle {cycle:>6}, t = {t:>6.1} s] {what}");
         }
@@ -322,7 +337,6 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         &c,
         &mut out,
         "activate wander + avoid + barcode_track; monitor the door's barcode",
-        &mut rows,
     );
     let mut seq = Sequencer {
         phase: Phase::Search,
@@ -343,19 +357,19 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind)
             && let Some(what) = seq.on_monitor(&c, id)?
         {
-            step(&c, &mut out, &what, &mut rows);
+            step(&c, &mut out, &what);
         }
-        if let Some((t, _, _, collisions, outside)) = truth(&traj, &mut rows) {
-            out.time_s = t;
-            out.collisions = collisions;
-            if outside {
+        if let Some(now) = latest(&traj) {
+            out.time_s = now.t;
+            out.collisions = now.collisions;
+            if now.outside {
                 out.success = true;
                 c.activate(&["stop"])?;
-                step(&c, &mut out, "outside the lab: stop", &mut rows);
+                step(&c, &mut out, "outside the lab: stop");
                 break;
             }
-            if t > opts.limit_s {
-                step(&c, &mut out, "time limit reached", &mut rows);
+            if now.t > opts.limit_s {
+                step(&c, &mut out, "time limit reached");
                 break;
             }
         }
@@ -367,10 +381,8 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         &c,
         &mut out,
         "avoid.safe_distance restored; skills deactivated",
-        &mut rows,
     );
-    truth(&traj, &mut rows);
-    out.trajectory = rows.iter().map(|r| [r[0], r[1], r[2]]).collect();
+    out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
     drop(c);
     drop(net);
     Ok(out)
@@ -415,7 +427,7 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         if run == 0
             && let Some(p) = &opts.plot
         {
-            let world = std::fs::read_to_string(&opts.world)?;
+            let world = World::load(&opts.world)?;
             std::fs::write(p, svg(&world, &r))?;
             if opts.verbose {
                 println!("  trajectory picture: {}", p.display());
@@ -438,39 +450,7 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
 }
 
 /// The trajectory over the world map, with the sequencer's switches marked.
-fn svg(world_text: &str, r: &RunOutcome) -> String {
-    #[derive(serde::Deserialize)]
-    struct Seg {
-        from: [f64; 2],
-        to: [f64; 2],
-    }
-    #[derive(serde::Deserialize)]
-    struct Rect {
-        min: [f64; 2],
-        max: [f64; 2],
-    }
-    #[derive(serde::Deserialize)]
-    struct Code {
-        at: [f64; 2],
-        id: u32,
-    }
-    #[derive(serde::Deserialize)]
-    struct W {
-        #[serde(default)]
-        wall: Vec<Seg>,
-        #[serde(default, rename = "box")]
-        boxes: Vec<Rect>,
-        #[serde(default)]
-        door: Vec<Seg>,
-        #[serde(default)]
-        barcode: Vec<Code>,
-    }
-    let w: W = toml::from_str(world_text).unwrap_or(W {
-        wall: vec![],
-        boxes: vec![],
-        door: vec![],
-        barcode: vec![],
-    });
+fn svg(w: &World, r: &RunOutcome) -> String {
     // The map's top edge (m) sets the picture's; the steps are listed below the map.
     let top = w
         .wall
@@ -512,17 +492,17 @@ fn svg(world_text: &str, r: &RunOutcome) -> String {
     let pts: Vec<String> = r
         .trajectory
         .iter()
-        .map(|p| format!("{:.1},{:.1}", px(p[1]), py(p[2])))
+        .map(|p| format!("{:.1},{:.1}", px(p.x), py(p.y)))
         .collect();
     s.push_str(&format!(
         "<polyline points=\"{}\" fill=\"none\" stroke=\"#15c\" stroke-width=\"2\"/>\n",
         pts.join(" ")
     ));
     for (i, (what, _, t)) in r.steps.iter().enumerate() {
-        if let Some(p) = r.trajectory.iter().find(|p| p[0] >= *t) {
+        if let Some(p) = r.trajectory.iter().find(|p| p.t >= *t) {
             s.push_str(&format!(
                 "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"5\" fill=\"#f80\"/><text x=\"{:.1}\" y=\"{:.1}\">{}</text>\n",
-                px(p[1]), py(p[2]), px(p[1]) + 7.0, py(p[2]) + 4.0, i + 1
+                px(p.x), py(p.y), px(p.x) + 7.0, py(p.y) + 4.0, i + 1
             ));
         }
         s.push_str(&format!(

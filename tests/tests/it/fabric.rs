@@ -333,3 +333,62 @@ fn skillfab_up_restarts_a_killed_skill_by_its_policy() {
         registered(&board, "scale").is_some_and(|s| s.decl.pid != first && s.runs > 5)
     });
 }
+
+/// Written from the README's naming scheme alone, as a user of plain iceoryx2 would: no
+/// skillfab type or function is used to find or read the topic.
+#[test]
+fn a_plain_iceoryx2_client_reads_a_skills_output_from_the_documented_names() {
+    use iceoryx2::prelude::*;
+
+    #[derive(Debug, Clone, Copy, ZeroCopySend)]
+    #[type_name("skillfab.Tick")]
+    #[repr(C)]
+    struct Tick {
+        value: u64,
+    }
+    #[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+    #[type_name("skillfab.SampleHeader")]
+    #[repr(C)]
+    struct SampleHeader {
+        cycle: u64,
+        stamp_ns: u64,
+        slot: u32,
+        reserved: u32,
+    }
+
+    let mut t = TestDomain::new("plain");
+    t.hello(&[]);
+    let name = t.domain.name().to_string();
+    let mut config = Config::default();
+    config.global.prefix = FileName::new(format!("sf_{name}_").as_bytes()).unwrap();
+    config
+        .global
+        .set_root_path(&Path::new(format!("/tmp/skillfab/{name}/").as_bytes()).unwrap());
+    let node = NodeBuilder::new()
+        .config(&config)
+        .create::<ipc::Service>()
+        .unwrap();
+    let service = node
+        .service_builder(&ServiceName::new("skillfab/topic/tick").unwrap())
+        .publish_subscribe::<Tick>()
+        .user_header::<SampleHeader>()
+        .open()
+        .unwrap();
+    let subscriber = service
+        .subscriber_builder()
+        .history_request(1)
+        .create()
+        .unwrap();
+    let mut seen = Vec::new();
+    t.wait_until("two ticks read by a plain iceoryx2 subscriber", || {
+        while let Some(s) = subscriber.receive().unwrap() {
+            seen.push((s.user_header().cycle, s.payload().value));
+        }
+        seen.len() >= 2
+    });
+    // The ticker publishes its cycle number, in the header and in the payload.
+    for (cycle, value) in &seen {
+        assert!(*cycle > 0, "{seen:?}");
+        assert_eq!(cycle, value, "{seen:?}");
+    }
+}

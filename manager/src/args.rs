@@ -9,7 +9,7 @@ use crate::stats::Report;
 use crate::up::{UpOptions, up};
 use anyhow::Context;
 use clap::Args;
-use skillfab_proto::domain::Domain;
+use skillfab_proto::domain::{DOMAIN_ENV, Domain};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -52,6 +52,30 @@ impl PaceArgs {
             ),
         }
     }
+}
+
+/// `--domain` (or `SKILLFAB_DOMAIN`), for every subcommand of `skillfab` and
+/// `skillfab-manager`.
+#[derive(Args, Debug, Clone)]
+pub struct DomainArg {
+    /// Fabric domain: processes of different domains never see each other.
+    #[arg(long, global = true, env = DOMAIN_ENV, default_value = "default")]
+    pub domain: String,
+}
+
+/// The tracing subscriber of the `skillfab` and `skillfab-manager` binaries: `RUST_LOG`
+/// (default `info`) to stderr, iceoryx2's own logger quieted to errors (`IOX2_LOG_LEVEL`
+/// overrides).
+pub fn init_tracing() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_writer(std::io::stderr)
+        .try_init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
 }
 
 /// `manager`: run the skill manager of a domain.

@@ -3,8 +3,8 @@
 //! the same arguments, so the manager's process links neither the console nor the demo.
 
 use clap::{Parser, Subcommand};
-use skillfab_manager::args::{ManagerArgs, UpArgs, run_manager, run_up};
-use skillfab_proto::domain::{DOMAIN_ENV, Domain};
+use skillfab_manager::args::{DomainArg, ManagerArgs, UpArgs, init_tracing, run_manager, run_up};
+use skillfab_proto::domain::Domain;
 use std::process::ExitCode;
 
 #[derive(Parser, Debug)]
@@ -14,9 +14,8 @@ use std::process::ExitCode;
     about = "The skillfab skill manager"
 )]
 struct Cli {
-    /// Fabric domain: processes of different domains never see each other.
-    #[arg(long, global = true, env = DOMAIN_ENV, default_value = "default")]
-    domain: String,
+    #[command(flatten)]
+    domain: DomainArg,
     #[command(subcommand)]
     command: Cmd,
 }
@@ -29,22 +28,10 @@ enum Cmd {
     Up(UpArgs),
 }
 
-fn init_tracing() {
-    use std::io::IsTerminal;
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_writer(std::io::stderr)
-        .try_init();
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-}
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_tracing();
-    let result = Domain::new(&cli.domain)
+    let result = Domain::new(&cli.domain.domain)
         .map_err(anyhow::Error::from)
         .and_then(|domain| match cli.command {
             Cmd::Manager(args) => run_manager(domain, args),

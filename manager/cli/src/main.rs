@@ -5,8 +5,8 @@ mod ctl;
 mod demo;
 
 use clap::{Parser, Subcommand};
-use skillfab_manager::args::{ManagerArgs, UpArgs};
-use skillfab_proto::domain::{DOMAIN_ENV, Domain};
+use skillfab_manager::args::{DomainArg, ManagerArgs, UpArgs, init_tracing};
+use skillfab_proto::domain::Domain;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -17,9 +17,8 @@ use std::process::ExitCode;
     about = "A zero-copy shared-memory multi-process skill fabric"
 )]
 struct Cli {
-    /// Fabric domain: processes of different domains never see each other.
-    #[arg(long, global = true, env = DOMAIN_ENV, default_value = "default")]
-    domain: String,
+    #[command(flatten)]
+    domain: DomainArg,
     #[command(subcommand)]
     command: Cmd,
 }
@@ -102,7 +101,7 @@ fn exec_manager() -> anyhow::Result<()> {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    let domain = Domain::new(&cli.domain)?;
+    let domain = Domain::new(&cli.domain.domain)?;
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
         Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
@@ -161,17 +160,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
     }
-}
-
-fn init_tracing() {
-    use std::io::IsTerminal;
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_writer(std::io::stderr)
-        .try_init();
 }
 
 fn main() -> ExitCode {

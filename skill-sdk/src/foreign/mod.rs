@@ -12,12 +12,17 @@
 //! same start-up path as a Rust skill; a process runs one skill, so [`run`] may be called once
 //! per process.
 
+mod sanitize;
+
+use sanitize::contains_bool;
+pub use sanitize::{sanitize_bools, sanitize_message};
+
 use crate::SdkError;
 use crate::decl::{Mode, PortDecl, PortKind};
 use crate::params::{ParamError, ParamSpec, ParamValue, Params, check_bounds};
 use crate::ports::{ErasedInput, ErasedOutput, InputMeta, InputSource, PortMaker};
 use crate::runtime::{Common, Io, Link, SkillArgs, Unit, guarded, start, step_skill};
-use crate::schema::{FieldKind, MessageSchema, Prim};
+use crate::schema::MessageSchema;
 use crate::skill::{Ctx, SkillError, SkillResult};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -400,50 +405,6 @@ impl<'a> ForeignRun<'a> {
     }
 }
 
-/// Replaces every bool byte that is not 0 or 1 with 1: C may store any non-zero value in a
-/// `bool`, Rust readers of the message may not see one.
-pub fn sanitize_bools(kind: &FieldKind, bytes: &mut [u8]) {
-    match kind {
-        FieldKind::Prim(Prim::Bool) => {
-            if let Some(b) = bytes.first_mut()
-                && *b > 1
-            {
-                *b = 1;
-            }
-        }
-        FieldKind::Prim(_) => {}
-        FieldKind::Array { elem, len } => {
-            let size = crate::value::kind_size(elem);
-            if !contains_bool(elem) || size == 0 {
-                return;
-            }
-            for i in 0..*len as usize {
-                if let Some(chunk) = bytes.get_mut(i * size..(i + 1) * size) {
-                    sanitize_bools(elem, chunk);
-                }
-            }
-        }
-        FieldKind::Struct(s) => sanitize_message(s, bytes),
-    }
-}
-
-/// [`sanitize_bools`] over a whole message.
-pub fn sanitize_message(schema: &MessageSchema, bytes: &mut [u8]) {
-    for f in &schema.fields {
-        if let Some(rest) = bytes.get_mut(f.offset as usize..) {
-            sanitize_bools(&f.ty, rest);
-        }
-    }
-}
-
-fn contains_bool(kind: &FieldKind) -> bool {
-    match kind {
-        FieldKind::Prim(p) => *p == Prim::Bool,
-        FieldKind::Array { elem, .. } => contains_bool(elem),
-        FieldKind::Struct(s) => s.fields.iter().any(|f| contains_bool(&f.ty)),
-    }
-}
-
 /// The runtime's unit of a foreign skill: its declaration and body, by value.
 struct ForeignUnit {
     mode: Mode,
@@ -564,100 +525,4 @@ impl Unit for ForeignUnit {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::prelude::Message;
-
-    #[derive(Message, Debug, Default, Clone, Copy)]
-    #[message(type_name = "skillfab.Tick")]
-    #[repr(C)]
-    struct Tick {
-        value: u64,
-    }
-    #[derive(Message, Debug, Default, Clone, Copy)]
-    #[message(type_name = "skillfab.Scaled")]
-    #[repr(C)]
-    struct Scaled {
-        value: f64,
-    }
-    #[derive(Message, Debug, Default, Clone, Copy)]
-    #[message(type_name = "skillfab.Drive")]
-    #[repr(C)]
-    struct Drive {
-        translate: f64,
-        rotate: f64,
-    }
-    #[derive(Message, Debug, Default, Clone, Copy)]
-    #[message(type_name = "skillfab.Bumpers")]
-    #[repr(C)]
-    struct Bumpers {
-        hit: u32,
-        stall: bool,
-    }
-    static REGISTRY: [MessageType; 3] = [
-        MessageType::of::<Tick>(),
-        MessageType::of::<Scaled>(),
-        MessageType::of::<Drive>(),
-    ];
-
-    fn float(name: &str, default: f64, min: f64, max: f64) -> ParamSpec {
-        ParamSpec {
-            name: name.into(),
-            kind: crate::params::ParamKind::Float,
-            default: ParamValue::Float(default),
-            min: Some(ParamValue::Float(min)),
-            max: Some(ParamValue::Float(max)),
-            doc: String::new(),
-        }
-    }
-
-    #[test]
-    fn declarations_are_checked() {
-        let mut s = ForeignSkill::new("c_scale", Mode::Sync, &REGISTRY).unwrap();
-        assert_eq!(s.input("tick", "skillfab.Tick"), Ok(0));
-        assert_eq!(s.output("scaled", "skillfab.Scaled"), Ok(0));
-        assert_eq!(s.proposal("drive", "skillfab.Drive"), Ok(1));
-        assert_eq!(s.outputs()[1].topic, "channel/drive");
-        assert!(matches!(
-            s.input("x", "skillfab.Nope"),
-            Err(DeclError::UnknownType { .. })
-        ));
-        assert!(matches!(
-            s.input("tick", "skillfab.Tick"),
-            Err(DeclError::BadName { .. })
-        ));
-        assert!(matches!(
-            s.output("bad name", "skillfab.Tick"),
-            Err(DeclError::BadName { .. })
-        ));
-        assert_eq!(s.param(float("gain", 2.0, -10.0, 10.0)), Ok(0));
-        assert!(matches!(
-            s.param(float("gain", 2.0, -10.0, 10.0)),
-            Err(DeclError::BadParam { .. })
-        ));
-        assert!(matches!(
-            s.param(float("g2", 20.0, -10.0, 10.0)),
-            Err(DeclError::BadParam { .. })
-        ));
-        assert!(matches!(
-            s.param(float("g3", 0.0, 10.0, -10.0)),
-            Err(DeclError::BadParam { .. })
-        ));
-        let mut wrong = float("g4", 0.0, -1.0, 1.0);
-        wrong.default = ParamValue::Int(0);
-        assert!(matches!(s.param(wrong), Err(DeclError::BadParam { .. })));
-        assert!(ForeignSkill::new("", Mode::Sync, &REGISTRY).is_err());
-    }
-
-    #[test]
-    fn bools_written_by_c_are_made_valid() {
-        let schema = <Bumpers as crate::Message>::schema();
-        let mut bytes = vec![0u8; schema.size as usize];
-        let stall = schema.fields[1].offset as usize;
-        bytes[stall] = 7;
-        bytes[0] = 9; // the u32 `hit` is left alone
-        sanitize_message(&schema, &mut bytes);
-        assert_eq!(bytes[stall], 1);
-        assert_eq!(bytes[0], 9);
-    }
-}
+mod tests;

@@ -10,7 +10,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use skillfab_bench::floors::{Iox, Pipes, Shape, Threads};
+use skillfab_bench::floors::{Iox, Pipes, Shape, Threads, hops};
 use skillfab_bench::{Case, Fabric};
 use std::time::Duration;
 
@@ -34,17 +34,17 @@ fn cycle(cr: &mut Criterion) {
             let shape: Shape = case.floor();
             let mut iox = Iox::start(shape);
             g.bench_function(format!("{}/iceoryx2_ring", case.name()), |b| {
-                b.iter_custom(|iters| us_sum(&iox.rounds(iters as usize, paced)))
+                b.iter_custom(|iters| us_sum(&hops(&iox.rounds(iters as usize, paced))))
             });
             drop(iox);
             let mut pipes = Pipes::start(shape);
             g.bench_function(format!("{}/pipe_ring", case.name()), |b| {
-                b.iter_custom(|iters| us_sum(&pipes.rounds(iters as usize, paced)))
+                b.iter_custom(|iters| us_sum(&hops(&pipes.rounds(iters as usize, paced))))
             });
             drop(pipes);
             let mut threads = Threads::start(shape);
             g.bench_function(format!("{}/threads", case.name()), |b| {
-                b.iter_custom(|iters| us_sum(&threads.rounds(iters as usize, paced)))
+                b.iter_custom(|iters| us_sum(&hops(&threads.rounds(iters as usize, paced))))
             });
         }
         g.finish();

@@ -1,10 +1,16 @@
 //! The floors: a token passed through the cycle's topology with nothing else done.
 //!
 //! - [`Shape::Ring`] of depth D: the driver (this process) wakes node 1, which wakes node 2,
-//!   …, node D wakes the driver: D + 1 hops, like a sync chain of depth D started and
-//!   finished by the manager.
+//!   …, node D wakes the driver, like a sync chain of depth D started by the manager.
 //! - [`Shape::Star`] of N: the driver wakes N nodes, each wakes the driver back: the fan-out
 //!   of N independent skills.
+//!
+//! Each round is timed as the fabric's cycle is ([`Timing`]): the driver stamps the start on
+//! `CLOCK_MONOTONIC`, every node stamps the moment it passes the token on, and the round's
+//! latency is the last node's stamp − the start: D wake-ups for a ring of depth D (one for a
+//! star), the hops of a sync chain of depth D from its cycle start to its last run's end.
+//! The round trip back to the driver (one wake-up more) is kept beside it, as the fabric's
+//! is (cycle start → the manager handling the completion).
 //!
 //! Each is measured three ways: raw iceoryx2 (publish a sample, then notify the next node's
 //! listener: the transport floor — the same services and settings the fabric uses), pipes
@@ -12,9 +18,10 @@
 //! process (no IPC: one channel send wakes one blocked thread). Nodes are `ring-node`
 //! processes of this package.
 
-use crate::{PACE, Summary};
+use crate::PACE;
 use skillfab_msgs::Tick;
 use skillfab_proto::domain::Domain;
+use skillfab_proto::header::now_ns;
 use skillfab_proto::services;
 use skillfab_tests::TestDomain;
 use std::io::{Read, Write};
@@ -72,9 +79,34 @@ fn pace(next: &mut Instant) {
     *next += PACE;
 }
 
-/// `n` round trips (µs) of `round` (given the round's sequence number) after 10 unmeasured
-/// ones, back to back or paced at [`PACE`].
-fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Duration) -> Vec<f64> {
+/// One round of a floor, timed as the fabric's cycle is (µs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    /// Driver's start stamp → the last node's stamp: the wake-ups of a chain of the same
+    /// depth (the fabric's cycle latency).
+    pub hops_us: f64,
+    /// Driver's start stamp → the driver woken by the last node: one wake-up more.
+    pub round_trip_us: f64,
+}
+
+impl Timing {
+    fn from_ns(start: u64, last_stamp: u64, back: u64) -> Timing {
+        let us = |ns: u64| ns as f64 / 1000.0;
+        Timing {
+            hops_us: us(last_stamp.saturating_sub(start)),
+            round_trip_us: us(back.saturating_sub(start)),
+        }
+    }
+}
+
+/// The hop latencies of `rounds` (µs).
+pub fn hops(rounds: &[Timing]) -> Vec<f64> {
+    rounds.iter().map(|t| t.hops_us).collect()
+}
+
+/// `n` rounds of `round` (given the round's sequence number) after 10 unmeasured ones, back
+/// to back or paced at [`PACE`].
+fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Timing) -> Vec<Timing> {
     for seq in 0..10 {
         round(seq);
     }
@@ -84,23 +116,18 @@ fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Duration) -> Vec<
             if paced {
                 pace(&mut next);
             }
-            round(seq).as_secs_f64() * 1e6
+            round(seq)
         })
         .collect()
 }
 
-/// Round trips (µs) of `n` tokens through `shape` by `transport`, back to back or paced.
-pub fn measure(shape: Shape, transport: Transport, paced: bool, n: usize) -> Vec<f64> {
+/// `n` rounds of a token through `shape` by `transport`, back to back or paced.
+pub fn measure(shape: Shape, transport: Transport, paced: bool, n: usize) -> Vec<Timing> {
     match transport {
         Transport::Iceoryx2 => Iox::start(shape).rounds(n, paced),
         Transport::Pipe => Pipes::start(shape).rounds(n, paced),
         Transport::Threads => Threads::start(shape).rounds(n, paced),
     }
-}
-
-/// [`measure`], summarised.
-pub fn summary(shape: Shape, transport: Transport, paced: bool, n: usize) -> Summary {
-    Summary::of(&measure(shape, transport, paced, n))
 }
 
 /// A running iceoryx2 ring or star.
@@ -220,13 +247,14 @@ impl Iox {
         }
     }
 
-    fn round(&mut self) -> Duration {
+    fn round(&mut self) -> Timing {
         self.seq += 1;
-        let start = Instant::now();
+        let start = now_ns();
         for (p, n) in &self.out {
             let s = p.loan_uninit().unwrap();
             let mut s = s.write_payload(Tick { value: self.seq });
             s.user_header_mut().cycle = self.seq;
+            s.user_header_mut().stamp_ns = start;
             s.send().unwrap();
             n.notify().unwrap();
         }
@@ -235,7 +263,8 @@ impl Iox {
             Shape::Star(n) => n,
         };
         let mut got = 0;
-        let spin_until = start + self.spin;
+        let mut last_stamp = 0;
+        let spin_until = Instant::now() + self.spin;
         while got < want {
             if Instant::now() >= spin_until {
                 self.listener.blocking_wait(|_| {}).unwrap();
@@ -246,11 +275,12 @@ impl Iox {
                 while let Some(s) = sub.receive().unwrap() {
                     if s.payload().value == self.seq {
                         got += 1;
+                        last_stamp = last_stamp.max(s.user_header().stamp_ns);
                     }
                 }
             }
         }
-        start.elapsed()
+        Timing::from_ns(start, last_stamp, now_ns())
     }
 
     /// Process ids of the nodes.
@@ -262,8 +292,8 @@ impl Iox {
         (0..n).map(|i| self._t.pid(i)).collect()
     }
 
-    /// `n` round trips (µs).
-    pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<f64> {
+    /// `n` rounds.
+    pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<Timing> {
         rounds(n, paced, |_| self.round())
     }
 }
@@ -322,20 +352,22 @@ impl Pipes {
         }
     }
 
-    fn round(&mut self) -> Duration {
-        let start = Instant::now();
+    fn round(&mut self) -> Timing {
+        let start = now_ns();
         for w in &mut self.to {
-            w.write_all(&[1]).unwrap();
+            w.write_all(&start.to_ne_bytes()).unwrap();
         }
-        let mut b = [0u8; 1];
+        let mut last_stamp = 0;
+        let mut b = [0u8; 8];
         for r in &mut self.from {
             r.read_exact(&mut b).unwrap();
+            last_stamp = last_stamp.max(u64::from_ne_bytes(b));
         }
-        start.elapsed()
+        Timing::from_ns(start, last_stamp, now_ns())
     }
 
-    /// `n` round trips (µs).
-    pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<f64> {
+    /// `n` rounds.
+    pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<Timing> {
         rounds(n, paced, |_| self.round())
     }
 }
@@ -361,10 +393,11 @@ impl Threads {
     /// Starts the threads, chained by bounded channels.
     pub fn start(shape: Shape) -> Threads {
         let (back_tx, from) = sync_channel::<u64>(64);
+        // Each relay passes on the moment it passes the token on.
         let relay = |rx: Receiver<u64>, tx: SyncSender<u64>| {
             std::thread::spawn(move || {
-                while let Ok(v) = rx.recv() {
-                    if tx.send(v).is_err() {
+                while rx.recv().is_ok() {
+                    if tx.send(now_ns()).is_err() {
                         break;
                     }
                 }
@@ -395,19 +428,20 @@ impl Threads {
         Threads { to, from, want }
     }
 
-    fn round(&mut self, seq: u64) -> Duration {
-        let start = Instant::now();
+    fn round(&mut self, seq: u64) -> Timing {
+        let start = now_ns();
         for tx in &self.to {
             tx.send(seq).unwrap();
         }
+        let mut last_stamp = 0;
         for _ in 0..self.want {
-            self.from.recv().unwrap();
+            last_stamp = last_stamp.max(self.from.recv().unwrap());
         }
-        start.elapsed()
+        Timing::from_ns(start, last_stamp, now_ns())
     }
 
-    /// `n` round trips (µs).
-    pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<f64> {
+    /// `n` rounds.
+    pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<Timing> {
         rounds(n, paced, |seq| self.round(seq))
     }
 }
@@ -448,18 +482,22 @@ pub fn iox_node(
             last = Instant::now();
             let mut out = publisher.loan_uninit().unwrap().write_payload(*s.payload());
             *out.user_header_mut() = *s.user_header();
+            // The moment this node passes the token on (the driver keeps the last one's).
+            out.user_header_mut().stamp_ns = now_ns();
             out.send().unwrap();
             notifier.notify().unwrap();
         }
     }
 }
 
-/// A pipe node (the `ring-node pipe` process): copies each byte of stdin to stdout until EOF.
+/// A pipe node (the `ring-node pipe` process): for each 8-byte token on stdin, writes the
+/// moment it passes it on (`CLOCK_MONOTONIC` ns, 8 bytes) to stdout, until EOF.
 pub fn pipe_node() {
-    let mut b = [0u8; 1];
+    let mut b = [0u8; 8];
     let (mut i, mut o) = (std::io::stdin().lock(), std::io::stdout().lock());
     while i.read_exact(&mut b).is_ok() {
-        if o.write_all(&b).and_then(|()| o.flush()).is_err() {
+        let stamp = now_ns().to_ne_bytes();
+        if o.write_all(&stamp).and_then(|()| o.flush()).is_err() {
             break;
         }
     }

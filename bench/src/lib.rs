@@ -249,9 +249,16 @@ impl Fabric {
     }
 
     /// The latencies (µs) of `n` cycles after the previous call, as the manager measured
-    /// them. Waits for the cycles by reading the board (shared memory: no wake-up of the
-    /// fabric), then asks for the most recent ones in batches the manager keeps (≤ 1024).
+    /// them (cycle start → last run done). See [`Fabric::times`].
     pub fn latencies(&mut self, n: usize) -> Vec<f64> {
+        self.times(n).into_iter().map(|t| t.hops_us).collect()
+    }
+
+    /// `n` cycles after the previous call, as the manager measured them: latency (cycle start
+    /// → last run done) and round trip (→ the manager handling the completion). Waits for the
+    /// cycles by reading the board (shared memory: no wake-up of the fabric), then asks for
+    /// the most recent ones in batches the manager keeps (≤ 1024).
+    pub fn times(&mut self, n: usize) -> Vec<floors::Timing> {
         const BATCH: u64 = 1000;
         let mut out = Vec::with_capacity(n);
         let mut left = n as u64;
@@ -263,10 +270,18 @@ impl Fabric {
             }
             // The most recent `want` cycles, all after the previous batch (back to back, the
             // manager may be far ahead by the time it answers).
-            let (cycle, us) = self.client.latencies(want as u32).unwrap();
-            out.extend(us.iter().map(|&x| f64::from(x)));
-            self.taken = cycle;
-            left -= us.len().min(want as usize) as u64;
+            let t = self.client.cycle_times(want as u32).unwrap();
+            out.extend(
+                t.latency_us
+                    .iter()
+                    .zip(&t.round_trip_us)
+                    .map(|(&l, &r)| floors::Timing {
+                        hops_us: f64::from(l),
+                        round_trip_us: f64::from(r),
+                    }),
+            );
+            self.taken = t.cycle;
+            left -= t.latency_us.len().min(want as usize) as u64;
         }
         out
     }
@@ -348,8 +363,10 @@ mod tests {
             for t in [Transport::Iceoryx2, Transport::Pipe, Transport::Threads] {
                 let v = floors::measure(shape, t, false, 20);
                 assert_eq!(v.len(), 20, "{shape:?} {t:?}");
+                // The last node's stamp lies between the start and the driver's wake-up.
                 assert!(
-                    v.iter().all(|x| x.is_finite() && *x > 0.0),
+                    v.iter()
+                        .all(|x| x.hops_us > 0.0 && x.hops_us <= x.round_trip_us),
                     "{shape:?} {t:?}: {v:?}"
                 );
             }
@@ -360,9 +377,15 @@ mod tests {
     fn a_fabric_case_gives_the_managers_latency_of_each_cycle() {
         for case in [Case::Chain(3), Case::Payload(3), Case::Lang(Lang::Python)] {
             let mut f = Fabric::start(case, false);
-            let v = f.latencies(50);
+            let v = f.times(50);
             assert_eq!(v.len(), 50, "{}", case.name());
-            assert!(v.iter().all(|x| *x > 0.0), "{}: {v:?}", case.name());
+            // The manager handles a completion after the last run ended.
+            assert!(
+                v.iter()
+                    .all(|x| x.hops_us > 0.0 && x.hops_us <= x.round_trip_us),
+                "{}: {v:?}",
+                case.name()
+            );
             // The sink found the payload of its own cycle in every run, written in place.
             assert!(
                 f.failures().iter().all(|(_, n)| *n == 0),

@@ -1,6 +1,12 @@
 //! `latency-report`: a short run of every case, back to back and paced at 100 Hz, each next
 //! to its floors measured in the same run (only ratios within one run are comparable on a
 //! shared machine), plus the idle cost of six skill processes.
+//!
+//! Same endpoints: skillfab's figure is cycle start → last run done (D wake-ups for a chain
+//! of depth D) and each floor's is the driver's start stamp → the last node's stamp over the
+//! same number of wake-ups; the round trips (one wake-up more: the manager, or the driver,
+//! woken at the end) are reported beside them. Each case is measured `repeats` times,
+//! fabric and floors interleaved, and the spread of the per-repeat medians is kept.
 
 use crate::floors::{self, Transport};
 use crate::{Case, Fabric, Summary, cpu_time, rss_mib};
@@ -12,16 +18,20 @@ use std::time::{Duration, Instant};
 pub struct Row {
     /// `chain-4`, `payload-1MiB@100Hz`, ...
     pub name: String,
-    /// skillfab's cycle latency.
+    /// skillfab's cycle latency (cycle start → last run done), all repeats pooled.
     pub skillfab: Summary,
-    /// Floors: iceoryx2 ring, pipe ring, threads (same topology).
+    /// Floors over the same wake-ups: iceoryx2 ring, pipe ring, threads (same topology).
     pub floors: Vec<(Transport, Summary)>,
+    /// Round trips (one wake-up more): skillfab first, then each floor.
+    pub round_trips: Vec<(String, Summary)>,
+    /// The lowest and highest per-repeat p50 (µs): skillfab first, then each floor.
+    pub p50_ranges: Vec<(String, (f64, f64))>,
     /// Mean compute time of a run per skill (µs), for the language cases.
     pub compute_us: Vec<(String, f64)>,
 }
 
 impl Row {
-    /// skillfab p50 ÷ the iceoryx2 floor's p50.
+    /// skillfab p50 ÷ the iceoryx2 floor's p50 (same endpoints, same wake-ups).
     pub fn ratio_p50(&self) -> f64 {
         self.floors
             .iter()
@@ -35,28 +45,66 @@ fn summary_json(s: &Summary) -> Json {
     json!({"p50": r(s.p50), "p99": r(s.p99), "max": r(s.max)})
 }
 
-/// Measures `case`: `n` cycles of skillfab and `n` round trips of each floor.
-pub fn row(case: Case, paced: bool, n: usize) -> Row {
-    let mut f = Fabric::start(case, paced);
-    let skillfab = Summary::of(&f.latencies(n));
-    let compute_us = if matches!(case, Case::Lang(_)) {
-        f.compute_us()
-    } else {
-        Vec::new()
-    };
-    drop(f);
-    let floors = [Transport::Iceoryx2, Transport::Pipe, Transport::Threads]
-        .into_iter()
-        .map(|t| (t, floors::summary(case.floor(), t, paced, n)))
-        .collect();
+/// Per-repeat p50s and all samples of one series.
+#[derive(Default)]
+struct Series {
+    hops: Vec<f64>,
+    round_trips: Vec<f64>,
+    p50s: Vec<f64>,
+}
+
+impl Series {
+    fn add(&mut self, t: &[floors::Timing]) {
+        let hops = floors::hops(t);
+        self.p50s.push(Summary::of(&hops).p50);
+        self.hops.extend(hops);
+        self.round_trips.extend(t.iter().map(|t| t.round_trip_us));
+    }
+    fn range(&self) -> (f64, f64) {
+        let lo = self.p50s.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = self.p50s.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    }
+}
+
+/// Measures `case`: `repeats` times `n` cycles of skillfab and `n` rounds of each floor,
+/// interleaved (fabric, iceoryx2, pipe, threads, then again), so a noisy spell of the shared
+/// machine hits all of them alike.
+pub fn row(case: Case, paced: bool, n: usize, repeats: usize) -> Row {
+    const FLOORS: [Transport; 3] = [Transport::Iceoryx2, Transport::Pipe, Transport::Threads];
+    let mut fabric = Series::default();
+    let mut floor: Vec<Series> = FLOORS.iter().map(|_| Series::default()).collect();
+    let mut compute_us = Vec::new();
+    for _ in 0..repeats.max(1) {
+        let mut f = Fabric::start(case, paced);
+        fabric.add(&f.times(n));
+        if matches!(case, Case::Lang(_)) {
+            compute_us = f.compute_us();
+        }
+        drop(f);
+        for (t, series) in FLOORS.iter().zip(&mut floor) {
+            series.add(&floors::measure(case.floor(), *t, paced, n));
+        }
+    }
+    let named = std::iter::once(("skillfab".to_string(), &fabric))
+        .chain(FLOORS.iter().map(|t| t.key().to_string()).zip(&floor));
     Row {
         name: if paced {
             format!("{}@100Hz", case.name())
         } else {
             case.name()
         },
-        skillfab,
-        floors,
+        skillfab: Summary::of(&fabric.hops),
+        floors: FLOORS
+            .iter()
+            .zip(&floor)
+            .map(|(t, s)| (*t, Summary::of(&s.hops)))
+            .collect(),
+        round_trips: named
+            .clone()
+            .map(|(k, s)| (k, Summary::of(&s.round_trips)))
+            .collect(),
+        p50_ranges: named.map(|(k, s)| (k, s.range())).collect(),
         compute_us,
     }
 }
@@ -96,7 +144,7 @@ pub fn spin_experiment(n: usize) -> String {
                 pids.push(std::process::id());
                 let cpu = |p: &[u32]| p.iter().map(|&p| cpu_time(p)).sum::<Duration>();
                 let (c0, t0) = (cpu(&pids), Instant::now());
-                let v = Summary::of(&ring.rounds(n, paced));
+                let v = Summary::of(&floors::hops(&ring.rounds(n, paced)));
                 let used = (cpu(&pids) - c0).as_secs_f64() / t0.elapsed().as_secs_f64() * 100.0;
                 s.push_str(&format!(
                     "   {:>6.0} / {:>6.0} µs ({used:>5.1} %)",
@@ -141,6 +189,18 @@ pub fn to_json(
                 o[t.key()] = summary_json(s);
             }
             o["ratio_p50"] = json!((r.ratio_p50() * 100.0).round() / 100.0);
+            o["round_trip"] = r
+                .round_trips
+                .iter()
+                .map(|(k, s)| (k.clone(), summary_json(s)))
+                .collect::<serde_json::Map<String, Json>>()
+                .into();
+            o["p50_range"] = r
+                .p50_ranges
+                .iter()
+                .map(|(k, (lo, hi))| (k.clone(), json!([lo.round(), hi.round()])))
+                .collect::<serde_json::Map<String, Json>>()
+                .into();
             if !r.compute_us.is_empty() {
                 o["compute_us_per_run"] = r
                     .compute_us
@@ -183,6 +243,8 @@ pub fn rows_from_json(j: &Json) -> Option<Vec<Row>> {
                     .into_iter()
                     .map(|t| Some((t, summary(&c[t.key()])?)))
                     .collect::<Option<Vec<_>>>()?,
+                round_trips: Vec::new(),
+                p50_ranges: Vec::new(),
                 compute_us: c["compute_us_per_run"]
                     .as_object()
                     .map(|m| {
@@ -203,17 +265,54 @@ pub fn to_text(
     rss_mib_per_skill: f64,
     manager_work: &[(String, Summary)],
 ) -> String {
-    let mut s = format!(
-        "{:<22} {:>28} {:>28} {:>28} {:>28} {:>7}\n",
-        "case (µs p50/p99/max)", "skillfab", "iceoryx2 ring", "pipe ring", "threads", "÷iox"
+    let mut s = String::from(
+        "cycle latency over the same wake-ups (skillfab: cycle start → last run done; floors: \
+         start stamp → last node's stamp), µs p50/p99/max [lowest–highest p50 of the repeats]\n",
     );
+    s.push_str(&format!(
+        "{:<22} {:>34} {:>34} {:>20} {:>20} {:>6}  {:>22}\n",
+        "case",
+        "skillfab",
+        "iceoryx2 ring",
+        "pipe ring",
+        "threads",
+        "÷iox",
+        "round trip p50 sf/iox"
+    ));
     let cell = |x: &Summary| format!("{:.0} / {:.0} / {:.0}", x.p50, x.p99, x.max);
+    let range = |r: &Row, k: &str| {
+        r.p50_ranges
+            .iter()
+            .find(|(n, _)| n == k)
+            .map_or(String::new(), |(_, (lo, hi))| format!(" [{lo:.0}–{hi:.0}]"))
+    };
+    let rt = |r: &Row, k: &str| {
+        r.round_trips
+            .iter()
+            .find(|(n, _)| n == k)
+            .map_or(f64::NAN, |(_, s)| s.p50)
+    };
     for r in rows {
-        s.push_str(&format!("{:<22} {:>28}", r.name, cell(&r.skillfab)));
-        for (_, f) in &r.floors {
-            s.push_str(&format!(" {:>28}", cell(f)));
+        s.push_str(&format!(
+            "{:<22} {:>34}",
+            r.name,
+            format!("{}{}", cell(&r.skillfab), range(r, "skillfab"))
+        ));
+        for (t, f) in &r.floors {
+            let c = if *t == Transport::Iceoryx2 {
+                format!("{}{}", cell(f), range(r, t.key()))
+            } else {
+                cell(f)
+            };
+            let w = if *t == Transport::Iceoryx2 { 34 } else { 20 };
+            s.push_str(&format!(" {c:>w$}"));
         }
-        s.push_str(&format!(" {:>7.2}\n", r.ratio_p50()));
+        s.push_str(&format!(
+            " {:>6.2}  {:>10.0} / {:<10.0}\n",
+            r.ratio_p50(),
+            rt(r, "skillfab"),
+            rt(r, Transport::Iceoryx2.key())
+        ));
     }
     for r in rows.iter().filter(|r| !r.compute_us.is_empty()) {
         let runs: Vec<String> = r

@@ -15,6 +15,9 @@ pub struct CycleStats {
     pub overruns: u64,
     latencies_ns: VecDeque<u64>,
     max_ns: u64,
+    /// Cycle start → the manager handling the cycle's completion (ns): the latency plus the
+    /// wake-up of the manager, i.e. the round trip back to the driver.
+    round_trips_ns: VecDeque<u64>,
     /// The manager's own work (ns of its thread's CPU time) per cycle, between waits.
     work_ns: VecDeque<u64>,
     work_max_ns: u64,
@@ -25,9 +28,14 @@ pub struct CycleStats {
 pub use skillfab_proto::control::Percentiles;
 
 impl CycleStats {
-    /// Records a finished cycle.
-    pub fn record(&mut self, latency_ns: u64, overrun: bool) {
+    /// Records a finished cycle: its latency (start → last run done) and round trip (start →
+    /// the manager handling its completion).
+    pub fn record(&mut self, latency_ns: u64, round_trip_ns: u64, overrun: bool) {
         self.cycles += 1;
+        if self.round_trips_ns.len() == WINDOW {
+            self.round_trips_ns.pop_front();
+        }
+        self.round_trips_ns.push_back(round_trip_ns);
         if overrun {
             self.overruns += 1;
         }
@@ -57,18 +65,28 @@ impl CycleStats {
 
     /// The latencies of the `n` most recent cycles in µs, oldest first (the console's history).
     pub fn recent_us(&self, n: usize) -> Vec<f32> {
-        let skip = self.latencies_ns.len().saturating_sub(n);
-        self.latencies_ns
-            .iter()
-            .skip(skip)
-            .map(|&ns| ns as f32 / 1000.0)
-            .collect()
+        recent(&self.latencies_ns, n)
+    }
+
+    /// The round trips of the `n` most recent cycles in µs, oldest first.
+    pub fn recent_round_trips_us(&self, n: usize) -> Vec<f32> {
+        recent(&self.round_trips_ns, n)
     }
 
     /// Latency percentiles over the recent window (max over all cycles).
     pub fn latency_us(&self) -> Percentiles {
         percentiles(&self.latencies_ns, self.max_ns)
     }
+}
+
+/// The `n` newest of `window` (ns) in µs, oldest first.
+fn recent(window: &VecDeque<u64>, n: usize) -> Vec<f32> {
+    let skip = window.len().saturating_sub(n);
+    window
+        .iter()
+        .skip(skip)
+        .map(|&ns| ns as f32 / 1000.0)
+        .collect()
 }
 
 /// Percentiles (µs) of a window of nanoseconds; `max_ns` is the all-time largest.
@@ -134,7 +152,7 @@ mod tests {
     fn percentiles() {
         let mut s = CycleStats::default();
         for i in 1..=100 {
-            s.record(i * 1000, i == 100);
+            s.record(i * 1000, i * 1000 + 10, i == 100);
         }
         let p = s.latency_us();
         assert_eq!(s.cycles, 100);

@@ -1,6 +1,8 @@
-//! `latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING]`: every case of the
+//! `latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING]`: every case of the
 //! cycle benchmarks, back to back and paced at 100 Hz, with its floors measured in the same
-//! run; p50 / p99 / max in µs and the ratio skillfab ÷ iceoryx2 ring. Build first:
+//! run, over the same wake-ups (see `report`), repeated R times (default 3) with fabric and
+//! floors interleaved; p50 / p99 / max in µs, the spread of the repeats' p50s, the round
+//! trips, and the ratio skillfab ÷ iceoryx2 ring. Build first:
 //! `cargo build --release --workspace && target/release/latency-report`.
 
 use skillfab_bench::Case;
@@ -9,13 +11,18 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);
-    let (mut json, mut cycles, mut svg, mut only) = (false, 400usize, None, None);
+    let (mut json, mut cycles, mut svg, mut only, mut repeats) =
+        (false, 400usize, None, None, 3usize);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--json" => json = true,
             "--cycles" => match args.next().and_then(|n| n.parse().ok()) {
                 Some(n) if n > 0 => cycles = n,
                 _ => return usage("--cycles needs a positive number"),
+            },
+            "--repeats" => match args.next().and_then(|n| n.parse().ok()) {
+                Some(n) if n > 0 => repeats = n,
+                _ => return usage("--repeats needs a positive number"),
             },
             "--svg" => match args.next() {
                 Some(f) => svg = Some(f),
@@ -57,7 +64,7 @@ fn main() -> ExitCode {
             },
             "-h" | "--help" => {
                 println!(
-                    "usage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
+                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
                 );
                 return ExitCode::SUCCESS;
             }
@@ -77,7 +84,7 @@ fn main() -> ExitCode {
             }
             // Paced runs take a period per cycle: fewer of them.
             let n = if paced { cycles / 2 } else { cycles }.max(10);
-            let r = report::row(case, paced, n);
+            let r = report::row(case, paced, n, repeats);
             eprintln!(
                 "{name}: skillfab p50 {:.0} µs, iceoryx2 ring p50 {:.0} µs",
                 r.skillfab.p50, r.floors[0].1.p50
@@ -111,7 +118,7 @@ fn main() -> ExitCode {
 
 fn usage(why: &str) -> ExitCode {
     eprintln!(
-        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
+        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
     );
     ExitCode::from(2)
 }

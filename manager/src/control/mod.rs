@@ -264,10 +264,14 @@ impl Manager {
             }
             Request::Step(_) => Ok(Reply::Stepped(self.cycle)),
             Request::Stats => Ok(Reply::Stats(self.stats_info())),
-            Request::Latencies(n) => Ok(Reply::Latencies {
-                cycle: self.cycle,
-                latency_us: self.stats.recent_us((n as usize).min(MAX_LATENCIES)),
-            }),
+            Request::Latencies(n) => {
+                let n = (n as usize).min(MAX_LATENCIES);
+                Ok(Reply::Latencies {
+                    cycle: self.cycle,
+                    latency_us: self.stats.recent_us(n),
+                    round_trip_us: self.stats.recent_round_trips_us(n),
+                })
+            }
             Request::SetIoLog { skill, on } => self.set_io_log(client, &skill, on),
             Request::Logging => Ok(self.logging()),
             Request::SetPriority { skill, priority } => self.set_priority(client, skill, priority),

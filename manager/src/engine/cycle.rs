@@ -249,12 +249,15 @@ impl Manager {
             .filter(|slot| slot.done_cycle.load(Ordering::Acquire) == run.k)
             .map(|slot| slot.last_end_ns.load(Ordering::Acquire))
             .max();
+        // Handled now: the manager was woken by the run that completed the cycle (or by its
+        // deadline), so this is the round trip back to the driver.
+        let round_trip = now_ns().saturating_sub(run.start_ns);
         let latency = if overrun {
-            now_ns().saturating_sub(run.start_ns)
+            round_trip
         } else {
             end.map_or(0, |e| e.saturating_sub(run.start_ns))
         };
-        self.stats.record(latency, overrun);
+        self.stats.record(latency, round_trip, overrun);
         self.cycle = run.k;
         if !self.plan.channels.is_empty() {
             self.read_channels(run.k);

@@ -64,6 +64,17 @@ fn sdk(what: &str, e: impl std::fmt::Debug) -> ClientError {
     ClientError::Fabric(skillfab_proto::Error::transport(what, e))
 }
 
+/// Recent cycles' timing, oldest first (µs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CycleTimes {
+    /// The last cycle completed.
+    pub cycle: u64,
+    /// Cycle start → last expected run done (the manager's cycle latency).
+    pub latency_us: Vec<f32>,
+    /// Cycle start → the manager handling the completion (one more wake-up).
+    pub round_trip_us: Vec<f32>,
+}
+
 /// The events subscriber and the listener woken after each publication.
 type EventsPort = (Subscriber<ipc::Service, [u8], ()>, Listener<ipc::Service>);
 
@@ -307,8 +318,21 @@ impl Client {
 
     /// The latencies of up to `n` most recent cycles (µs, oldest first) and the last cycle.
     pub fn latencies(&self, n: u32) -> Result<(u64, Vec<f32>), ClientError> {
+        self.cycle_times(n).map(|t| (t.cycle, t.latency_us))
+    }
+
+    /// The latencies and round trips of up to `n` most recent cycles (µs, oldest first).
+    pub fn cycle_times(&self, n: u32) -> Result<CycleTimes, ClientError> {
         match self.request(&Request::Latencies(n))? {
-            Reply::Latencies { cycle, latency_us } => Ok((cycle, latency_us)),
+            Reply::Latencies {
+                cycle,
+                latency_us,
+                round_trip_us,
+            } => Ok(CycleTimes {
+                cycle,
+                latency_us,
+                round_trip_us,
+            }),
             other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
     }

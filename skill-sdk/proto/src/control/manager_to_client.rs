@@ -192,8 +192,11 @@ pub enum Reply {
     Latencies {
         /// The last cycle completed.
         cycle: u64,
-        /// One per cycle, ending with `cycle`'s.
+        /// Cycle start → last expected run done, one per cycle, ending with `cycle`'s.
         latency_us: Vec<f32>,
+        /// Cycle start → the manager handling the completion (one more wake-up: the round
+        /// trip back to the manager), one per cycle, aligned with `latency_us`.
+        round_trip_us: Vec<f32>,
     },
     /// The fabric log.
     Logging {

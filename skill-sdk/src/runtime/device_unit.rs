@@ -3,17 +3,17 @@
 //! arbitrated, the commands go to the device's body and out on the command topics, and the
 //! run is finished.
 
+use super::arbiter::Arbiter;
 use super::serve::Link;
 use super::skill_unit::{RunRecord, RuntimeInputs, commit_outputs, finish_run, guarded};
 use super::{Common, Io, Unit};
 use crate::SdkError;
-use crate::board::{Board, MAX_CHANNELS, MAX_SLOTS, RunStatus, Slot};
-use crate::decl::{Mode, PortDecl, SkillDecl};
+use crate::board::RunStatus;
+use crate::decl::{Mode, PortDecl};
 use crate::device::{Device, DeviceOptions};
 use crate::header::{SampleHeader, now_ns};
-use crate::ports::{Candidate, ErasedInput, ErasedOutput, InputSet, OutputSet, PortMaker};
+use crate::ports::{ErasedInput, ErasedOutput, InputSet, OutputSet, PortMaker};
 use crate::skill::Ctx;
-use std::collections::HashMap;
 use std::sync::atomic::Ordering;
 
 /// The wrapper that runs a [`Device`].
@@ -23,13 +23,9 @@ pub(crate) struct DeviceUnit<D: Device> {
     options: DeviceOptions,
     /// Last cycle whose sample phase ran.
     sampled: u64,
-    /// Proposer names by slot, with the slot generation they belong to: a name is decoded
-    /// from the board's declaration once per registration, not once per cycle.
-    names: HashMap<u32, (u32, String)>,
+    /// Picks each channel's command from the cycle's proposals.
+    arbiter: Arbiter,
 }
-
-/// A proposer that settled in the cycle: its slot, priority and name.
-type Settled = (u32, i32, String);
 
 impl<D: Device> DeviceUnit<D> {
     pub(crate) fn new(device: D, options: DeviceOptions) -> DeviceUnit<D> {
@@ -37,7 +33,7 @@ impl<D: Device> DeviceUnit<D> {
             device,
             options,
             sampled: 0,
-            names: HashMap::new(),
+            arbiter: Arbiter::default(),
         }
     }
 
@@ -58,82 +54,6 @@ impl<D: Device> DeviceUnit<D> {
         };
         let mask = commit_outputs(&mut io.outputs, status, header(link, k));
         me.published_mask.store(mask, Ordering::Relaxed);
-    }
-
-    /// The proposers of each channel in cycle `k`, once every one the manager expects has
-    /// settled: its proposal for k is in, or it finished k without proposing (it then wakes
-    /// the device), or it was cancelled. `None` while one may still propose.
-    fn settled(
-        &mut self,
-        board: &Board,
-        me: &Slot,
-        io: &mut Io,
-        k: u64,
-    ) -> Option<Vec<Vec<Settled>>> {
-        let mut channels = Vec::new();
-        for c in 0..io.inputs.len().min(MAX_CHANNELS) {
-            let mask = me.channel_proposers[c].load(Ordering::Acquire);
-            let mut settled = Vec::new();
-            for s in (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0) {
-                let p = board.slot(s);
-                if p.expected_cycle.load(Ordering::Acquire) != k {
-                    continue;
-                }
-                let proposed = io.inputs[c]
-                    .as_channel()
-                    .is_some_and(|ch| ch.has_proposal(s as u32, k));
-                let done = proposed
-                    || p.done_cycle.load(Ordering::Acquire) == k
-                    || p.cancelled_cycle.load(Ordering::Acquire) == k;
-                if !done {
-                    return None;
-                }
-                let name = self.name_of(p, s as u32);
-                settled.push((s as u32, p.priority.load(Ordering::Acquire), name));
-            }
-            channels.push(settled);
-        }
-        Some(channels)
-    }
-
-    /// The instance name of the skill in slot `s` (cached per registration).
-    fn name_of(&mut self, p: &Slot, s: u32) -> String {
-        let generation = p.generation.load(Ordering::Acquire);
-        match self.names.get(&s) {
-            Some((g, n)) if *g == generation => n.clone(),
-            _ => {
-                let n = postcard::from_bytes::<SkillDecl>(&p.read_decl())
-                    .map(|d| d.name)
-                    .unwrap_or_else(|_| format!("slot{s}"));
-                self.names.insert(s, (generation, n.clone()));
-                n
-            }
-        }
-    }
-
-    /// Picks each channel's command of cycle `k` among its settled proposers and records the
-    /// winner and contributors on the board (the manager reports them).
-    fn arbitrate(me: &Slot, io: &mut Io, channels: &[Vec<Settled>], k: u64) {
-        for (c, settled) in channels.iter().enumerate() {
-            let Some(ch) = io.inputs[c].as_channel() else {
-                continue;
-            };
-            let candidates: Vec<Candidate<'_>> = settled
-                .iter()
-                .map(|(slot, priority, name)| Candidate {
-                    slot: *slot,
-                    priority: *priority,
-                    name,
-                })
-                .collect();
-            let arb = ch.arbitrate(k, &candidates);
-            me.channel_winner[c].store(arb.winner.map_or(0, |w| w + 1), Ordering::Relaxed);
-            me.channel_mask[c].store(
-                arb.weights.iter().fold(0u64, |m, (s, _)| m | (1 << s)),
-                Ordering::Relaxed,
-            );
-            me.channel_cycle[c].store(k, Ordering::Release);
-        }
     }
 
     /// Hands the cycle's commands to the body and publishes them on the command topics.
@@ -228,7 +148,7 @@ impl<D: Device> Unit for DeviceUnit<D> {
         if self.sampled < k {
             self.sample(link, io, common, k);
         }
-        let Some(channels) = self.settled(board, me, io, k) else {
+        let Some(channels) = self.arbiter.settled(board, me, io, k) else {
             return;
         };
         // A proposer publishes its proposal before it marks its run done, but the proposal
@@ -240,7 +160,7 @@ impl<D: Device> Unit for DeviceUnit<D> {
             }
         }
         let start = now_ns();
-        Self::arbitrate(me, io, &channels, k);
+        Arbiter::arbitrate(me, io, &channels, k);
         let status = self.command(link, io, common, k);
         let end = now_ns();
         common.last_cycle = k;

@@ -21,8 +21,10 @@
 //! - `serve`: waiting for the manager, registering, and the wait loop of a registered unit;
 //! - `skill_unit`: a skill's run (shared by Rust and foreign skills): inputs due, body,
 //!   outputs sent, the run stamped on the board;
-//! - `device_unit`: a device's cycle: sample at once, then arbitrate and command.
+//! - `device_unit`: a device's cycle: sample at once, then arbitrate and command;
+//!   `arbiter`: which proposers have settled, and each channel's command from them.
 
+mod arbiter;
 mod device_unit;
 mod serve;
 mod skill_unit;

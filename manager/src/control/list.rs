@@ -15,9 +15,8 @@ impl Manager {
                 })
                 .collect()
         };
-        self.order
-            .iter()
-            .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
+        self.skills
+            .in_order()
             .map(|(s, e)| SkillInfo {
                 name: e.decl.name.clone(),
                 kind: e.decl.kind.clone(),

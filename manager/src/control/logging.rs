@@ -8,8 +8,9 @@ impl Manager {
     /// Starts or stops logging a skill's input and output samples to the fabric log.
     pub(super) fn set_io_log(&mut self, client: &str, skill: &str, on: bool) -> Response {
         let s = self.slot_of(skill)?;
-        let e = self.skills[s]
-            .as_ref()
+        let e = self
+            .skills
+            .get(s)
             .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
         if !on {
             if self.io_log.remove(skill).is_some()

@@ -218,10 +218,8 @@ fn param_err(skill: &str, e: ParamError) -> ControlError {
 /// `monitors`; `logging`: the fabric log).
 impl Manager {
     fn slot_of(&self, name: &str) -> Result<usize, ControlError> {
-        self.order
-            .iter()
-            .copied()
-            .find(|&s| self.skills[s].as_ref().is_some_and(|e| e.decl.name == name))
+        self.skills
+            .slot_of(name)
             .ok_or_else(|| ControlError::UnknownSkill(name.to_string()))
     }
 

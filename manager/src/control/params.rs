@@ -12,7 +12,7 @@ impl Manager {
             .map(|n| self.slot_of(n))
             .collect::<Result<Vec<_>, _>>()?;
         for s in slots {
-            let Some(e) = self.skills[s].as_mut() else {
+            let Some(e) = self.skills.get_mut(s) else {
                 continue;
             };
             if e.active == active {
@@ -42,8 +42,9 @@ impl Manager {
         arg: ParamArg,
     ) -> Response {
         let s = self.slot_of(skill)?;
-        let e = self.skills[s]
-            .as_mut()
+        let e = self
+            .skills
+            .get_mut(s)
             .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
         let spec = e
             .decl
@@ -113,8 +114,9 @@ impl Manager {
     /// A parameter's current value.
     pub(super) fn get_param(&self, skill: &str, param: String) -> Response {
         let s = self.slot_of(skill)?;
-        let e = self.skills[s]
-            .as_ref()
+        let e = self
+            .skills
+            .get(s)
             .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
         e.values
             .iter()
@@ -126,7 +128,7 @@ impl Manager {
     /// A skill's arbitration priority, from the next cycle start.
     pub(super) fn set_priority(&mut self, client: &str, skill: String, priority: i32) -> Response {
         let s = self.slot_of(&skill)?;
-        if let Some(e) = self.skills[s].as_mut() {
+        if let Some(e) = self.skills.get_mut(s) {
             let old = e.decl.priority;
             e.decl.priority = priority;
             if old != priority {

@@ -18,8 +18,9 @@ impl Manager {
             reason,
         };
         let s = self.slot_of(skill)?;
-        let e = self.skills[s]
-            .as_ref()
+        let e = self
+            .skills
+            .get(s)
             .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
         let port = e
             .decl
@@ -42,8 +43,9 @@ impl Manager {
     /// Opens (once) an untyped reader of the output's topic.
     pub(super) fn open_reader(&mut self, skill: &str, output: &str) -> Result<(), ControlError> {
         let s = self.slot_of(skill)?;
-        let Some(port) = self.skills[s]
-            .as_ref()
+        let Some(port) = self
+            .skills
+            .get(s)
             .and_then(|e| e.decl.outputs.iter().find(|p| p.port == output))
         else {
             return Err(ControlError::UnknownSkill(skill.to_string()));
@@ -75,10 +77,9 @@ impl Manager {
                 }),
             })?;
         let schema = self
-            .order
-            .iter()
-            .filter_map(|&s| self.skills[s].as_ref())
-            .flat_map(|e| e.decl.inputs.iter())
+            .skills
+            .in_order()
+            .flat_map(|(_, e)| e.decl.inputs.iter())
             .find(|p| {
                 p.channel_name() == Some(name)
                     && matches!(p.kind, skillfab_proto::decl::PortKind::Channel(_))
@@ -104,13 +105,7 @@ impl Manager {
             path: text.into(),
             reason: e.reason,
         })?;
-        let reader = self
-            .readers
-            .get_mut(&topic)
-            .ok_or_else(|| ControlError::NoValue(text.into()))?;
-        reader
-            .poll()
-            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        let reader = self.polled_reader(&topic, text)?;
         let command = reader
             .latest()
             .and_then(|(b, h)| Some((f.read(b)?, h.cycle)));
@@ -148,6 +143,18 @@ impl Manager {
         })
     }
 
+    /// The open reader of `topic`, with what arrived since its last poll taken in.
+    fn polled_reader(&mut self, topic: &str, text: &str) -> Result<&mut RawReader, ControlError> {
+        let reader = self
+            .readers
+            .get_mut(topic)
+            .ok_or_else(|| ControlError::NoValue(text.into()))?;
+        reader
+            .poll()
+            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        Ok(reader)
+    }
+
     /// The latest value at `skill.output[.field][index]` (or `channel.…`), with its cycle.
     pub(super) fn query(&mut self, path: &str) -> Response {
         let text = path.trim();
@@ -160,13 +167,7 @@ impl Manager {
         })?;
         let (topic, f, slot) = self.resolve_path(&path.skill, &path.output, &path.field, text)?;
         self.open_reader(&path.skill, &path.output)?;
-        let reader = self
-            .readers
-            .get_mut(&topic)
-            .ok_or_else(|| ControlError::NoValue(text.into()))?;
-        reader
-            .poll()
-            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        let reader = self.polled_reader(&topic, text)?;
         let (bytes, header) = reader
             .latest_of(slot)
             .ok_or_else(|| ControlError::NoValue(text.into()))?;

@@ -41,13 +41,7 @@ impl Manager {
                     .config
                     .wait_for
                     .iter()
-                    .filter(|n| {
-                        !self
-                            .skills
-                            .iter()
-                            .flatten()
-                            .any(|e| e.ready && &e.decl.name == *n)
-                    })
+                    .filter(|n| !self.skills.all().any(|e| e.ready && &e.decl.name == *n))
                     .cloned()
                     .collect();
                 if !missing.is_empty() {
@@ -88,17 +82,14 @@ impl Manager {
 
     pub(super) fn replan(&mut self) {
         let nodes: Vec<PlanNode<'_>> = self
-            .order
-            .iter()
-            .filter_map(|&s| {
-                self.skills[s]
-                    .as_ref()
-                    .filter(|e| e.ready)
-                    .map(|e| PlanNode {
-                        slot: s,
-                        decl: &e.decl,
-                        active: e.active,
-                    })
+            .skills
+            .in_order()
+            .filter_map(|(s, e)| {
+                Some(e).filter(|e| e.ready).map(|e| PlanNode {
+                    slot: s,
+                    decl: &e.decl,
+                    active: e.active,
+                })
             })
             .collect();
         self.plan = graph::plan(&nodes);
@@ -108,8 +99,8 @@ impl Manager {
                 .fresh_mask
                 .store(mask, Ordering::Release);
         }
-        for &s in &self.order {
-            if let Some(e) = &self.skills[s] {
+        for (s, e) in self.skills.in_order() {
+            {
                 let slot = self.board.slot(s);
                 slot.active.store(u32::from(e.active), Ordering::Release);
                 slot.priority.store(e.decl.priority, Ordering::Release);
@@ -122,8 +113,9 @@ impl Manager {
             }
             // Read the commands from now on (queries find the latest one).
             let topic = names::command_topic(&ch.channel);
-            let schema = self.skills[ch.device]
-                .as_ref()
+            let schema = self
+                .skills
+                .get(ch.device)
                 .and_then(|e| e.decl.inputs.get(ch.index))
                 .map(|p| p.schema.clone());
             if let Some(schema) = schema
@@ -165,7 +157,7 @@ impl Manager {
             cancelled: [false; MAX_SLOTS],
         });
         for &s in &self.plan.sources {
-            if let Some(e) = &self.skills[s]
+            if let Some(e) = self.skills.get(s)
                 && let Err(err) = e.trigger.notify()
             {
                 tracing::warn!(skill = %e.decl.name, error = ?err, "could not wake skill");
@@ -227,7 +219,7 @@ impl Manager {
                 .iter()
                 .filter(|c| c.proposers & (1 << s) != 0)
             {
-                if let Some(e) = &self.skills[ch.device] {
+                if let Some(e) = self.skills.get(ch.device) {
                     let _ = e.trigger.notify();
                 }
             }

@@ -16,6 +16,7 @@
 mod cycle;
 mod observe;
 mod registry;
+mod skills;
 
 use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
@@ -36,6 +37,7 @@ use skillfab_proto::param::ParamValue;
 use skillfab_proto::services::RawReader;
 use skillfab_proto::value::FieldPath;
 use skillfab_proto::{Error as SdkError, names, services};
+use skills::Skills;
 use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -183,9 +185,8 @@ pub struct Manager {
     pub(crate) config: ManagerConfig,
     pub(crate) board: Board,
     pub(crate) node: Node<ipc::Service>,
-    pub(crate) skills: Vec<Option<Entry>>,
-    /// Slots in registration order (for reports).
-    pub(crate) order: Vec<usize>,
+    /// The registered skills, by slot and in registration order.
+    pub(crate) skills: Skills,
     plan: Plan,
     /// The plan must be recomputed before the next cycle.
     pub(crate) dirty: bool,
@@ -209,8 +210,6 @@ pub struct Manager {
     pub(crate) next_monitor: u64,
     /// Untyped readers of topics that monitors and queries read.
     pub(crate) readers: HashMap<String, RawReader>,
-    /// Names that have registered before (a new registration is then a restart).
-    seen: HashSet<String>,
     /// Requests and events; taken out while the loop runs.
     control: Option<ControlPlane>,
     /// Events published so far.
@@ -277,8 +276,7 @@ impl Manager {
             config,
             board,
             node,
-            skills: (0..MAX_SLOTS).map(|_| None).collect(),
-            order: Vec::new(),
+            skills: Skills::new(),
             plan: Plan::default(),
             dirty: true,
             cycle: 0,
@@ -289,7 +287,6 @@ impl Manager {
             monitors: Vec::new(),
             next_monitor: 1,
             readers: HashMap::new(),
-            seen: HashSet::new(),
             control: Some(control),
             events_published: 0,
             channels: HashMap::new(),
@@ -387,7 +384,7 @@ impl Manager {
         self.board.close();
         // Wake every skill: it finds the board closed and leaves now, not at its next
         // liveness tick.
-        for e in self.skills.iter().flatten() {
+        for e in self.skills.all() {
             let _ = e.trigger.notify();
         }
         let cleaned = self.node.try_cleanup_dead_nodes();
@@ -470,9 +467,8 @@ impl Manager {
     /// Figures of the run so far.
     pub fn report(&self) -> Report {
         let skills = self
-            .order
-            .iter()
-            .filter_map(|&s| self.skills[s].as_ref().map(|e| (s, e)))
+            .skills
+            .in_order()
             .map(|(s, e)| SkillReport {
                 name: e.decl.name.clone(),
                 kind: e.decl.kind.clone(),

@@ -44,7 +44,7 @@ impl Manager {
 
     /// Reads each channel's arbitration of cycle `k` from the board; a new winner is an event.
     pub(super) fn read_channels(&mut self, k: u64) {
-        let name_of = |s: usize| self.skills.get(s)?.as_ref().map(|e| e.decl.name.clone());
+        let name_of = |s: usize| self.skills.get(s).map(|e| e.decl.name.clone());
         let mut changes = Vec::new();
         for ch in &self.plan.channels {
             if ch.index >= skillfab_proto::board::MAX_CHANNELS {

@@ -18,7 +18,7 @@ impl Manager {
             match self.board.slot(i).state() {
                 SlotState::Pending => self.admit(i),
                 SlotState::Ready => {
-                    if let Some(e) = self.skills[i].as_mut().filter(|e| !e.ready) {
+                    if let Some(e) = self.skills.get_mut(i).filter(|e| !e.ready) {
                         e.ready = true;
                         self.dirty = true;
                         tracing::info!(skill = %e.decl.name, "skill ready");
@@ -82,13 +82,14 @@ impl Manager {
         // A previous instance of the same name that died is replaced, not a duplicate.
         if let Some(j) = (0..MAX_SLOTS).find(|&j| {
             j != i
-                && self.skills[j]
-                    .as_ref()
+                && self
+                    .skills
+                    .get(j)
                     .is_some_and(|e| e.decl.name == decl.name && !pid_alive(e.decl.pid))
         }) {
             self.drop_slot(j, DropReason::Died);
         }
-        let live = self.skills.iter().flatten().map(|e| &e.decl);
+        let live = self.skills.all().map(|e| &e.decl);
         if let Err(e) = graph::check_join(live, &decl) {
             return self.refuse(i, Some(&decl.name), &e.to_string());
         }
@@ -107,27 +108,27 @@ impl Manager {
             skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
             active = decl.start_active, "skill registered"
         );
-        let restarted = !self.seen.insert(decl.name.clone());
-        if restarted && is_device(&decl) {
+        let (name, pid, device) = (decl.name.clone(), decl.pid, is_device(&decl));
+        let restarted = self.skills.insert(
+            i,
+            Entry {
+                values: decl.param_values.clone(),
+                ready: false,
+                active: decl.start_active,
+                decl,
+                trigger,
+            },
+        );
+        if restarted && device {
             self.outbox.push(EventKind::DeviceBack {
-                device: decl.name.clone(),
+                device: name.clone(),
             });
         }
         self.outbox.push(EventKind::SkillRegistered {
-            skill: decl.name.clone(),
-            pid: decl.pid,
+            skill: name,
+            pid,
             restarted,
         });
-        let values = decl.param_values.clone();
-        self.skills[i] = Some(Entry {
-            values,
-            ready: false,
-            active: decl.start_active,
-            decl,
-            trigger,
-        });
-        self.order.retain(|&s| s != i);
-        self.order.push(i);
         self.dirty = true;
     }
 
@@ -142,7 +143,7 @@ impl Manager {
             self.running = Some(run);
         }
         let slot = self.board.slot(i);
-        if let Some(e) = self.skills[i].take() {
+        if let Some(e) = self.skills.remove(i) {
             if why == DropReason::Died {
                 self.deaths += 1;
                 tracing::warn!(skill = %e.decl.name, pid = e.decl.pid, "skill died");
@@ -161,7 +162,6 @@ impl Manager {
                     skill: e.decl.name.clone(),
                 });
             }
-            self.order.retain(|&s| s != i);
             self.dirty = true;
             // Stop reading its outputs: the manager must not keep a dead producer's topics
             // alive. They are read again when a new producer is ready.

@@ -47,6 +47,9 @@ pub enum Transport {
     Pipe,
     /// Channels between threads of one process.
     Threads,
+    /// `FUTEX_WAIT`/`FUTEX_WAKE` on shared memory between processes: the least a
+    /// cross-process wake-up costs ([`crate::futex`]).
+    Futex,
 }
 
 impl Transport {
@@ -56,6 +59,7 @@ impl Transport {
             Transport::Iceoryx2 => "iceoryx2_ring",
             Transport::Pipe => "pipe_ring",
             Transport::Threads => "threads",
+            Transport::Futex => "futex_ring",
         }
     }
 }
@@ -90,7 +94,7 @@ pub struct Timing {
 }
 
 impl Timing {
-    fn from_ns(start: u64, last_stamp: u64, back: u64) -> Timing {
+    pub(crate) fn from_ns(start: u64, last_stamp: u64, back: u64) -> Timing {
         let us = |ns: u64| ns as f64 / 1000.0;
         Timing {
             hops_us: us(last_stamp.saturating_sub(start)),
@@ -106,7 +110,7 @@ pub fn hops(rounds: &[Timing]) -> Vec<f64> {
 
 /// `n` rounds of `round` (given the round's sequence number) after 10 unmeasured ones, back
 /// to back or paced at [`PACE`].
-fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Timing) -> Vec<Timing> {
+pub(crate) fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Timing) -> Vec<Timing> {
     for seq in 0..10 {
         round(seq);
     }
@@ -127,6 +131,7 @@ pub fn measure(shape: Shape, transport: Transport, paced: bool, n: usize) -> Vec
         Transport::Iceoryx2 => Iox::start(shape).rounds(n, paced),
         Transport::Pipe => Pipes::start(shape).rounds(n, paced),
         Transport::Threads => Threads::start(shape).rounds(n, paced),
+        Transport::Futex => crate::futex::Futex::start(shape).rounds(n, paced),
     }
 }
 

@@ -14,6 +14,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 pub mod floors;
+pub mod futex;
 pub mod report;
 
 use skillfab_client::Client;
@@ -360,7 +361,12 @@ mod tests {
     #[test]
     fn every_floor_passes_its_token_around() {
         for shape in [Shape::Ring(3), Shape::Star(3)] {
-            for t in [Transport::Iceoryx2, Transport::Pipe, Transport::Threads] {
+            for t in [
+                Transport::Iceoryx2,
+                Transport::Pipe,
+                Transport::Threads,
+                Transport::Futex,
+            ] {
                 let v = floors::measure(shape, t, false, 20);
                 assert_eq!(v.len(), 20, "{shape:?} {t:?}");
                 // The last node's stamp lies between the start and the driver's wake-up.

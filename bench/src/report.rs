@@ -33,9 +33,14 @@ pub struct Row {
 impl Row {
     /// skillfab p50 ÷ the iceoryx2 floor's p50 (same endpoints, same wake-ups).
     pub fn ratio_p50(&self) -> f64 {
+        self.ratio_to(Transport::Iceoryx2)
+    }
+
+    /// skillfab p50 ÷ floor `t`'s p50.
+    pub fn ratio_to(&self, t: Transport) -> f64 {
         self.floors
             .iter()
-            .find(|(t, _)| *t == Transport::Iceoryx2)
+            .find(|(f, _)| *f == t)
             .map_or(f64::NAN, |(_, s)| self.skillfab.p50 / s.p50)
     }
 }
@@ -71,7 +76,12 @@ impl Series {
 /// interleaved (fabric, iceoryx2, pipe, threads, then again), so a noisy spell of the shared
 /// machine hits all of them alike.
 pub fn row(case: Case, paced: bool, n: usize, repeats: usize) -> Row {
-    const FLOORS: [Transport; 3] = [Transport::Iceoryx2, Transport::Pipe, Transport::Threads];
+    const FLOORS: [Transport; 4] = [
+        Transport::Iceoryx2,
+        Transport::Futex,
+        Transport::Pipe,
+        Transport::Threads,
+    ];
     let mut fabric = Series::default();
     let mut floor: Vec<Series> = FLOORS.iter().map(|_| Series::default()).collect();
     let mut compute_us = Vec::new();
@@ -189,6 +199,7 @@ pub fn to_json(
                 o[t.key()] = summary_json(s);
             }
             o["ratio_p50"] = json!((r.ratio_p50() * 100.0).round() / 100.0);
+            o["ratio_futex_p50"] = json!((r.ratio_to(Transport::Futex) * 100.0).round() / 100.0);
             o["round_trip"] = r
                 .round_trips
                 .iter()
@@ -308,8 +319,9 @@ pub fn to_text(
             s.push_str(&format!(" {c:>w$}"));
         }
         s.push_str(&format!(
-            " {:>6.2}  {:>10.0} / {:<10.0}\n",
+            " {:>6.2} {:>6.2}  {:>10.0} / {:<10.0}\n",
             r.ratio_p50(),
+            r.ratio_to(Transport::Futex),
             rt(r, "skillfab"),
             rt(r, Transport::Iceoryx2.key())
         ));

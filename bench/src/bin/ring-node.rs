@@ -1,6 +1,6 @@
 //! A node of the benchmarks' floor rings (`skillfab_bench::floors`):
 //! `ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT SPIN_US` (in `SKILLFAB_DOMAIN`) or
-//! `ring-node pipe`.
+//! `ring-node pipe`, or `ring-node futex INDEX NEXT SHM_NAME ring|star`.
 
 use std::process::ExitCode;
 
@@ -13,6 +13,16 @@ fn main() -> ExitCode {
         .as_slice()
     {
         ["pipe"] => skillfab_bench::floors::pipe_node(),
+        ["futex", index, next, name, mode] => {
+            let (Ok(index), Ok(next)) = (index.parse(), next.parse()) else {
+                eprintln!("ring-node: bad index {index} or next {next}");
+                return ExitCode::FAILURE;
+            };
+            if let Err(e) = skillfab_bench::futex::futex_node(index, next, name, *mode == "star") {
+                eprintln!("ring-node: futex page {name}: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
         ["iox", index, topic, event, out_topic, out_event, spin_us] => {
             let Ok(spin_us) = spin_us.parse::<u64>() else {
                 eprintln!("ring-node: bad spin {spin_us}");
@@ -37,7 +47,7 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: ring-node pipe | ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT SPIN_US"
+                "usage: ring-node pipe | ring-node iox INDEX TOPIC EVENT OUT_TOPIC OUT_EVENT SPIN_US | ring-node futex INDEX NEXT SHM_NAME ring|star"
             );
             return ExitCode::FAILURE;
         }

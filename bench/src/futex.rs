@@ -124,7 +124,7 @@ pub struct Futex {
     name: String,
     seq: u32,
     // Last: kills the nodes and removes the domain's files.
-    t: TestDomain,
+    _t: TestDomain,
 }
 
 impl Futex {
@@ -157,7 +157,7 @@ impl Futex {
             shared,
             name,
             seq: 0,
-            t,
+            _t: t,
         }
     }
 
@@ -202,14 +202,6 @@ impl Futex {
     /// `n` rounds.
     pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<Timing> {
         crate::floors::rounds(n, paced, |_| self.round())
-    }
-
-    /// Process ids of the nodes.
-    pub fn node_pids(&self) -> Vec<u32> {
-        let n = match self.shape {
-            Shape::Ring(d) | Shape::Star(d) => d,
-        };
-        (0..n).map(|i| self.t.pid(i)).collect()
     }
 }
 

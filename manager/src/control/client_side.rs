@@ -31,13 +31,13 @@ impl ClientSide {
             .initial_max_slice_len(4096)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| transport("control server", e))?;
+            .map_err(|e| SdkError::transport("control server", e))?;
         let events = services::events_service(&node)?
             .publisher_builder()
             .initial_max_slice_len(services::EVENT_MAX_BYTES)
             .allocation_strategy(AllocationStrategy::Static)
             .create()
-            .map_err(|e| transport("events publisher", e))?;
+            .map_err(|e| SdkError::transport("events publisher", e))?;
         Ok(ClientSide {
             events_notifier: services::notifier(&node, &names::events())?,
             listener: services::listener(&node, &names::control())?,

@@ -69,13 +69,6 @@ pub struct ControlPlane {
     steps: Vec<(u64, Option<String>)>,
 }
 
-fn transport(what: &str, e: impl std::fmt::Debug) -> SdkError {
-    SdkError::Transport {
-        what: what.to_string(),
-        detail: format!("{e:?}"),
-    }
-}
-
 /// A client id is `<pid>-<n>`; the pid tells whether it still lives.
 fn client_pid(client: &str) -> Option<u32> {
     client.split('-').next()?.parse().ok()
@@ -103,10 +96,10 @@ impl ControlPlane {
                     }
                 }
             })
-            .map_err(|e| transport("control thread", e))?;
+            .map_err(|e| SdkError::transport("control thread", e))?;
         ready_rx
             .recv()
-            .map_err(|e| transport("control thread start", e))??;
+            .map_err(|e| SdkError::transport("control thread start", e))??;
         Ok(ControlPlane {
             from_clients,
             to_clients,

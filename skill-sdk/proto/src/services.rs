@@ -31,13 +31,6 @@ pub const SUBSCRIBER_BORROWED: usize = 2;
 /// Notifiers and listeners per event service.
 pub const EVENT_MAX_PORTS: usize = 32;
 
-fn transport(what: String, e: impl std::fmt::Debug) -> Error {
-    Error::Transport {
-        what,
-        detail: format!("{e:?}"),
-    }
-}
-
 /// The fabric's sizes of a topic service: every opener (typed or not) asks for the same.
 fn topic_qos<P: std::fmt::Debug + IceoryxSend + ?Sized>(
     builder: iceoryx2::service::builder::publish_subscribe::Builder<P, SampleHeader, ipc::Service>,
@@ -65,7 +58,7 @@ fn topic_sizes(topic: &str) -> (usize, usize) {
 }
 
 fn service_name(name: &str) -> Result<ServiceName, Error> {
-    ServiceName::new(name).map_err(|e| transport(format!("service name '{name}'"), e))
+    ServiceName::new(name).map_err(|e| Error::transport(&format!("service name '{name}'"), e))
 }
 
 fn pubsub<T: Message>(
@@ -82,7 +75,7 @@ fn pubsub<T: Message>(
         .user_header::<SampleHeader>();
     topic_qos(builder, topic)
         .open_or_create()
-        .map_err(|e| transport(format!("open topic '{topic}' ({})", T::TYPE_NAME), e))
+        .map_err(|e| Error::transport(&format!("open topic '{topic}' ({})", T::TYPE_NAME), e))
 }
 
 /// The publisher of `topic`.
@@ -94,7 +87,7 @@ pub fn publisher<T: Message>(
         .publisher_builder()
         .max_loaned_samples(2)
         .create()
-        .map_err(|e| transport(format!("publisher on '{topic}'"), e))
+        .map_err(|e| Error::transport(&format!("publisher on '{topic}'"), e))
 }
 
 /// Whether `topic` is a channel's proposal topic (many publishers, one per proposer).
@@ -115,7 +108,7 @@ pub fn proposal_subscriber<T: Message>(
         .subscriber_builder()
         .buffer_size(CHANNEL_MAX_PUBLISHERS)
         .create()
-        .map_err(|e| transport(format!("proposal subscriber on '{topic}'"), e))
+        .map_err(|e| Error::transport(&format!("proposal subscriber on '{topic}'"), e))
 }
 
 /// A subscriber of `topic` that also receives the last sample sent before it connected.
@@ -128,7 +121,7 @@ pub fn subscriber<T: Message>(
         .buffer_size(SUBSCRIBER_BUFFER)
         .history_request(1)
         .create()
-        .map_err(|e| transport(format!("subscriber on '{topic}'"), e))
+        .map_err(|e| Error::transport(&format!("subscriber on '{topic}'"), e))
 }
 
 fn event(
@@ -141,7 +134,7 @@ fn event(
         .max_listeners(EVENT_MAX_PORTS)
         .max_nodes(MAX_NODES)
         .open_or_create()
-        .map_err(|e| transport(format!("open event '{name}'"), e))
+        .map_err(|e| Error::transport(&format!("open event '{name}'"), e))
 }
 
 /// A listener on event service `name`.
@@ -149,7 +142,7 @@ pub fn listener(node: &Node<ipc::Service>, name: &str) -> Result<Listener<ipc::S
     event(node, name)?
         .listener_builder()
         .create()
-        .map_err(|e| transport(format!("listener on '{name}'"), e))
+        .map_err(|e| Error::transport(&format!("listener on '{name}'"), e))
 }
 
 /// A notifier on an event service that must already exist (never creates it).
@@ -163,10 +156,10 @@ pub fn notifier_existing(
         .max_listeners(EVENT_MAX_PORTS)
         .max_nodes(MAX_NODES)
         .open()
-        .map_err(|e| transport(format!("open event '{name}'"), e))?
+        .map_err(|e| Error::transport(&format!("open event '{name}'"), e))?
         .notifier_builder()
         .create()
-        .map_err(|e| transport(format!("notifier on '{name}'"), e))
+        .map_err(|e| Error::transport(&format!("notifier on '{name}'"), e))
 }
 
 /// A notifier on event service `name`.
@@ -174,19 +167,20 @@ pub fn notifier(node: &Node<ipc::Service>, name: &str) -> Result<Notifier<ipc::S
     event(node, name)?
         .notifier_builder()
         .create()
-        .map_err(|e| transport(format!("notifier on '{name}'"), e))
+        .map_err(|e| Error::transport(&format!("notifier on '{name}'"), e))
 }
 
 /// A node of `domain` named `name`, with iceoryx2's SIGINT/SIGTERM handling.
 pub fn node(domain: &crate::domain::Domain, name: &str) -> Result<Node<ipc::Service>, Error> {
     let config = domain.iceoryx_config()?;
-    let node_name = NodeName::new(name).map_err(|e| transport(format!("node name '{name}'"), e))?;
+    let node_name =
+        NodeName::new(name).map_err(|e| Error::transport(&format!("node name '{name}'"), e))?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| transport(format!("create node '{name}' in domain '{domain}'"), e))
+        .map_err(|e| Error::transport(&format!("create node '{name}' in domain '{domain}'"), e))
 }
 
 /// Whether SIGINT or SIGTERM reached this process since the last check (which this clears):
@@ -224,7 +218,7 @@ impl RawReader {
             schema.size as usize,
             schema.align as usize,
         )
-        .map_err(|e| transport(format!("type name '{}'", schema.type_name), e))?;
+        .map_err(|e| Error::transport(&format!("type name '{}'", schema.type_name), e))?;
         // SAFETY: the details are those of the producer's type (same schema), so the segment
         // holds `size` bytes of that layout per sample; we only ever read them as bytes.
         let builder = unsafe {
@@ -234,8 +228,8 @@ impl RawReader {
                 .__internal_set_payload_type_details(&details)
         };
         let factory = topic_qos(builder, topic).open_or_create().map_err(|e| {
-            transport(
-                format!("open topic '{topic}' ({}) untyped", schema.type_name),
+            Error::transport(
+                &format!("open topic '{topic}' ({}) untyped", schema.type_name),
                 e,
             )
         })?;
@@ -244,7 +238,7 @@ impl RawReader {
             .buffer_size(SUBSCRIBER_BUFFER)
             .history_request(1)
             .create()
-            .map_err(|e| transport(format!("untyped subscriber on '{topic}'"), e))?;
+            .map_err(|e| Error::transport(&format!("untyped subscriber on '{topic}'"), e))?;
         Ok(RawReader {
             subscriber,
             latest: None,
@@ -267,7 +261,7 @@ impl RawReader {
                     self.latest = Some(s);
                 }
                 Ok(None) => return Ok(()),
-                Err(e) => return Err(transport("untyped receive".into(), e)),
+                Err(e) => return Err(Error::transport("untyped receive", e)),
             }
         }
     }
@@ -315,7 +309,7 @@ pub fn control_service(node: &Node<ipc::Service>) -> Result<ControlFactory, Erro
         .max_active_requests_per_client(4)
         .max_response_buffer_size(4)
         .open_or_create()
-        .map_err(|e| transport(format!("open '{name}'"), e))
+        .map_err(|e| Error::transport(&format!("open '{name}'"), e))
 }
 
 /// Clients of the control plane at once (sequencers, CLI calls, consoles).
@@ -343,5 +337,5 @@ pub fn events_service(node: &Node<ipc::Service>) -> Result<EventsFactory, Error>
         .subscriber_max_borrowed_samples(2)
         .enable_safe_overflow(true)
         .open_or_create()
-        .map_err(|e| transport(format!("open '{name}'"), e))
+        .map_err(|e| Error::transport(&format!("open '{name}'"), e))
 }

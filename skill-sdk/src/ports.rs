@@ -311,9 +311,6 @@ pub trait ErasedOutputCell {
     fn discard(&mut self);
     /// Takes a value written in memory (harness): a `Box<T>`.
     fn take_memory(&mut self) -> Option<Box<dyn Any>>;
-    /// Wakes the topic's listeners without sending (a proposer that did not propose tells
-    /// the device so).
-    fn wake(&self);
     /// The value of this run as bytes, loaned at first access (see [`Output::get_mut`] and,
     /// for `clear` false, [`Output::fill_in_place`]); marks the output written. For bodies
     /// in other languages, which write the message's `#[repr(C)]` layout.
@@ -349,7 +346,9 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
                 }
             },
         }
-        // Data first, then the wake-up: a consumer woken by this finds the sample.
+        // Data first, then the wake-up: a reader woken by this finds the sample. The
+        // fabric's own consumers sleep on doorbells (rung by the runtime after this); this
+        // event is for readers outside the fabric and costs no system call without them.
         if let Some(n) = &self.notifier {
             n.notify().map_err(|e| send_err(&e))?;
         }
@@ -357,11 +356,6 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
     }
     fn discard(&mut self) {
         self.pending = None;
-    }
-    fn wake(&self) {
-        if let Some(n) = &self.notifier {
-            let _ = n.notify();
-        }
     }
     fn bytes_mut(&mut self, clear: bool) -> &mut [u8] {
         let value: *mut T = self.slot(clear);

@@ -5,7 +5,7 @@ use super::*;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
-use skillfab_proto::board::pid_alive;
+use skillfab_proto::board::{Board, pid_alive};
 use skillfab_proto::control;
 use std::collections::HashMap;
 
@@ -16,7 +16,10 @@ pub(super) struct ClientSide {
     events: Publisher<ipc::Service, [u8], ()>,
     events_notifier: Notifier<ipc::Service>,
     listener: Listener<ipc::Service>,
-    wake_engine: Notifier<ipc::Service>,
+    /// The board, for the engine's doorbell (opened at the first request: the engine
+    /// creates the board after this thread's services exist).
+    board: Option<Board>,
+    prefix: String,
     /// One notifier per client that asked something: wakes it when its answer is in.
     clients: HashMap<String, Notifier<ipc::Service>>,
     pending: HashMap<u64, Pending>,
@@ -41,7 +44,8 @@ impl ClientSide {
         Ok(ClientSide {
             events_notifier: services::notifier(&node, &names::events())?,
             listener: services::listener(&node, &names::control())?,
-            wake_engine: services::notifier(&node, &names::manager_wake())?,
+            board: None,
+            prefix: domain.prefix(),
             server,
             events,
             _node: node,
@@ -87,7 +91,7 @@ impl ClientSide {
                 forwarded = true;
             }
             if forwarded {
-                let _ = self.wake_engine.notify();
+                self.wake_engine();
             }
             while let Ok(out) = from_engine.try_recv() {
                 match out {
@@ -108,6 +112,17 @@ impl ClientSide {
                 self.clients
                     .retain(|c, _| client_pid(c).is_none_or(pid_alive));
             }
+        }
+    }
+
+    /// Rings the engine's doorbell.
+    fn wake_engine(&mut self) {
+        if self.board.is_none() {
+            self.board = Board::open(&self.prefix).ok();
+        }
+        match &self.board {
+            Some(b) => b.ring_manager(),
+            None => tracing::warn!("no board yet: the engine sees the request at its next tick"),
         }
     }
 

@@ -100,10 +100,17 @@ impl Manager {
                 .store(mask, Ordering::Release);
         }
         for (s, e) in self.skills.in_order() {
-            {
-                let slot = self.board.slot(s);
-                slot.active.store(u32::from(e.active), Ordering::Release);
-                slot.priority.store(e.decl.priority, Ordering::Release);
+            let slot = self.board.slot(s);
+            slot.active.store(u32::from(e.active), Ordering::Release);
+            slot.priority.store(e.decl.priority, Ordering::Release);
+            // Whom each of its outputs wakes: every registered unit reading that topic.
+            for (o, out) in e.decl.outputs.iter().enumerate().take(MAX_OUTPUTS) {
+                let readers = self
+                    .skills
+                    .in_order()
+                    .filter(|(_, c)| c.decl.inputs.iter().any(|i| i.topic == out.topic))
+                    .fold(0u64, |m, (c, _)| m | 1 << c);
+                slot.consumers[o].store(readers, Ordering::Release);
             }
         }
         for ch in &self.plan.channels {
@@ -157,11 +164,7 @@ impl Manager {
             cancelled: [false; MAX_SLOTS],
         });
         for &s in &self.plan.sources {
-            if let Some(e) = self.skills.get(s)
-                && let Err(err) = e.trigger.notify()
-            {
-                tracing::warn!(skill = %e.decl.name, error = ?err, "could not wake skill");
-            }
+            self.board.slot(s).bell.ring();
         }
     }
 
@@ -219,9 +222,7 @@ impl Manager {
                 .iter()
                 .filter(|c| c.proposers & (1 << s) != 0)
             {
-                if let Some(e) = self.skills.get(ch.device) {
-                    let _ = e.trigger.notify();
-                }
+                self.board.slot(ch.device).bell.ring();
             }
             if let Some(per_output) = self.plan.consumers.get(&s) {
                 todo.extend(per_output.iter().flatten());

@@ -24,11 +24,8 @@ use crate::monitors::Monitor;
 use crate::recorder::{IoSample, Recorder};
 use crate::stats::{CycleStats, Report, SkillReport};
 use iceoryx2::node::{Node, NodeView};
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
-use skillfab_proto::board::{Board, MAX_SLOTS, RunStatus, SlotState, pid_alive};
+use skillfab_proto::board::{Board, MAX_OUTPUTS, MAX_SLOTS, RunStatus, SlotState, pid_alive};
 use skillfab_proto::control::{EventKind, SkillFigures};
 use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::domain::Domain;
@@ -161,7 +158,6 @@ pub enum ManagerError {
 
 pub(crate) struct Entry {
     pub(crate) decl: SkillDecl,
-    trigger: Notifier<ipc::Service>,
     pub(crate) active: bool,
     /// Its ports are open: cycles may count on it.
     pub(crate) ready: bool,
@@ -304,61 +300,27 @@ impl Manager {
     /// Runs until SIGINT/SIGTERM, until `stop(cycles_done)` returns true, or until
     /// `max_cycles` cycles are done; returns the report of the run.
     pub fn run(&mut self, stop: &dyn Fn(u64) -> bool) -> Result<Report, ManagerError> {
-        let wait_err = |e: &dyn std::fmt::Debug| ManagerError::Wait {
-            detail: format!("{e:?}"),
-        };
-        let wake: Listener<ipc::Service> = services::listener(&self.node, &names::manager_wake())?;
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| wait_err(&e))?;
-        let _guard = waitset
-            .attach_notification(&wake)
-            .map_err(|e| wait_err(&e))?;
         let mut control = self.control.take().ok_or_else(|| ManagerError::Wait {
             detail: "the manager runs once".into(),
         })?;
         tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
-        let result = self.serve_loop(&waitset, &wake, &mut control, stop);
+        let result = self.serve_loop(&mut control, stop);
         self.control = Some(control);
         result
     }
 
+    /// The manager's loop: it sleeps on its doorbell (rung by the run that ends a cycle, by
+    /// registrations and by the control thread) until the next deadline or cycle start, then
+    /// does what is due.
     fn serve_loop(
         &mut self,
-        waitset: &WaitSet<ipc::Service>,
-        wake: &Listener<ipc::Service>,
         control: &mut ControlPlane,
         stop: &dyn Fn(u64) -> bool,
     ) -> Result<Report, ManagerError> {
-        let wait_err = |e: &dyn std::fmt::Debug| ManagerError::Wait {
-            detail: format!("{e:?}"),
-        };
         loop {
-            let timeout = self.timeout(Instant::now());
-            let result = waitset
-                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout)
-                .map_err(|e| wait_err(&e))?;
-            // A wait cut short by a signal other than SIGINT/SIGTERM (a debugger attaching,
-            // SIGSTOP/SIGCONT) goes on.
-            let interrupted = match result {
-                WaitSetRunResult::TerminationRequest => true,
-                WaitSetRunResult::Interrupt => services::termination_requested(&self.node),
-                _ => false,
-            };
-            if interrupted || stop(self.cycle) {
-                break;
-            }
+            // Read before doing the work: a ring from here on ends the wait at once.
+            let seen = self.board.header().bell.seen();
             let awake = thread_cpu_ns();
-            // Drained after every wait, the timed-out ones too. iceoryx2 0.10's listener keeps
-            // a "notified" flag beside its socket: a notifier sends a datagram only when the
-            // flag was clear, and a drain clears it. A drain that races two notifiers can
-            // leave the flag set with the socket empty; from then on no notifier sends and
-            // the wait never fires again, so a listener drained only when it fired stays deaf
-            // for good (seen: every cycle closed by the 200 ms liveness tick). Draining on a
-            // timeout too clears the flag at the next tick at the latest; it costs one
-            // recvfrom (EAGAIN) per timed-out wait.
-            let _ = wake.try_wait(|_| {});
             self.service_registry();
             if self.last_liveness.elapsed() >= LIVENESS_TICK {
                 self.check_liveness();
@@ -370,6 +332,15 @@ impl Manager {
             self.stats.add_work(thread_cpu_ns().saturating_sub(awake));
             if self.running.is_none() && self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
                 break;
+            }
+            // A signal during the wait ends it (EINTR) and is seen here next time round; one
+            // that lands between this check and the wait is seen within a liveness tick.
+            if services::termination_requested() || stop(self.cycle) {
+                break;
+            }
+            let timeout = self.timeout(Instant::now());
+            if !timeout.is_zero() {
+                self.board.header().bell.wait(seen, timeout);
             }
         }
         Ok(self.report())
@@ -384,8 +355,8 @@ impl Manager {
         self.board.close();
         // Wake every skill: it finds the board closed and leaves now, not at its next
         // liveness tick.
-        for e in self.skills.all() {
-            let _ = e.trigger.notify();
+        for (s, _) in self.skills.in_order() {
+            self.board.slot(s).bell.ring();
         }
         let cleaned = self.node.try_cleanup_dead_nodes();
         // The control thread's node is ours too: close it before looking for others.

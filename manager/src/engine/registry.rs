@@ -50,11 +50,7 @@ impl Manager {
         let slot = self.board.slot(i);
         slot.write_msg(reason);
         slot.set_state(SlotState::Refused);
-        if let Some(n) = name
-            && let Ok(t) = services::notifier(&self.node, &names::skill_trigger(n))
-        {
-            let _ = t.notify();
-        }
+        slot.bell.ring();
     }
 
     pub(super) fn admit(&mut self, i: usize) {
@@ -93,17 +89,13 @@ impl Manager {
         if let Err(e) = graph::check_join(live, &decl) {
             return self.refuse(i, Some(&decl.name), &e.to_string());
         }
-        let trigger = match services::notifier(&self.node, &names::skill_trigger(&decl.name)) {
-            Ok(t) => t,
-            Err(e) => return self.refuse(i, Some(&decl.name), &e.to_string()),
-        };
         let slot = self.board.slot(i);
         slot.reset_counters();
         slot.generation.fetch_add(1, Ordering::Relaxed);
         slot.active
             .store(u32::from(decl.start_active), Ordering::Release);
         slot.set_state(SlotState::Accepted);
-        let _ = trigger.notify();
+        slot.bell.ring();
         tracing::info!(
             skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
             active = decl.start_active, "skill registered"
@@ -116,7 +108,6 @@ impl Manager {
                 ready: false,
                 active: decl.start_active,
                 decl,
-                trigger,
             },
         );
         if restarted && device {

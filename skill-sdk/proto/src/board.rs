@@ -2,15 +2,17 @@
 //!
 //! It carries what must not cost a wake-up: the current cycle number, which skills are active,
 //! which of a skill's inputs must come from the same cycle, and the completion stamps and
-//! counters that skills write when they finish. Skills wake each other directly through their
-//! topics' event services; the manager reads the board and is woken once, by the skill that
-//! finishes a cycle's last expected run (or by one whose run produced nothing to pass on).
+//! counters that skills write when they finish, and every unit's [`Doorbell`]. Skills wake each
+//! other directly (a producer rings the doorbells of its output's consumers, listed here by the
+//! manager); the manager reads the board and is woken once, by the skill that finishes a
+//! cycle's last expected run (or by one whose run produced nothing to pass on).
 //!
 //! Every field is an atomic, so plain shared references are sound across processes. Byte areas
 //! (a skill's declaration, the manager's refusal text) are owned by one side at a time; the
 //! slot's `state` atomic hands them over with release/acquire ordering.
 
 use crate::Error;
+use crate::doorbell::Doorbell;
 use nix::fcntl::OFlag;
 use nix::sys::mman::{MapFlags, ProtFlags, mmap, munmap, shm_open, shm_unlink};
 use nix::sys::stat::Mode as FileMode;
@@ -29,7 +31,9 @@ pub const MSG_BYTES: usize = 1024;
 pub const MAX_CHANNELS: usize = 4;
 /// Room for a skill's encoded parameter values.
 pub const PARAM_BYTES: usize = 4096;
-const MAGIC: u64 = 0x5346_424f_4152_4402; // "SFBOARD" + layout version 2
+/// Most outputs of one skill (the published mask is a `u64`).
+pub const MAX_OUTPUTS: usize = 64;
+const MAGIC: u64 = 0x5346_424f_4152_4403; // "SFBOARD" + layout version 3
 
 /// Life of a slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -106,6 +110,8 @@ pub struct Header {
     pub remaining: AtomicU64,
     /// Monotonic clock (ns) when the current cycle started.
     pub cycle_start_ns: AtomicU64,
+    /// The manager's doorbell.
+    pub bell: Doorbell,
 }
 
 /// One skill instance.
@@ -113,6 +119,12 @@ pub struct Header {
 pub struct Slot {
     /// A [`SlotState`].
     pub state: AtomicU32,
+    /// The unit's doorbell: the manager rings it at cycle start and for registration, and
+    /// producers ring it when they publish one of its inputs.
+    pub bell: Doorbell,
+    /// Per output: the slots with an input on that output's topic (written by the manager
+    /// when it plans), whose doorbells a run rings after it publishes.
+    pub consumers: [AtomicU64; MAX_OUTPUTS],
     /// Process id of the skill.
     pub pid: AtomicU32,
     /// Bumped by the manager each time the slot is (re)accepted, so stats can tell instances apart.
@@ -295,6 +307,19 @@ impl Board {
     /// Marks the board closed (the manager, on shutdown).
     pub fn close(&self) {
         self.header().open.store(0, Ordering::Release);
+    }
+
+    /// Rings the doorbell of every slot in `mask` (bit i: slot i).
+    pub fn ring(&self, mut mask: u64) {
+        while mask != 0 {
+            self.slot(mask.trailing_zeros() as usize).bell.ring();
+            mask &= mask - 1;
+        }
+    }
+
+    /// Rings the manager's doorbell.
+    pub fn ring_manager(&self) {
+        self.header().bell.ring();
     }
 
     /// Arms the completion counter for `cycle` with `count` expected runs.

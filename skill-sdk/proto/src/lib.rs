@@ -25,6 +25,7 @@ pub mod board;
 pub mod control;
 pub mod decl;
 pub mod domain;
+pub mod doorbell;
 pub mod header;
 pub mod json;
 pub mod log;

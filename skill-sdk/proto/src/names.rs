@@ -22,17 +22,6 @@ pub fn command_topic(channel: &str) -> String {
     format!("channel/{channel}/command")
 }
 
-/// Event service through which the manager wakes skill `name` (cycle start for skills with no
-/// same-cycle inputs, registration answers, shutdown).
-pub fn skill_trigger(name: &str) -> String {
-    format!("skillfab/skill/{name}/trigger")
-}
-
-/// Event service through which skills wake the manager (registration, cycle completion).
-pub fn manager_wake() -> String {
-    "skillfab/manager/wake".to_string()
-}
-
 /// Request-response service of the control plane.
 pub fn control() -> String {
     "skillfab/control".to_string()

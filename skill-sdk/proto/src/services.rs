@@ -183,12 +183,13 @@ pub fn node(domain: &crate::domain::Domain, name: &str) -> Result<Node<ipc::Serv
         .map_err(|e| Error::transport(&format!("create node '{name}' in domain '{domain}'"), e))
 }
 
-/// Whether SIGINT or SIGTERM reached this process since the last check (which this clears):
-/// what a WaitSet's `Interrupt` result means only sometimes, since iceoryx2 reports every
-/// interrupted wait so — a debugger or `strace` attaching, SIGSTOP/SIGCONT — and those must not
-/// end a skill or the manager.
-pub fn termination_requested(node: &Node<ipc::Service>) -> bool {
-    node.wait(std::time::Duration::ZERO).is_err()
+/// Whether SIGINT or SIGTERM reached this process since the last check (which this clears).
+/// The first call installs iceoryx2's handler for both signals (the one its WaitSets and
+/// `Node::wait` use); after that a check is a flag read, no system call, so units call it
+/// before every doorbell wait. A wait cut short by any other signal — a debugger or `strace`
+/// attaching, SIGSTOP/SIGCONT — must not end a skill or the manager.
+pub fn termination_requested() -> bool {
+    iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
 }
 
 /// Reads a topic without knowing its Rust type: the bytes of the newest sample, laid out as

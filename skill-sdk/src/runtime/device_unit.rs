@@ -52,7 +52,7 @@ impl<D: Device> DeviceUnit<D> {
             let device = &mut self.device;
             guarded(k, || device.sample(&ctx, &mut out))
         };
-        let mask = commit_outputs(&mut io.outputs, status, header(link, k));
+        let mask = commit_outputs(link, &mut io.outputs, status, header(link, k));
         me.published_mask.store(mask, Ordering::Relaxed);
     }
 

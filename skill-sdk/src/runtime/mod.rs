@@ -10,8 +10,9 @@
 //!    answer (a refusal, e.g. a type mismatch, ends the process with that error);
 //! 4. open the data ports, tell the manager it is ready, and serve cycles: a sync skill runs when the manager expects it in
 //!    cycle k and every same-cycle input carries cycle k; an async skill runs whenever an
-//!    input changed (or once per cycle without inputs). Outputs are sent, then the topic's
-//!    listeners are woken directly; the run is stamped on the board; the manager is woken
+//!    input changed (or once per cycle without inputs). Outputs are sent, then the doorbells
+//!    of their consumers are rung directly (and the topic's iceoryx2 event service notified,
+//!    for readers outside the fabric); the run is stamped on the board; the manager is woken
 //!    only by the run that completes the cycle, or by a run that passed nothing on;
 //! 5. on SIGINT/SIGTERM leave the slot cleanly; if the manager goes away, go back to 2.
 
@@ -309,15 +310,7 @@ fn run<U: Unit>(
     let span = tracing::info_span!("skill", name = %decl.name, domain = %domain);
     let _enter = span.enter();
     let node = services::node(&domain, &decl.name)?;
-    let trigger = services::listener(&node, &names::skill_trigger(&decl.name))?;
-    let wake = services::notifier(&node, &names::manager_wake())?;
-
     let mut io: Option<Io> = None;
-    let listeners = decl
-        .inputs
-        .iter()
-        .map(|p| services::listener(&node, &names::topic(&p.topic)))
-        .collect::<Result<Vec<_>, _>>()?;
     unit.init()?;
     let mut common = Common {
         params,
@@ -333,7 +326,7 @@ fn run<U: Unit>(
         // A new manager learns the values the previous one set.
         decl.param_values = common.params.values();
         let encoded = postcard::to_allocvec(&decl).map_err(skillfab_proto::Error::from)?;
-        let idx = match register(&node, &board, &decl, &encoded, &trigger, &wake)? {
+        let idx = match register(&board, &decl, &encoded)? {
             Registration::Accepted(idx) => idx,
             Registration::ManagerGone => continue,
             Registration::Terminated => return Ok(()),
@@ -367,23 +360,16 @@ fn run<U: Unit>(
         {
             continue;
         }
-        let _ = wake.notify();
+        board.ring_manager();
         common.last_cycle = 0;
         common.param_gen = 0;
-        let link = Link {
-            node: &node,
-            board: &board,
-            idx,
-            trigger: &trigger,
-            listeners: &listeners,
-            wake: &wake,
-        };
+        let link = Link { board: &board, idx };
         match serve(&link, io, &mut unit, &mut common)? {
             End::Terminated => {
                 let slot = board.slot(idx);
                 if slot.pid.load(Ordering::Acquire) == std::process::id() {
                     slot.set_state(SlotState::Leaving);
-                    let _ = wake.notify();
+                    board.ring_manager();
                 }
                 tracing::info!("leaving");
                 return Ok(());

@@ -8,20 +8,23 @@ use crate::domain::Domain;
 use crate::params::Params;
 use crate::services;
 use iceoryx2::node::Node;
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use std::sync::atomic::Ordering;
+use std::time::Instant;
 
 /// What a registered unit uses to talk to its manager.
 pub(crate) struct Link<'a> {
-    pub(super) node: &'a Node<ipc::Service>,
     pub(crate) board: &'a Board,
     pub(crate) idx: usize,
-    pub(super) trigger: &'a Listener<ipc::Service>,
-    pub(super) listeners: &'a [Listener<ipc::Service>],
-    pub(crate) wake: &'a Notifier<ipc::Service>,
+}
+
+impl Link<'_> {
+    /// Rings the doorbells of output `o`'s consumers (after its sample was sent).
+    pub(crate) fn wake_consumers(&self, o: usize) {
+        if let Some(c) = self.board.slot(self.idx).consumers.get(o) {
+            self.board.ring(c.load(Ordering::Acquire));
+        }
+    }
 }
 
 pub(super) enum Registration {
@@ -33,10 +36,6 @@ pub(super) enum Registration {
 pub(super) enum End {
     Terminated,
     ManagerGone,
-}
-
-fn terminated(node: &Node<ipc::Service>) -> bool {
-    services::termination_requested(node)
 }
 
 pub(super) fn wait_for_board(
@@ -60,12 +59,9 @@ pub(super) fn wait_for_board(
 }
 
 pub(super) fn register(
-    node: &Node<ipc::Service>,
     board: &Board,
     decl: &SkillDecl,
     encoded: &[u8],
-    trigger: &Listener<ipc::Service>,
-    wake: &Notifier<ipc::Service>,
 ) -> Result<Registration, SdkError> {
     let idx = (0..MAX_SLOTS)
         .find(|&i| {
@@ -81,8 +77,9 @@ pub(super) fn register(
         return Err(e.into());
     }
     slot.set_state(SlotState::Pending);
-    let _ = wake.notify();
+    board.ring_manager();
     loop {
+        let seen = slot.bell.seen();
         match slot.state() {
             SlotState::Accepted => return Ok(Registration::Accepted(idx)),
             SlotState::Refused => {
@@ -98,106 +95,59 @@ pub(super) fn register(
         if !board.manager_alive() {
             return Ok(Registration::ManagerGone);
         }
-        if terminated(node) {
+        if services::termination_requested() {
             slot.set_state(SlotState::Leaving);
-            let _ = wake.notify();
+            board.ring_manager();
             return Ok(Registration::Terminated);
         }
-        let _ = trigger.timed_wait(|_| {}, BOARD_POLL);
+        slot.bell.wait(seen, BOARD_POLL);
     }
 }
 
+/// The wait loop of a registered unit: it sleeps on its slot's doorbell, which the manager
+/// rings at cycle start and the producers of its inputs ring when they publish; on every
+/// wake-up it receives its inputs, takes new parameter values, and runs if a run is due. Once
+/// per liveness tick it checks that its manager still runs and still holds its slot.
 pub(super) fn serve<U: Unit>(
     link: &Link<'_>,
     io: &mut Io,
     unit: &mut U,
     common: &mut Common<U::Params>,
 ) -> Result<End, SdkError> {
-    let Link {
-        board,
-        idx,
-        trigger,
-        listeners,
-        ..
-    } = *link;
-    let transport = |what: &str, e: &dyn std::fmt::Debug| crate::SdkError::transport(what, e);
-    let waitset = WaitSetBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-        .create::<ipc::Service>()
-        .map_err(|e| transport("create waitset", &e))?;
-    let trigger_guard = waitset
-        .attach_notification(trigger)
-        .map_err(|e| transport("attach trigger", &e))?;
-    let mut input_guards = Vec::new();
-    for l in listeners {
-        input_guards.push(
-            waitset
-                .attach_notification(l)
-                .map_err(|e| transport("attach input", &e))?,
-        );
-    }
-    let tick = waitset
-        .attach_interval(LIVENESS_TICK)
-        .map_err(|e| transport("attach interval", &e))?;
+    let Link { board, idx } = *link;
     let slot = board.slot(idx);
     let me = std::process::id();
+    let mut next_tick = Instant::now() + LIVENESS_TICK;
     loop {
-        let mut ticked = false;
-        // Which listeners fired: only those are drained (each drain is a system call that
-        // ends in EAGAIN; a skill is usually woken by one of them).
-        let mut triggered = false;
-        let mut fired = 0u64;
-        let result = waitset
-            .wait_and_process_once(|id| {
-                if id.has_event_from(&tick) {
-                    ticked = true;
-                } else if id.has_event_from(&trigger_guard) {
-                    triggered = true;
-                } else if let Some(i) = input_guards.iter().position(|g| id.has_event_from(g)) {
-                    fired |= 1 << i.min(63);
-                }
-                CallbackProgression::Continue
-            })
-            .map_err(|e| transport("wait", &e))?;
-        match result {
-            WaitSetRunResult::TerminationRequest => return Ok(End::Terminated),
-            // A wait cut short by a signal: only SIGINT/SIGTERM end the skill.
-            WaitSetRunResult::Interrupt if terminated(link.node) => return Ok(End::Terminated),
-            WaitSetRunResult::Interrupt => continue,
-            _ => {}
-        }
-        // Only the listeners that fired are drained; a listener that fired after the wait is
-        // drained at the next one (the WaitSet reports it again at once). On the liveness
-        // tick every listener is drained: iceoryx2 0.10's listener can be left with its
-        // "notified" flag set and its socket empty by a drain that races two notifiers, after
-        // which no notifier sends to it (see the manager's loop); the tick's drain clears
-        // that, so a deaf listener recovers within a second.
-        if triggered || ticked {
-            let _ = trigger.try_wait(|_| {});
-        }
-        for (i, l) in listeners.iter().enumerate() {
-            if ticked || fired & (1 << i.min(63)) != 0 {
-                let _ = l.try_wait(|_| {});
-            }
-        }
+        // Read before looking for work: a ring from here on ends the wait below at once.
+        let seen = slot.bell.seen();
         for i in io.inputs.iter_mut() {
             i.poll()?;
         }
-        if ticked
-            && (!board.manager_alive()
+        let now = Instant::now();
+        if now >= next_tick {
+            next_tick = now + LIVENESS_TICK;
+            if !board.manager_alive()
                 || slot.state() != SlotState::Ready
-                || slot.pid.load(Ordering::Acquire) != me)
-        {
-            return Ok(End::ManagerGone);
+                || slot.pid.load(Ordering::Acquire) != me
+            {
+                return Ok(End::ManagerGone);
+            }
         }
-        let s = board.slot(idx);
-        if let Some((generation, bytes)) = s.read_params(common.param_gen) {
+        if let Some((generation, bytes)) = slot.read_params(common.param_gen) {
             common.param_gen = generation;
             apply_params(&mut common.params, &bytes);
         }
-        if s.active.load(Ordering::Acquire) != 0 {
+        if slot.active.load(Ordering::Acquire) != 0 {
             unit.step(link, io, common);
         }
+        // A signal during the wait ends it (EINTR) and the next check sees it; one that lands
+        // in the few instructions between this check and the wait is seen within a tick.
+        if services::termination_requested() {
+            return Ok(End::Terminated);
+        }
+        slot.bell
+            .wait(seen, next_tick.saturating_duration_since(Instant::now()));
     }
 }
 

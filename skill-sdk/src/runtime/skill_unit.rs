@@ -53,8 +53,10 @@ pub(crate) fn guarded(cycle: u64, body: impl FnOnce() -> SkillResult) -> RunStat
     }
 }
 
-/// Sends the written outputs of a successful run (or drops them); returns the sent mask.
+/// Sends the written outputs of a successful run (or drops them), ringing each sent output's
+/// consumers; returns the sent mask.
 pub(crate) fn commit_outputs(
+    link: &Link<'_>,
     outputs: &mut [ErasedOutput],
     status: RunStatus,
     header: SampleHeader,
@@ -66,7 +68,10 @@ pub(crate) fn commit_outputs(
             continue;
         }
         match o.commit(header) {
-            Ok(true) => mask |= 1 << i,
+            Ok(true) => {
+                mask |= 1 << i;
+                link.wake_consumers(i);
+            }
             Ok(false) => {}
             Err(e) => tracing::warn!(cycle = header.cycle, error = %e, "publish failed"),
         }
@@ -122,7 +127,7 @@ pub(crate) fn finish_run(link: &Link<'_>, r: RunRecord) {
         };
         let finished = link.board.complete(k, 1);
         if finished || status != RunStatus::Ok || mask != all {
-            let _ = link.wake.notify();
+            link.board.ring_manager();
         }
     }
 }
@@ -213,7 +218,7 @@ pub(crate) fn step_skill<P: Params>(
         slot: link.idx as u32,
         reserved: 0,
     };
-    let mask = commit_outputs(&mut io.outputs, status, header);
+    let mask = commit_outputs(link, &mut io.outputs, status, header);
     for i in io.inputs.iter_mut() {
         i.consume();
     }
@@ -233,7 +238,7 @@ pub(crate) fn step_skill<P: Params>(
     // A proposal not made: the device waiting for it learns from the board, once woken.
     for &i in &io.proposals {
         if mask & (1 << i) == 0 {
-            io.outputs[i].wake();
+            link.wake_consumers(i);
         }
     }
 }

@@ -391,4 +391,35 @@ fn a_plain_iceoryx2_client_reads_a_skills_output_from_the_documented_names() {
         assert!(*cycle > 0, "{seen:?}");
         assert_eq!(cycle, value, "{seen:?}");
     }
+    // The topic's event service wakes a blocking listener outside the fabric after every
+    // sample (the fabric's own consumers sleep on doorbells instead).
+    let listener = node
+        .service_builder(&ServiceName::new("skillfab/topic/tick").unwrap())
+        .event()
+        .open()
+        .unwrap()
+        .listener_builder()
+        .create()
+        .unwrap();
+    let mut last = seen.last().map_or(0, |s| s.0);
+    for _ in 0..5 {
+        let mut woken = false;
+        listener
+            .timed_wait(|_| woken = true, skillfab_tests::WAIT)
+            .unwrap();
+        assert!(woken, "no event within {:?}", skillfab_tests::WAIT);
+        let mut newest = None;
+        while let Some(s) = subscriber.receive().unwrap() {
+            newest = Some(s.user_header().cycle);
+        }
+        // Woken after the send: a newer sample is there (or was taken at the previous wake).
+        if let Some(c) = newest {
+            assert!(c > last, "sample of cycle {c} after {last}");
+            last = c;
+        }
+    }
+    assert!(
+        last > seen.last().map_or(0, |s| s.0),
+        "no new sample after the wake-ups"
+    );
 }

@@ -74,13 +74,13 @@ pub fn topic_name(i: usize) -> String {
     format!("bench_node_{i}")
 }
 
-/// Sleeps until `next` (absolute), then moves it one period on.
-fn pace(next: &mut Instant) {
+/// Sleeps until `next` (absolute), then moves it one `period` on.
+fn pace(next: &mut Instant, period: Duration) {
     let now = Instant::now();
     if *next > now {
         std::thread::sleep(*next - now);
     }
-    *next += PACE;
+    *next += period;
 }
 
 /// One round of a floor, timed as the fabric's cycle is (µs).
@@ -110,15 +110,24 @@ pub fn hops(rounds: &[Timing]) -> Vec<f64> {
 
 /// `n` rounds of `round` (given the round's sequence number) after 10 unmeasured ones, back
 /// to back or paced at [`PACE`].
-pub(crate) fn rounds(n: usize, paced: bool, mut round: impl FnMut(u64) -> Timing) -> Vec<Timing> {
+pub(crate) fn rounds(n: usize, paced: bool, round: impl FnMut(u64) -> Timing) -> Vec<Timing> {
+    rounds_every(n, paced.then_some(PACE), round)
+}
+
+/// As [`rounds`], one round every `period` (`None`: back to back).
+pub(crate) fn rounds_every(
+    n: usize,
+    period: Option<Duration>,
+    mut round: impl FnMut(u64) -> Timing,
+) -> Vec<Timing> {
     for seq in 0..10 {
         round(seq);
     }
     let mut next = Instant::now();
     (0..n as u64)
         .map(|seq| {
-            if paced {
-                pace(&mut next);
+            if let Some(p) = period {
+                pace(&mut next, p);
             }
             round(seq)
         })

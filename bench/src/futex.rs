@@ -123,8 +123,10 @@ pub struct Futex {
     shared: Shared,
     name: String,
     seq: u32,
+    /// The nodes' indices in the fixture.
+    nodes: Vec<usize>,
     // Last: kills the nodes and removes the domain's files.
-    _t: TestDomain,
+    t: TestDomain,
 }
 
 impl Futex {
@@ -138,6 +140,7 @@ impl Futex {
             Shape::Ring(d) | Shape::Star(d) => d,
         };
         assert!(n < MAX, "at most {} nodes", MAX - 1);
+        let mut nodes = Vec::new();
         for i in 1..=n {
             let next = match shape {
                 Shape::Ring(d) => (i + 1) % (d + 1),
@@ -147,17 +150,18 @@ impl Futex {
                 Shape::Ring(_) => "ring",
                 Shape::Star(_) => "star",
             };
-            t.spawn(
+            nodes.push(t.spawn(
                 "ring-node",
                 &["futex", &i.to_string(), &next.to_string(), &name, mode],
-            );
+            ));
         }
         Futex {
             shape,
             shared,
             name,
             seq: 0,
-            _t: t,
+            nodes,
+            t,
         }
     }
 
@@ -202,6 +206,16 @@ impl Futex {
     /// `n` rounds.
     pub fn rounds(&mut self, n: usize, paced: bool) -> Vec<Timing> {
         crate::floors::rounds(n, paced, |_| self.round())
+    }
+
+    /// `n` rounds, one every `period` (`None`: back to back).
+    pub fn rounds_every(&mut self, n: usize, period: Option<Duration>) -> Vec<Timing> {
+        crate::floors::rounds_every(n, period, |_| self.round())
+    }
+
+    /// Process ids of the nodes (the driver is the calling thread).
+    pub fn node_pids(&self) -> Vec<u32> {
+        self.nodes.iter().map(|&i| self.t.pid(i)).collect()
     }
 }
 

@@ -13,6 +13,7 @@
 // Benchmark set-up: a failed step should stop the run right there, with its message.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+pub mod dora;
 pub mod floors;
 pub mod futex;
 pub mod report;
@@ -217,11 +218,17 @@ pub struct Fabric {
 impl Fabric {
     /// Starts `case` paced at [`PACE`] or back to back; returns once every skill runs.
     pub fn start(case: Case, paced: bool) -> Fabric {
+        Fabric::start_every(case, paced.then_some(PACE))
+    }
+
+    /// Starts `case` with a cycle every `period` (whole milliseconds; `None`: back to back);
+    /// returns once every skill runs.
+    pub fn start_every(case: Case, period: Option<Duration>) -> Fabric {
         if matches!(case, Case::Lang(_)) {
             skillfab_tests::build_foreign_examples();
         }
         let mut t = TestDomain::new(&case.name());
-        let period = if paced { PACE.as_millis() as u64 } else { 0 };
+        let period = period.map_or(0, |p| p.as_millis().max(1) as u64);
         let text = case
             .launch(period)
             .replace("{dir}", t.dir.to_str().unwrap());
@@ -285,6 +292,11 @@ impl Fabric {
             left -= t.latency_us.len().min(want as usize) as u64;
         }
         out
+    }
+
+    /// The cycle in progress (read from the board).
+    pub fn cycle(&self) -> u64 {
+        skillfab_tests::cycle(&self.board)
     }
 
     /// Failed runs of each skill so far (a payload sink fails when it reads another cycle's

@@ -119,21 +119,204 @@ pub fn row(case: Case, paced: bool, n: usize, repeats: usize) -> Row {
     }
 }
 
-/// Idle cost: a chain of six skill processes cycling at 100 Hz for `secs`: total CPU of the
-/// manager and the skills (% of one core) and resident memory per skill process (MiB).
-pub fn idle(secs: f64) -> (f64, f64) {
-    let f = Fabric::start(Case::Chain(6), true);
-    let (manager, skills) = f.pids();
-    let all: Vec<u32> = std::iter::once(manager)
-        .chain(skills.iter().copied())
-        .collect();
+/// Idle cost of six skills cycling at 100 Hz, next to its floor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Idle {
+    /// CPU of the manager and six chained skill processes (% of one core).
+    pub fabric_percent: f64,
+    /// CPU of the floor: six bare processes woken in the same pattern (a futex ring of
+    /// depth 6 driven at 100 Hz) and the driver (% of one core).
+    pub floor_percent: f64,
+    /// The manager's CPU per cycle (µs: the process's whole account, waits included).
+    pub manager_us_per_cycle: f64,
+    /// The floor driver's CPU per round (µs): it sleeps to the next period, wakes the first
+    /// node and is woken by the last — the manager's part of a cycle, without the fabric.
+    pub driver_us_per_round: f64,
+    /// Resident memory per skill process (MiB).
+    pub rss_mib_per_skill: f64,
+}
+
+impl Idle {
+    /// Fabric CPU ÷ floor CPU.
+    pub fn ratio(&self) -> f64 {
+        self.fabric_percent / self.floor_percent
+    }
+    /// Manager CPU per cycle ÷ the floor driver's CPU per round.
+    pub fn manager_ratio(&self) -> f64 {
+        self.manager_us_per_cycle / self.driver_us_per_round
+    }
+}
+
+/// Idle cost: a chain of six skill processes cycling at 100 Hz for `secs` (total CPU of the
+/// manager and the skills, from the scheduler's account; the manager's CPU per cycle;
+/// resident memory per skill process), then its floor for as long: six futex ring nodes and
+/// their driver, paced the same. Repeated `repeats` times, fabric and floor interleaved; the
+/// medians are kept.
+pub fn idle(secs: f64, repeats: usize) -> Idle {
     let cpu = |pids: &[u32]| pids.iter().map(|&p| cpu_time(p)).sum::<Duration>();
-    let (c0, t0) = (cpu(&all), Instant::now());
-    std::thread::sleep(Duration::from_secs_f64(secs));
-    let (c1, t1) = (cpu(&all), Instant::now());
-    let percent = (c1 - c0).as_secs_f64() / (t1 - t0).as_secs_f64() * 100.0;
-    let rss = skills.iter().map(|&p| rss_mib(p)).sum::<f64>() / skills.len().max(1) as f64;
-    (percent, rss)
+    let mut runs = Vec::new();
+    for _ in 0..repeats.max(1) {
+        let f = Fabric::start(Case::Chain(6), true);
+        let (manager, skills) = f.pids();
+        let all: Vec<u32> = std::iter::once(manager)
+            .chain(skills.iter().copied())
+            .collect();
+        let (c0, m0, k0, t0) = (cpu(&all), cpu_time(manager), f.cycle(), Instant::now());
+        std::thread::sleep(Duration::from_secs_f64(secs));
+        let (c1, m1, k1, t1) = (cpu(&all), cpu_time(manager), f.cycle(), Instant::now());
+        let fabric_percent = (c1 - c0).as_secs_f64() / (t1 - t0).as_secs_f64() * 100.0;
+        let manager_us_per_cycle = (m1 - m0).as_secs_f64() * 1e6 / (k1 - k0).max(1) as f64;
+        let rss = skills.iter().map(|&p| rss_mib(p)).sum::<f64>() / skills.len().max(1) as f64;
+        drop(f);
+
+        let mut ring = crate::futex::Futex::start(floors::Shape::Ring(6));
+        let nodes = ring.node_pids();
+        let rounds = (secs * 100.0) as usize;
+        let (n0, d0, t0) = (cpu(&nodes), thread_cpu(), Instant::now());
+        ring.rounds_every(rounds, Some(crate::PACE));
+        let (n1, d1, t1) = (cpu(&nodes), thread_cpu(), Instant::now());
+        let floor_percent = ((n1 - n0) + (d1 - d0)).as_secs_f64() / (t1 - t0).as_secs_f64() * 100.0;
+        // The 10 unmeasured warm-up rounds ran inside the window too.
+        let driver_us_per_round = (d1 - d0).as_secs_f64() * 1e6 / (rounds + 10) as f64;
+        runs.push(Idle {
+            fabric_percent,
+            floor_percent,
+            manager_us_per_cycle,
+            driver_us_per_round,
+            rss_mib_per_skill: rss,
+        });
+    }
+    let median = |f: fn(&Idle) -> f64| Summary::of(&runs.iter().map(f).collect::<Vec<_>>()).p50;
+    Idle {
+        fabric_percent: median(|i| i.fabric_percent),
+        floor_percent: median(|i| i.floor_percent),
+        manager_us_per_cycle: median(|i| i.manager_us_per_cycle),
+        driver_us_per_round: median(|i| i.driver_us_per_round),
+        rss_mib_per_skill: median(|i| i.rss_mib_per_skill),
+    }
+}
+
+/// One point of the scale sweep: a chain of `skills` sync skills at `rate_hz`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScalePoint {
+    /// Skill processes in the chain.
+    pub skills: usize,
+    /// Cycles per second.
+    pub rate_hz: u32,
+    /// Cycle latency (start → last run done), µs.
+    pub skillfab: Summary,
+    /// The futex ring of the same depth, paced the same (same endpoints), µs.
+    pub futex: Summary,
+    /// CPU of the manager and every skill process while cycling (% of one core).
+    pub cpu_percent: f64,
+    /// CPU of the futex ring's nodes and driver (% of one core).
+    pub floor_cpu_percent: f64,
+    /// Cycles that ran past their period (the next one started late), of those measured.
+    pub late: usize,
+    /// Cycles measured.
+    pub cycles: usize,
+}
+
+/// Cost against the number of skills and the rate: a chain of each size in `sizes` at each
+/// rate in `rates` for `secs` seconds, then its futex floor for as many rounds.
+pub fn scale(sizes: &[usize], rates: &[u32], secs: f64) -> Vec<ScalePoint> {
+    let cpu = |pids: &[u32]| pids.iter().map(|&p| cpu_time(p)).sum::<Duration>();
+    let mut out = Vec::new();
+    for &rate_hz in rates {
+        let period = Duration::from_secs(1) / rate_hz.max(1);
+        for &n in sizes {
+            let cycles = ((secs * f64::from(rate_hz)) as usize).max(50);
+            let mut f = Fabric::start_every(Case::Chain(n), Some(period));
+            let (manager, skills) = f.pids();
+            let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
+            let (c0, t0) = (cpu(&all), Instant::now());
+            let times = f.times(cycles);
+            let cpu_percent = (cpu(&all) - c0).as_secs_f64() / t0.elapsed().as_secs_f64() * 100.0;
+            drop(f);
+            let period_us = period.as_secs_f64() * 1e6;
+            let late = times.iter().filter(|t| t.round_trip_us > period_us).count();
+
+            let mut ring = crate::futex::Futex::start(floors::Shape::Ring(n));
+            let nodes = ring.node_pids();
+            let (n0, d0, t0) = (cpu(&nodes), thread_cpu(), Instant::now());
+            let floor = ring.rounds_every(cycles, Some(period));
+            let floor_cpu_percent = ((cpu(&nodes) - n0) + (thread_cpu() - d0)).as_secs_f64()
+                / t0.elapsed().as_secs_f64()
+                * 100.0;
+            let point = ScalePoint {
+                skills: n,
+                rate_hz,
+                skillfab: Summary::of(&floors::hops(&times)),
+                futex: Summary::of(&floors::hops(&floor)),
+                cpu_percent,
+                floor_cpu_percent,
+                late,
+                cycles: times.len(),
+            };
+            eprintln!(
+                "scale: chain-{n}@{rate_hz}Hz p50 {:.0} µs (futex {:.0}), CPU {:.1} % (floor {:.1} %), {late} late",
+                point.skillfab.p50, point.futex.p50, cpu_percent, floor_cpu_percent
+            );
+            out.push(point);
+        }
+    }
+    out
+}
+
+/// The scale sweep as a table for people.
+pub fn scale_text(points: &[ScalePoint]) -> String {
+    let mut s = String::from(
+        "scale: a chain of N sync skills; cycle latency (start → last run done) µs p50/p99, \
+         its futex ring floor (same endpoints), CPU of all processes (% of one core), cycles \
+         whose round trip ran past the period\n",
+    );
+    s.push_str(&format!(
+        "{:>6} {:>7} {:>18} {:>18} {:>7} {:>10} {:>10} {:>12}\n",
+        "skills", "rate", "skillfab", "futex ring", "÷futex", "CPU", "floor CPU", "late"
+    ));
+    for p in points {
+        s.push_str(&format!(
+            "{:>6} {:>5}Hz {:>18} {:>18} {:>7.2} {:>9.1}% {:>9.1}% {:>6}/{:<6}\n",
+            p.skills,
+            p.rate_hz,
+            format!("{:.0} / {:.0}", p.skillfab.p50, p.skillfab.p99),
+            format!("{:.0} / {:.0}", p.futex.p50, p.futex.p99),
+            p.skillfab.p50 / p.futex.p50,
+            p.cpu_percent,
+            p.floor_cpu_percent,
+            p.late,
+            p.cycles
+        ));
+    }
+    s
+}
+
+/// The scale sweep as JSON.
+pub fn scale_json(points: &[ScalePoint]) -> Json {
+    points
+        .iter()
+        .map(|p| {
+            json!({
+                "skills": p.skills,
+                "rate_hz": p.rate_hz,
+                "skillfab": summary_json(&p.skillfab),
+                "futex_ring": summary_json(&p.futex),
+                "ratio_futex_p50": (p.skillfab.p50 / p.futex.p50 * 100.0).round() / 100.0,
+                "cpu_percent": (p.cpu_percent * 10.0).round() / 10.0,
+                "floor_cpu_percent": (p.floor_cpu_percent * 10.0).round() / 10.0,
+                "late": p.late,
+                "cycles": p.cycles,
+            })
+        })
+        .collect()
+}
+
+/// CPU time of the calling thread.
+fn thread_cpu() -> Duration {
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID)
+        .map_or(Duration::ZERO, |t| {
+            Duration::new(t.tv_sec() as u64, t.tv_nsec() as u32)
+        })
 }
 
 /// The wake-up strategy on the transport floor: iceoryx2 rings of depth 1, 2, 4 whose
@@ -185,12 +368,7 @@ pub fn manager_work(case: Case, cycles: usize) -> Summary {
 }
 
 /// The report as one JSON object.
-pub fn to_json(
-    rows: &[Row],
-    idle_cpu_percent: f64,
-    rss_mib_per_skill: f64,
-    manager_work: &[(String, Summary)],
-) -> Json {
+pub fn to_json(rows: &[Row], idle: &Idle, manager_work: &[(String, Summary)]) -> Json {
     let cases: Vec<Json> = rows
         .iter()
         .map(|r| {
@@ -225,8 +403,12 @@ pub fn to_json(
         .collect();
     json!({
         "cases": cases,
-        "idle_cpu_percent": (idle_cpu_percent * 100.0).round() / 100.0,
-        "rss_mib_per_skill": (rss_mib_per_skill * 100.0).round() / 100.0,
+        "idle_cpu_percent": (idle.fabric_percent * 100.0).round() / 100.0,
+        "idle_floor_cpu_percent": (idle.floor_percent * 100.0).round() / 100.0,
+        "idle_ratio": (idle.ratio() * 100.0).round() / 100.0,
+        "manager_cpu_us_per_cycle": (idle.manager_us_per_cycle * 10.0).round() / 10.0,
+        "floor_driver_cpu_us_per_round": (idle.driver_us_per_round * 10.0).round() / 10.0,
+        "rss_mib_per_skill": (idle.rss_mib_per_skill * 100.0).round() / 100.0,
         "manager_work_us": manager_work
             .iter()
             .map(|(n, s)| (n.clone(), summary_json(s)))
@@ -270,12 +452,7 @@ pub fn rows_from_json(j: &Json) -> Option<Vec<Row>> {
 }
 
 /// The report as a table for people.
-pub fn to_text(
-    rows: &[Row],
-    idle_cpu_percent: f64,
-    rss_mib_per_skill: f64,
-    manager_work: &[(String, Summary)],
-) -> String {
+pub fn to_text(rows: &[Row], idle: &Idle, manager_work: &[(String, Summary)]) -> String {
     let mut s = String::from(
         "cycle latency over the same wake-ups (skillfab: cycle start → last run done; floors: \
          start stamp → last node's stamp), µs p50/p99/max [lowest–highest p50 of the repeats]\n",
@@ -339,7 +516,12 @@ pub fn to_text(
         ));
     }
     s.push_str(&format!(
-        "idle: 6 skill processes at 100 Hz use {idle_cpu_percent:.2} % of one core (manager included); {rss_mib_per_skill:.1} MiB resident per skill process\n"
+        "idle: 6 skill processes at 100 Hz use {:.2} % of one core (manager included), their floor (6 futex ring nodes + driver, paced the same) {:.2} %: {:.2}x; {:.1} MiB resident per skill process\n",
+        idle.fabric_percent, idle.floor_percent, idle.ratio(), idle.rss_mib_per_skill
+    ));
+    s.push_str(&format!(
+        "manager CPU per cycle {:.1} µs (its process, waits included) against the floor driver's {:.1} µs per round: {:.2}x\n",
+        idle.manager_us_per_cycle, idle.driver_us_per_round, idle.manager_ratio()
     ));
     for (n, w) in manager_work {
         s.push_str(&format!(

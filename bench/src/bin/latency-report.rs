@@ -2,8 +2,10 @@
 //! cycle benchmarks, back to back and paced at 100 Hz, with its floors measured in the same
 //! run, over the same wake-ups (see `report`), repeated R times (default 3) with fabric and
 //! floors interleaved; p50 / p99 / max in µs, the spread of the repeats' p50s, the round
-//! trips, and the ratio skillfab ÷ iceoryx2 ring. Build first:
-//! `cargo build --release --workspace && target/release/latency-report`.
+//! trips, and the ratio skillfab ÷ iceoryx2 ring; then the idle cost against its floor.
+//! `--scale [SECS]`: the scale sweep instead (chains of 1…64 skills at 100 Hz and 1 kHz).
+//! `--peer dora`: skillfab against dora-rs 1.1 on the same chains instead.
+//! Build first: `cargo build --release --workspace && target/release/latency-report`.
 
 use skillfab_bench::Case;
 use skillfab_bench::report::{self, Row};
@@ -13,6 +15,7 @@ fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);
     let (mut json, mut cycles, mut svg, mut only, mut repeats) =
         (false, 400usize, None, None, 3usize);
+    let (mut scale, mut peer) = (None, None);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--json" => json = true,
@@ -58,18 +61,56 @@ fn main() -> ExitCode {
                 print!("{}", report::spin_experiment(cycles));
                 return ExitCode::SUCCESS;
             }
+            "--scale" => scale = Some(args.next().and_then(|s| s.parse().ok()).unwrap_or(3.0)),
+            "--peer" => match args.next().as_deref() {
+                Some("dora") => peer = Some("dora"),
+                _ => return usage("--peer takes 'dora'"),
+            },
             "--only" => match args.next() {
                 Some(s) => only = Some(s),
                 None => return usage("--only needs a substring of case names"),
             },
             "-h" | "--help" => {
                 println!(
-                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
+                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--json] | --peer dora [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
                 );
                 return ExitCode::SUCCESS;
             }
             other => return usage(&format!("unknown argument '{other}'")),
         }
+    }
+    if let Some(secs) = scale {
+        let points = report::scale(&[1, 2, 4, 6, 8, 16, 32, 64], &[100, 1000], secs);
+        if json {
+            println!("{}", report::scale_json(&points));
+        } else {
+            print!("{}", report::scale_text(&points));
+        }
+        return ExitCode::SUCCESS;
+    }
+    if peer.is_some() {
+        return match skillfab_bench::dora::compare(&[1, 2, 4, 8], cycles / 2, repeats) {
+            Ok(rows) if json => {
+                let v: Vec<_> = rows
+                    .iter()
+                    .map(|r| {
+                        serde_json::json!({"depth": r.depth,
+                            "skillfab_p50": r.skillfab.p50, "skillfab_p99": r.skillfab.p99,
+                            "dora_p50": r.dora.p50, "dora_p99": r.dora.p99})
+                    })
+                    .collect();
+                println!("{}", serde_json::Value::from(v));
+                ExitCode::SUCCESS
+            }
+            Ok(rows) => {
+                print!("{}", skillfab_bench::dora::to_text(&rows));
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("latency-report --peer dora: {e}");
+                ExitCode::FAILURE
+            }
+        };
     }
     let mut rows: Vec<Row> = Vec::new();
     for paced in [false, true] {
@@ -92,7 +133,7 @@ fn main() -> ExitCode {
             rows.push(r);
         }
     }
-    let (cpu, rss) = report::idle(5.0);
+    let idle = report::idle(5.0, repeats);
     let work: Vec<_> = [Case::ExitLab, Case::Chain(6)]
         .into_iter()
         .map(|c| {
@@ -103,9 +144,9 @@ fn main() -> ExitCode {
         })
         .collect();
     if json {
-        println!("{}", report::to_json(&rows, cpu, rss, &work));
+        println!("{}", report::to_json(&rows, &idle, &work));
     } else {
-        print!("{}", report::to_text(&rows, cpu, rss, &work));
+        print!("{}", report::to_text(&rows, &idle, &work));
     }
     if let Some(f) = svg
         && let Err(e) = std::fs::write(&f, report::to_svg(&rows))

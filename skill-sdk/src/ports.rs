@@ -11,6 +11,7 @@ use crate::header::SampleHeader;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use std::any::Any;
 use std::ops::Deref;
 
@@ -232,6 +233,9 @@ pub struct OutputCell<T: Message> {
     publisher: Option<Publisher<ipc::Service, T, SampleHeader>>,
     notifier: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
     pending: Option<Pending<T>>,
+    /// A sample loaned ahead, while the unit waited: the next run writes into it without
+    /// loaning on the cycle's critical path (see [`ErasedOutputCell::prepare`]).
+    ahead: Option<SampleMutUninit<ipc::Service, std::mem::MaybeUninit<T>, SampleHeader>>,
     /// Loaned samples (by address) this cell has initialised once: their bytes are a valid
     /// T from then on, as only this publisher writes them.
     initialised: std::collections::HashSet<usize>,
@@ -247,6 +251,7 @@ impl<T: Message> OutputCell<T> {
             publisher: Some(publisher),
             notifier: Some(notifier),
             pending: None,
+            ahead: None,
             initialised: std::collections::HashSet::new(),
         }
     }
@@ -257,6 +262,7 @@ impl<T: Message> OutputCell<T> {
             publisher: None,
             notifier: None,
             pending: None,
+            ahead: None,
             initialised: std::collections::HashSet::new(),
         }
     }
@@ -266,7 +272,10 @@ impl<T: Message> OutputCell<T> {
     fn slot(&mut self, clear: bool) -> &mut T {
         if self.pending.is_none() {
             let initialised = &mut self.initialised;
-            let loaned = self.publisher.as_ref().and_then(|p| match p.loan_uninit() {
+            let ahead = self.ahead.take();
+            let publisher = self.publisher.as_ref();
+            let loan = ahead.map(Ok).or_else(|| publisher.map(|p| p.loan_uninit()));
+            let loaned = loan.and_then(|loan| match loan {
                 Ok(mut s) => {
                     let p = s.payload_mut().as_mut_ptr();
                     // Outputs start zeroed: every Message is valid when all bytes are zero.
@@ -305,10 +314,18 @@ pub trait ErasedOutputCell {
     fn as_any_mut(&mut self) -> &mut dyn Any;
     /// Whether the body wrote this output.
     fn is_written(&self) -> bool;
-    /// Sends the written value with `header`; returns whether something was sent.
+    /// Sends the written value with `header`; returns whether something was sent. Readers
+    /// outside the fabric are woken by [`ErasedOutputCell::announce`], afterwards.
     fn commit(&mut self, header: SampleHeader) -> Result<bool, crate::SdkError>;
+    /// Notifies the topic's iceoryx2 event service that a sample was sent: wakes listeners
+    /// outside the fabric (the fabric's own consumers were woken by their doorbells first).
+    fn announce(&self);
     /// Drops an unsent value (the body failed).
     fn discard(&mut self);
+    /// Loans the next run's sample now, off the critical path (the runtime calls it before
+    /// it sleeps): loaning touches the publisher's shared-memory bookkeeping, which after an
+    /// idle period is cold and costs several µs. Nothing is sent or marked written.
+    fn prepare(&mut self);
     /// Takes a value written in memory (harness): a `Box<T>`.
     fn take_memory(&mut self) -> Option<Box<dyn Any>>;
     /// The value of this run as bytes, loaned at first access (see [`Output::get_mut`] and,
@@ -346,16 +363,28 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
                 }
             },
         }
-        // Data first, then the wake-up: a reader woken by this finds the sample. The
-        // fabric's own consumers sleep on doorbells (rung by the runtime after this); this
-        // event is for readers outside the fabric and costs no system call without them.
-        if let Some(n) = &self.notifier {
-            n.notify().map_err(|e| send_err(&e))?;
-        }
         Ok(true)
+    }
+    fn announce(&self) {
+        // After the send: a reader woken by this finds the sample. Without listeners outside
+        // the fabric this makes no system call.
+        if let Some(n) = &self.notifier
+            && let Err(e) = n.notify()
+        {
+            tracing::warn!(type_name = T::TYPE_NAME, error = ?e, "event notification failed");
+        }
     }
     fn discard(&mut self) {
         self.pending = None;
+    }
+    fn prepare(&mut self) {
+        if self.ahead.is_none()
+            && self.pending.is_none()
+            && let Some(p) = &self.publisher
+        {
+            // A failed loan is tried again by the run (which says why).
+            self.ahead = p.loan_uninit().ok();
+        }
     }
     fn bytes_mut(&mut self, clear: bool) -> &mut [u8] {
         let value: *mut T = self.slot(clear);

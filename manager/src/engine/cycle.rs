@@ -151,21 +151,25 @@ impl Manager {
                 .store(k, Ordering::Release);
         }
         self.board.arm(k, self.plan.expected.len() as u32);
-        let start_ns = now_ns();
-        let h = self.board.header();
-        h.cycle_start_ns.store(start_ns, Ordering::Release);
-        h.cycle.store(k, Ordering::Release);
-        self.running = Some(Running {
+        let mut run = Running {
             k,
-            start_ns,
+            start_ns: 0,
             deadline: Instant::now() + self.config.deadline(),
             expected: self.plan.expected.clone(),
             processed: [false; MAX_SLOTS],
             cancelled: [false; MAX_SLOTS],
-        });
+        };
+        // The cycle starts when it is published and its sources woken: the book-keeping
+        // above comes first, as the floors' driver stamps right before its wake-up. (Stamped
+        // before the cycle number is published: a unit that is awake may run at once.)
+        let h = self.board.header();
+        run.start_ns = now_ns();
+        h.cycle_start_ns.store(run.start_ns, Ordering::Release);
+        h.cycle.store(k, Ordering::Release);
         for &s in &self.plan.sources {
             self.board.slot(s).bell.ring();
         }
+        self.running = Some(run);
     }
 
     /// Looks at runs of the current cycle that finished without passing everything on, and

@@ -5,7 +5,7 @@
 
 use super::arbiter::Arbiter;
 use super::serve::Link;
-use super::skill_unit::{RunRecord, RuntimeInputs, commit_outputs, finish_run, guarded};
+use super::skill_unit::{RunRecord, RuntimeInputs, announce, commit_outputs, finish_run, guarded};
 use super::{Common, Io, Unit};
 use crate::SdkError;
 use crate::board::RunStatus;
@@ -54,6 +54,7 @@ impl<D: Device> DeviceUnit<D> {
         };
         let mask = commit_outputs(link, &mut io.outputs, status, header(link, k));
         me.published_mask.store(mask, Ordering::Relaxed);
+        announce(&io.outputs, mask);
     }
 
     /// Hands the cycle's commands to the body and publishes them on the command topics.

@@ -141,6 +141,10 @@ pub(super) fn serve<U: Unit>(
         if slot.active.load(Ordering::Acquire) != 0 {
             unit.step(link, io, common);
         }
+        // The next run's samples, loaned while nothing waits for this unit.
+        for o in io.outputs.iter_mut() {
+            o.prepare();
+        }
         // A signal during the wait ends it (EINTR) and the next check sees it; one that lands
         // in the few instructions between this check and the wait is seen within a tick.
         if services::termination_requested() {

@@ -54,7 +54,8 @@ pub(crate) fn guarded(cycle: u64, body: impl FnOnce() -> SkillResult) -> RunStat
 }
 
 /// Sends the written outputs of a successful run (or drops them), ringing each sent output's
-/// consumers; returns the sent mask.
+/// consumers; returns the sent mask. Readers outside the fabric are told afterwards, off the
+/// critical path ([`announce`]).
 pub(crate) fn commit_outputs(
     link: &Link<'_>,
     outputs: &mut [ErasedOutput],
@@ -79,8 +80,15 @@ pub(crate) fn commit_outputs(
     mask
 }
 
-/// Stamps a finished run on the board and, for a sync unit, takes it off the cycle's counter
-/// (waking the manager if that finished the cycle or the run passed nothing on).
+/// Notifies the iceoryx2 event services of the outputs in `mask` (readers outside the fabric).
+pub(crate) fn announce(outputs: &[ErasedOutput], mask: u64) {
+    for (i, o) in outputs.iter().enumerate() {
+        if mask & (1 << i.min(63)) != 0 {
+            o.announce();
+        }
+    }
+}
+
 /// One finished run, as stamped on the board.
 pub(crate) struct RunRecord {
     pub(crate) k: u64,
@@ -95,6 +103,8 @@ pub(crate) struct RunRecord {
     pub(crate) sync: bool,
 }
 
+/// Stamps a finished run on the board and, for a sync unit, takes it off the cycle's counter
+/// (waking the manager if that finished the cycle or the run passed nothing on).
 pub(crate) fn finish_run(link: &Link<'_>, r: RunRecord) {
     let RunRecord {
         k,
@@ -241,4 +251,5 @@ pub(crate) fn step_skill<P: Params>(
             link.wake_consumers(i);
         }
     }
+    announce(&io.outputs, mask);
 }

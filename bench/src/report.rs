@@ -457,15 +457,14 @@ pub fn to_text(rows: &[Row], idle: &Idle, manager_work: &[(String, Summary)]) ->
         "cycle latency over the same wake-ups (skillfab: cycle start → last run done; floors: \
          start stamp → last node's stamp), µs p50/p99/max [lowest–highest p50 of the repeats]\n",
     );
+    s.push_str(&format!("{:<22} {:>34}", "case", "skillfab"));
+    for (t, _) in rows.first().map_or(&[][..], |r| &r.floors[..]) {
+        let w = if *t == Transport::Iceoryx2 { 34 } else { 20 };
+        s.push_str(&format!(" {:>w$}", t.key().replace('_', " ")));
+    }
     s.push_str(&format!(
-        "{:<22} {:>34} {:>34} {:>20} {:>20} {:>6}  {:>22}\n",
-        "case",
-        "skillfab",
-        "iceoryx2 ring",
-        "pipe ring",
-        "threads",
-        "÷iox",
-        "round trip p50 sf/iox"
+        " {:>6} {:>6}  {:>22}\n",
+        "÷iox", "÷futex", "round trip p50 sf/iox"
     ));
     let cell = |x: &Summary| format!("{:.0} / {:.0} / {:.0}", x.p50, x.p99, x.max);
     let range = |r: &Row, k: &str| {

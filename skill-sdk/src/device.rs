@@ -13,6 +13,10 @@ pub struct DeviceOptions {
     pub port: Option<String>,
     /// Baud rate.
     pub baud: Option<u32>,
+    /// A directory of this device instance (by domain and name) for state that must outlive
+    /// its process — a restarted or hot-swapped instance finds it there (e.g. the odometry
+    /// frame). It lies in the domain's private root and goes with the domain's files.
+    pub state_dir: Option<std::path::PathBuf>,
 }
 
 /// A device: sensor outputs published at cycle start, actuator channels served at cycle end.

@@ -288,6 +288,27 @@ impl Drop for TestDomain {
             let _ = nix::sys::signal::kill(pgid, nix::sys::signal::Signal::SIGKILL);
             let _ = c.wait();
         }
+        // `skillfab up` puts its children in process groups of their own (they get SIGTERM
+        // when it dies, and may still write while they go): every process of the domain is
+        // killed and gone before its files are removed, or one would make them again.
+        let me = std::process::id();
+        let deadline = std::time::Instant::now() + Duration::from_secs(5);
+        loop {
+            let left: Vec<u32> = skillfab_proto::clean::live_pids(&self.domain)
+                .into_iter()
+                .filter(|&p| p != 0 && p != me)
+                .collect();
+            if left.is_empty() || std::time::Instant::now() > deadline {
+                break;
+            }
+            for p in left {
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(p as i32),
+                    nix::sys::signal::Signal::SIGKILL,
+                );
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
         self.domain.remove_all_files();
         let _ = std::fs::remove_dir_all(&self.dir);
     }

@@ -33,7 +33,8 @@ pub struct Sample {
     pub connected: bool,
     /// When the last valid packet arrived.
     pub received: Option<Instant>,
-    /// Odometry (m, m, rad), unwrapped, relative to the first packet of this connection.
+    /// Odometry (m, m, rad), unwrapped in one frame for the life of the robot's own dead
+    /// reckoning ([`Odometer`]): across reconnects and, with a store, across device processes.
     pub pose: (f64, f64, f64),
     /// Velocities (m/s, rad/s).
     pub vel: (f64, f64),
@@ -97,6 +98,75 @@ pub struct Driver {
     thread: Option<JoinHandle<()>>,
 }
 
+/// The robot's x and y (15-bit millimetres that wrap at 32768) unwrapped into one frame. The
+/// frame starts at (0, 0) where the first driver on this robot first heard from it and then
+/// follows the robot's own dead reckoning: a reconnect, or a new device process that finds
+/// the previous one's store (a hot swap, a restart), unwraps from the last raw value seen, so
+/// positions skills hold in the odometry frame (a barcode, a door) stay valid. (A robot that
+/// reboots restarts its dead reckoning; that is a new frame this cannot tell from a move of
+/// less than 16 m.)
+#[derive(Debug)]
+pub struct Odometer {
+    /// Last raw (x, y) and the unwrapped millimetres at that packet.
+    last: Option<((u16, u16), (i64, i64))>,
+    /// File the last values are kept in (written as they change, atomically).
+    store: Option<std::path::PathBuf>,
+}
+
+impl Odometer {
+    /// An odometer that continues the frame kept in `store`, if that holds one.
+    pub fn new(store: Option<std::path::PathBuf>) -> Odometer {
+        let last = store.as_ref().and_then(|p| {
+            let text = std::fs::read_to_string(p).ok()?;
+            let v: Vec<i64> = text
+                .split_whitespace()
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .ok()?;
+            let raw = |i: usize| u16::try_from(v[i]).ok().filter(|r| *r < 0x8000);
+            (v.len() == 4).then_some(((raw(0)?, raw(1)?), (v[2], v[3])))
+        });
+        if let Some(((x, y), (ux, uy))) = last {
+            tracing::info!(
+                raw_x = x,
+                raw_y = y,
+                x_mm = ux,
+                y_mm = uy,
+                "odometry frame continued"
+            );
+        }
+        Odometer { last, store }
+    }
+
+    /// Unwraps a packet's raw (x, y); returns millimetres in the frame.
+    pub fn update(&mut self, x: u16, y: u16) -> (i64, i64) {
+        let now = match self.last {
+            None => (0, 0),
+            Some(((px, py), (ux, uy))) => (
+                ux + i64::from(wrap_delta(px, x)),
+                uy + i64::from(wrap_delta(py, y)),
+            ),
+        };
+        if self.last.map(|l| l.0) != Some((x, y)) {
+            self.last = Some(((x, y), now));
+            self.save();
+        }
+        now
+    }
+
+    fn save(&self) {
+        let (Some(p), Some(((x, y), (ux, uy)))) = (&self.store, self.last) else {
+            return;
+        };
+        let tmp = p.with_extension("tmp");
+        let written = std::fs::write(&tmp, format!("{x} {y} {ux} {uy}\n"))
+            .and_then(|()| std::fs::rename(&tmp, p));
+        if let Err(e) = written {
+            tracing::debug!(error = %e, "odometry frame not stored");
+        }
+    }
+}
+
 fn lock(m: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
     // A poisoned lock only means the driver thread panicked mid-update: the data is still
     // the best there is.
@@ -107,8 +177,13 @@ fn lock(m: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
 pub type Opener = Box<dyn Fn() -> io::Result<Box<dyn Transport>> + Send>;
 
 impl Driver {
-    /// Starts the driver thread.
+    /// Starts the driver thread; odometry starts a new frame.
     pub fn start(open: Opener) -> Driver {
+        Driver::start_with(open, Odometer::new(None))
+    }
+
+    /// Starts the driver thread with `odometer` (which may continue an earlier frame).
+    pub fn start_with(open: Opener, mut odometer: Odometer) -> Driver {
         let shared = Arc::new(Mutex::new(Shared {
             sample: Sample::default(),
             command: None,
@@ -118,7 +193,7 @@ impl Driver {
         let (s, st) = (shared.clone(), stop.clone());
         let thread = std::thread::Builder::new()
             .name("denning-driver".into())
-            .spawn(move || run(&open, &s, &st))
+            .spawn(move || run(&open, &s, &st, &mut odometer))
             .ok();
         Driver {
             shared,
@@ -153,12 +228,12 @@ impl Drop for Driver {
     }
 }
 
-fn run(open: &Opener, shared: &Mutex<Shared>, stop: &AtomicBool) {
+fn run(open: &Opener, shared: &Mutex<Shared>, stop: &AtomicBool, odometer: &mut Odometer) {
     let mut total = DecodeStats::default();
     while !stop.load(Ordering::Acquire) {
         match open() {
             Ok(mut t) => {
-                match session(t.as_mut(), shared, stop, &mut total) {
+                match session(t.as_mut(), shared, stop, &mut total, odometer) {
                     Ok(()) => {}
                     Err(e) => tracing::warn!(error = %e, "robot link lost; reconnecting"),
                 }
@@ -215,6 +290,7 @@ fn session(
     shared: &Mutex<Shared>,
     stop: &AtomicBool,
     total: &mut DecodeStats,
+    odometer: &mut Odometer,
 ) -> io::Result<()> {
     let mut d = Decoder::default();
     if !handshake(t, &mut d)? {
@@ -236,7 +312,7 @@ fn session(
         last_wire: None,
         last_sent: Instant::now() - RESEND,
     });
-    let result = serve_link(t, d, shared, stop, total);
+    let result = serve_link(t, d, shared, stop, total, odometer);
     lock(shared).link = None;
     result
 }
@@ -248,9 +324,8 @@ fn serve_link(
     shared: &Mutex<Shared>,
     stop: &AtomicBool,
     total: &mut DecodeStats,
+    odometer: &mut Odometer,
 ) -> io::Result<()> {
-    let mut origin: Option<(u16, u16)> = None;
-    let mut acc = (0i64, 0i64);
     let mut last_packet = Instant::now();
     let base = *total;
     while !stop.load(Ordering::Acquire) {
@@ -264,9 +339,7 @@ fn serve_link(
             let mut s = lock(shared);
             for p in packets {
                 match p {
-                    Packet::Status(st) => {
-                        apply_status(&mut s.sample, &st, &mut origin, &mut acc, now)
-                    }
+                    Packet::Status(st) => apply_status(&mut s.sample, &st, odometer, now),
                     Packet::Barcodes(b) => s.sample.barcodes = (b, Some(now)),
                     Packet::Sync(_) => {}
                 }
@@ -288,21 +361,8 @@ fn serve_link(
     Ok(())
 }
 
-fn apply_status(
-    s: &mut Sample,
-    st: &Status,
-    origin: &mut Option<(u16, u16)>,
-    acc: &mut (i64, i64),
-    now: Instant,
-) {
-    match origin {
-        None => *origin = Some((st.x, st.y)),
-        Some((px, py)) => {
-            acc.0 += i64::from(wrap_delta(*px, st.x));
-            acc.1 += i64::from(wrap_delta(*py, st.y));
-            *origin = Some((st.x, st.y));
-        }
-    }
+fn apply_status(s: &mut Sample, st: &Status, odometer: &mut Odometer, now: Instant) {
+    let acc = odometer.update(st.x, st.y);
     let th = f64::from(st.th) / 4096.0 * std::f64::consts::TAU;
     s.pose = (acc.0 as f64 / 1000.0, acc.1 as f64 / 1000.0, th);
     s.vel = (
@@ -323,6 +383,24 @@ fn apply_status(
 mod tests {
     use super::*;
     use crate::transport::memory_pair;
+
+    #[test]
+    fn odometry_continues_its_frame_from_the_store_across_the_wrap() {
+        let store = std::env::temp_dir().join(format!("denning-odom-{}", std::process::id()));
+        let _ = std::fs::remove_file(&store);
+        let mut a = Odometer::new(Some(store.clone()));
+        assert_eq!(a.update(16384, 100), (0, 0), "a new frame starts at zero");
+        assert_eq!(a.update(32000, 100), (15616, 0));
+        assert_eq!(a.update(500, 90), (16884, -10), "across the 15-bit wrap");
+        drop(a);
+        // Another process on the same robot: the frame goes on from the last raw value.
+        let mut b = Odometer::new(Some(store.clone()));
+        assert_eq!(b.update(700, 90), (17084, -10));
+        // A torn or foreign store starts a new frame instead of a wrong one.
+        std::fs::write(&store, "12 x").unwrap();
+        assert_eq!(Odometer::new(Some(store.clone())).update(5, 5), (0, 0));
+        let _ = std::fs::remove_file(&store);
+    }
 
     /// A scripted robot on the other end of an in-memory pair.
     #[test]

@@ -41,6 +41,16 @@ enum Cmd {
         #[arg(long)]
         python: bool,
     },
+    /// Remove what fabrics left on this machine: with processes of the domain alive, only the
+    /// resources of its dead iceoryx2 nodes; with none, every file of the domain.
+    Clean {
+        /// Every domain of this user whose processes are all gone (instead of --domain).
+        #[arg(long)]
+        all_dead: bool,
+        /// Print one JSON object per domain.
+        #[arg(long)]
+        json: bool,
+    },
     /// The paper's experiment.
     Demo {
         #[command(subcommand)]
@@ -100,12 +110,54 @@ fn exec_manager() -> anyhow::Result<()> {
     Err(anyhow::Error::from(err).context(format!("running {}", program.display())))
 }
 
+/// `skillfab clean`: one domain, or every dead one of this user.
+fn clean(domain: &Domain, all_dead: bool, json: bool) -> anyhow::Result<()> {
+    use skillfab_proto::clean;
+    let domains = if all_dead {
+        clean::domains_on_machine()
+            .into_iter()
+            .filter(|d| clean::live_pids(d).is_empty())
+            .collect()
+    } else {
+        vec![domain.clone()]
+    };
+    for d in &domains {
+        let c = clean::clean(d)?;
+        if json {
+            println!("{}", serde_json::to_string(&c)?);
+        } else if c.alive.is_empty() {
+            println!(
+                "{}: removed {} files ({} bytes){}, {} dead nodes",
+                c.domain,
+                c.files,
+                c.bytes,
+                if c.root {
+                    " and its root directory"
+                } else {
+                    ""
+                },
+                c.dead_nodes
+            );
+        } else {
+            println!(
+                "{}: still running (pids {:?}): removed the resources of {} dead nodes, kept the rest",
+                c.domain, c.alive, c.dead_nodes
+            );
+        }
+    }
+    if domains.is_empty() && !json {
+        println!("nothing to clean");
+    }
+    Ok(())
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
     let domain = Domain::new(&cli.domain.domain)?;
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
         Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
         Cmd::Console => skillfab_console::run(&domain),
+        Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),
         Cmd::Schema { c, python } => {
             let schemas = skillfab_codegen::shared_schemas();
             if c {

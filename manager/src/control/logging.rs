@@ -6,7 +6,7 @@ use skillfab_proto::value;
 
 impl Manager {
     /// Starts or stops logging a skill's input and output samples to the fabric log.
-    pub(super) fn set_io_log(&mut self, client: &str, skill: &str, on: bool) -> Response {
+    pub(crate) fn set_io_log(&mut self, client: &str, skill: &str, on: bool) -> Response {
         let s = self.slot_of(skill)?;
         let e = self
             .skills

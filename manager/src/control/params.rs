@@ -22,6 +22,7 @@ impl Manager {
             // skill deactivated mid-cycle still finishes the run the cycle counts on.
             e.active = active;
             let skill = e.decl.name.clone();
+            self.skills.keep(&skill).active = Some(active);
             self.dirty = true;
             tracing::info!(%skill, active, "activation changed");
             self.outbox.push(if active {
@@ -97,6 +98,11 @@ impl Manager {
             .slot(s)
             .write_params(&bytes)
             .map_err(|err| ControlError::Refused(err.to_string()))?;
+        let kept = &mut self.skills.keep(skill).params;
+        match kept.iter_mut().find(|(n, _)| n == param) {
+            Some(slot) => slot.1 = value,
+            None => kept.push((param.to_string(), value)),
+        }
         tracing::info!(skill, param, %old, new = %value, by = client, cycle = self.cycle, "parameter changed");
         if let Some(r) = &self.recorder {
             r.param(self.in_progress(), skill, param, old, value, client);
@@ -131,6 +137,7 @@ impl Manager {
         if let Some(e) = self.skills.get_mut(s) {
             let old = e.decl.priority;
             e.decl.priority = priority;
+            self.skills.keep(&skill).priority = Some(priority);
             if old != priority {
                 // Written to the board at the next cycle start: arbitration changes
                 // from the next cycle.

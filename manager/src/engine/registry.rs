@@ -1,7 +1,9 @@
 //! Registration and liveness: skills claiming slots, admitted or refused, leaving or found
 //! dead, and rejoining.
 
+use super::skills::Kept;
 use super::*;
+use skillfab_proto::param::check_bounds;
 
 /// Why a skill leaves the registry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,7 +57,7 @@ impl Manager {
 
     pub(super) fn admit(&mut self, i: usize) {
         let slot = self.board.slot(i);
-        let decl: SkillDecl = match postcard::from_bytes(&slot.read_decl()) {
+        let mut decl: SkillDecl = match postcard::from_bytes(&slot.read_decl()) {
             Ok(d) => d,
             Err(e) => return self.refuse(i, None, &format!("malformed declaration: {e}")),
         };
@@ -89,24 +91,41 @@ impl Manager {
         if let Err(e) = graph::check_join(live, &decl) {
             return self.refuse(i, Some(&decl.name), &e.to_string());
         }
+        // What clients set for an earlier instance of this name comes back.
+        let mut values = decl.param_values.clone();
+        let restored = self
+            .skills
+            .kept(&decl.name)
+            .map(|k| restore(k, &mut decl, &mut values));
+        let active = restored.as_ref().map_or(decl.start_active, |r| r.active);
         let slot = self.board.slot(i);
         slot.reset_counters();
         slot.generation.fetch_add(1, Ordering::Relaxed);
-        slot.active
-            .store(u32::from(decl.start_active), Ordering::Release);
+        if values != decl.param_values {
+            // Read by the skill before its first run (it was written while it waits for
+            // the answer); the same snapshot a `set` writes.
+            match postcard::to_allocvec(&values).map(|b| slot.write_params(&b)) {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => {
+                    tracing::warn!(skill = %decl.name, error = %e, "parameters not restored")
+                }
+                Err(e) => tracing::warn!(skill = %decl.name, error = %e, "parameters not restored"),
+            }
+        }
+        slot.active.store(u32::from(active), Ordering::Release);
         slot.set_state(SlotState::Accepted);
         slot.bell.ring();
         tracing::info!(
             skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
-            active = decl.start_active, "skill registered"
+            active, "skill registered"
         );
         let (name, pid, device) = (decl.name.clone(), decl.pid, is_device(&decl));
         let restarted = self.skills.insert(
             i,
             Entry {
-                values: decl.param_values.clone(),
+                values,
                 ready: false,
-                active: decl.start_active,
+                active,
                 decl,
             },
         );
@@ -116,10 +135,30 @@ impl Manager {
             });
         }
         self.outbox.push(EventKind::SkillRegistered {
-            skill: name,
+            skill: name.clone(),
             pid,
             restarted,
         });
+        if let Some(r) = restored {
+            // Its samples go to the fabric log again (the ports are those of the new one).
+            let io_log = self.io_log.contains_key(&name)
+                && match self.set_io_log("restore", &name, true) {
+                    Ok(_) => true,
+                    Err(e) => {
+                        tracing::warn!(skill = %name, error = %e, "I/O logging not restored");
+                        false
+                    }
+                };
+            tracing::info!(skill = %name, active = r.active, params = r.params.len(), priority = ?r.priority, io_log, "state restored");
+            self.outbox.push(EventKind::StateRestored {
+                skill: name,
+                active: r.active,
+                params: r.params,
+                priority: r.priority,
+                io_log,
+                dropped: r.dropped,
+            });
+        }
         self.dirty = true;
     }
 
@@ -187,6 +226,54 @@ impl Manager {
             let _ = self.node.try_cleanup_dead_nodes();
         }
     }
+}
+
+/// What a new instance got back of what clients set for the name.
+struct Restored {
+    active: bool,
+    params: Vec<(String, ParamValue)>,
+    priority: Option<i32>,
+    dropped: Vec<String>,
+}
+
+/// Applies `kept` to a new instance's declaration and parameter values: activation,
+/// priority, and every parameter the new binary still declares with a type and bounds that
+/// admit the kept value (the others are dropped, with the reason).
+fn restore(kept: &Kept, decl: &mut SkillDecl, values: &mut Vec<(String, ParamValue)>) -> Restored {
+    let mut r = Restored {
+        active: kept.active.unwrap_or(decl.start_active),
+        params: Vec::new(),
+        priority: kept.priority,
+        dropped: Vec::new(),
+    };
+    if let Some(p) = kept.priority {
+        decl.priority = p;
+    }
+    for (name, value) in &kept.params {
+        let Some(spec) = decl.params.iter().find(|p| p.name == *name) else {
+            r.dropped.push(format!("{name}: no longer declared"));
+            continue;
+        };
+        let checked = value
+            .coerce(spec.kind)
+            .ok_or_else(|| format!("{name}: now of type {}", spec.kind))
+            .and_then(|v| {
+                check_bounds(spec, v)
+                    .map(|()| v)
+                    .map_err(|e| format!("{name}: {e}"))
+            });
+        match checked {
+            Ok(v) => {
+                match values.iter_mut().find(|(n, _)| n == name) {
+                    Some(slot) => slot.1 = v,
+                    None => values.push((name.clone(), v)),
+                }
+                r.params.push((name.clone(), v));
+            }
+            Err(why) => r.dropped.push(why),
+        }
+    }
+    r
 }
 
 /// Whether a registered unit is a device (it serves an actuator channel).

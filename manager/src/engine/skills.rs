@@ -1,9 +1,22 @@
-//! The registered skills: one entry per board slot, the slots in registration order, and the
-//! names seen before (a second registration of a name is a restart).
+//! The registered skills: one entry per board slot, the slots in registration order, the
+//! names seen before (a second registration of a name is a restart), and what clients set for
+//! each name, which a restarted instance gets back.
 
 use super::Entry;
 use skillfab_proto::board::MAX_SLOTS;
-use std::collections::HashSet;
+use skillfab_proto::param::ParamValue;
+use std::collections::{HashMap, HashSet};
+
+/// What clients set for a skill, kept by name across restarts of its process.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Kept {
+    /// Activation, once a client changed it.
+    pub(crate) active: Option<bool>,
+    /// Parameters clients set, in the order they were first set.
+    pub(crate) params: Vec<(String, ParamValue)>,
+    /// Priority, once a client changed it.
+    pub(crate) priority: Option<i32>,
+}
 
 /// The manager's registry of skills.
 pub(crate) struct Skills {
@@ -13,6 +26,8 @@ pub(crate) struct Skills {
     order: Vec<usize>,
     /// Names that have registered before.
     seen: HashSet<String>,
+    /// What clients set, by skill name.
+    kept: HashMap<String, Kept>,
 }
 
 impl Skills {
@@ -21,6 +36,7 @@ impl Skills {
             entries: (0..MAX_SLOTS).map(|_| None).collect(),
             order: Vec::new(),
             seen: HashSet::new(),
+            kept: HashMap::new(),
         }
     }
 
@@ -58,6 +74,16 @@ impl Skills {
         self.order.retain(|&o| o != s);
         self.order.push(s);
         restarted
+    }
+
+    /// What clients set for `name`, to change (a client sets something).
+    pub(crate) fn keep(&mut self, name: &str) -> &mut Kept {
+        self.kept.entry(name.to_string()).or_default()
+    }
+
+    /// What clients set for `name`, if anything.
+    pub(crate) fn kept(&self, name: &str) -> Option<&Kept> {
+        self.kept.get(name)
     }
 
     /// Takes the skill out of slot `s`.

@@ -105,6 +105,16 @@ impl Client {
         );
         match Board::open(&domain.prefix()) {
             Ok(b) if b.manager_alive() => {}
+            // Another user's domain: say so rather than "no manager".
+            Err(skillfab_proto::Error::Board { name, source })
+                if source.kind() == std::io::ErrorKind::PermissionDenied =>
+            {
+                return Err(ClientError::Fabric(skillfab_proto::Error::DomainAccess {
+                    domain: domain.name().to_string(),
+                    path: format!("/dev/shm/{}", name.trim_start_matches('/')),
+                    reason: "permission denied: the domain belongs to another user".into(),
+                }));
+            }
             _ => return Err(ClientError::NoManager(domain.name().to_string())),
         }
         let node = services::node(domain, &format!("client-{id}"))?;

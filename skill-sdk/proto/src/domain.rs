@@ -4,11 +4,23 @@
 //! `iceoryx2.toml` in `$PWD`, `$HOME` or `/etc`): file prefix `sf_<domain>_` for every
 //! shared-memory object and root path `/tmp/skillfab/<domain>/` for iceoryx2's node and
 //! service files. Domain names exclude `_`, so no domain's prefix is a prefix of another's.
+//!
+//! A domain belongs to the user who starts it: its root directory is 0700 and every file in
+//! `/dev/shm` 0600 ([`Domain::secure_root`] before a node is created, [`Domain::secure_shm`]
+//! after). iceoryx2 makes its own directories 0750 and its node counter (`…global_mgmt`,
+//! shared by every process of the domain) 0666, with no configuration to change either: the
+//! root directory is created 0700 by skillfab first, so nothing below it is reachable by other
+//! users, and the node counter is narrowed to 0600 right after the first node of the domain
+//! creates it.
 
 use crate::Error;
 use iceoryx2::config::Config;
 use iceoryx2::prelude::*;
+use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
 use std::path::PathBuf;
+
+/// The directory holding every domain's root directory (world-writable and sticky, like /tmp).
+pub const ROOTS: &str = "/tmp/skillfab";
 
 /// Environment variable that selects the domain when `--domain` is not given.
 pub const DOMAIN_ENV: &str = "SKILLFAB_DOMAIN";
@@ -50,7 +62,73 @@ impl Domain {
 
     /// iceoryx2's root directory for this domain.
     pub fn root_path(&self) -> PathBuf {
-        PathBuf::from(format!("/tmp/skillfab/{}/", self.name))
+        PathBuf::from(format!("{ROOTS}/{}/", self.name))
+    }
+
+    /// Makes the domain's root directory exist, belong to this user and be 0700 (created
+    /// so, or narrowed); refuses a directory of another user (another user's fabric of the
+    /// same name, or a squatted name). [`ROOTS`] is created world-writable and sticky.
+    pub fn secure_root(&self) -> Result<(), Error> {
+        let err = |path: &str, reason: String| Error::DomainAccess {
+            domain: self.name.clone(),
+            path: path.to_string(),
+            reason,
+        };
+        let me = nix::unistd::geteuid().as_raw();
+        match std::fs::DirBuilder::new().mode(0o1777).create(ROOTS) {
+            Ok(()) => {
+                // The umask took bits off: put them back.
+                let _ = std::fs::set_permissions(ROOTS, std::fs::Permissions::from_mode(0o1777));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                // Ours but not shared (made by an older version or by iceoryx2): share it.
+                if std::fs::metadata(ROOTS)
+                    .is_ok_and(|m| m.uid() == me && m.mode() & 0o7777 != 0o1777)
+                {
+                    let _ =
+                        std::fs::set_permissions(ROOTS, std::fs::Permissions::from_mode(0o1777));
+                }
+            }
+            Err(e) => return Err(err(ROOTS, e.to_string())),
+        }
+        let root = self.root_path();
+        let shown = root.display().to_string();
+        match std::fs::DirBuilder::new().mode(0o700).create(&root) {
+            Ok(()) => return Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => return Err(err(&shown, e.to_string())),
+        }
+        let meta = std::fs::symlink_metadata(&root).map_err(|e| err(&shown, e.to_string()))?;
+        if !meta.is_dir() {
+            return Err(err(&shown, "not a directory".into()));
+        }
+        if meta.uid() != me {
+            return Err(err(
+                &shown,
+                format!(
+                    "belongs to uid {}, not to this user (uid {me}): another user's domain",
+                    meta.uid()
+                ),
+            ));
+        }
+        if meta.mode() & 0o077 != 0 {
+            std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o700))
+                .map_err(|e| err(&shown, e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Narrows every file of this domain in `/dev/shm` that this user owns to 0600 (iceoryx2
+    /// creates its node counter 0666). Returns how many it changed.
+    pub fn secure_shm(&self) -> usize {
+        let me = nix::unistd::geteuid().as_raw();
+        self.shm_files()
+            .into_iter()
+            .filter(|f| {
+                std::fs::metadata(f).is_ok_and(|m| m.uid() == me && m.mode() & 0o077 != 0)
+                    && std::fs::set_permissions(f, std::fs::Permissions::from_mode(0o600)).is_ok()
+            })
+            .count()
     }
 
     /// The iceoryx2 configuration of this domain.

@@ -49,6 +49,24 @@ pub fn event_json(e: &Event) -> Json {
             "skill_registered",
             json!({"skill": skill, "pid": pid, "restarted": restarted}),
         ),
+        EventKind::StateRestored {
+            skill,
+            active,
+            params,
+            priority,
+            io_log,
+            dropped,
+        } => {
+            let p: serde_json::Map<String, Json> = params
+                .iter()
+                .map(|(n, v)| (n.clone(), param_json(v)))
+                .collect();
+            (
+                "state_restored",
+                json!({"skill": skill, "active": active, "params": p, "priority": priority,
+                       "io_log": io_log, "dropped": dropped}),
+            )
+        }
         EventKind::SkillActivated { skill } => ("skill_activated", json!({"skill": skill})),
         EventKind::SkillDeactivated { skill } => ("skill_deactivated", json!({"skill": skill})),
         EventKind::SkillDied { skill, pid } => ("skill_died", json!({"skill": skill, "pid": pid})),

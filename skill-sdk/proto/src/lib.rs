@@ -22,6 +22,7 @@
 extern crate self as skillfab_proto;
 
 pub mod board;
+pub mod clean;
 pub mod control;
 pub mod decl;
 pub mod domain;
@@ -88,6 +89,16 @@ pub enum Error {
         len: usize,
         /// Room.
         max: usize,
+    },
+    /// The domain's files cannot be made private to this user.
+    #[error("domain '{domain}': {path}: {reason}")]
+    DomainAccess {
+        /// The domain.
+        domain: String,
+        /// The directory or file.
+        path: String,
+        /// What is wrong.
+        reason: String,
     },
     /// An iceoryx2 operation failed.
     #[error("{what}: {detail}")]

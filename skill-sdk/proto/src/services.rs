@@ -170,17 +170,21 @@ pub fn notifier(node: &Node<ipc::Service>, name: &str) -> Result<Notifier<ipc::S
         .map_err(|e| Error::transport(&format!("notifier on '{name}'"), e))
 }
 
-/// A node of `domain` named `name`, with iceoryx2's SIGINT/SIGTERM handling.
+/// A node of `domain` named `name`, with iceoryx2's SIGINT/SIGTERM handling; the domain's
+/// files are made private to this user first (see [`crate::domain`]).
 pub fn node(domain: &crate::domain::Domain, name: &str) -> Result<Node<ipc::Service>, Error> {
     let config = domain.iceoryx_config()?;
     let node_name =
         NodeName::new(name).map_err(|e| Error::transport(&format!("node name '{name}'"), e))?;
-    NodeBuilder::new()
+    domain.secure_root()?;
+    let node = NodeBuilder::new()
         .name(&node_name)
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| Error::transport(&format!("create node '{name}' in domain '{domain}'"), e))
+        .map_err(|e| Error::transport(&format!("create node '{name}' in domain '{domain}'"), e))?;
+    domain.secure_shm();
+    Ok(node)
 }
 
 /// Whether SIGINT or SIGTERM reached this process since the last check (which this clears).

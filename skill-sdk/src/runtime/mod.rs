@@ -110,9 +110,13 @@ pub fn main<S: Skill>() -> ExitCode {
 /// A device binary's whole `main`: `fn main() -> ExitCode { skill_sdk::device_main::<MyDevice>() }`.
 pub fn device_main<D: Device>() -> ExitCode {
     let args = DeviceArgs::parse();
+    let name = args.skill.name.clone().unwrap_or_else(program_name);
     let options = DeviceOptions {
         port: args.port.clone(),
         baud: args.baud,
+        state_dir: skillfab_proto::domain::Domain::new(&args.skill.domain)
+            .ok()
+            .map(|d| d.root_path().join("devices").join(name)),
     };
     let unit = DeviceUnit::new(D::default(), options);
     exit_code(start(unit, &args.skill, &args.policies, &program_name()))

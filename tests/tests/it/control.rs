@@ -288,6 +288,114 @@ fn the_client_library_sees_events_in_order_with_typed_errors() {
     let _ = &mut t;
 }
 
+/// The next event that `pick` accepts (others are skipped); fails after 20 s or 400 events.
+fn next_matching<T>(
+    c: &mut Client,
+    what: &str,
+    mut pick: impl FnMut(&EventKind) -> Option<T>,
+) -> (T, u64) {
+    for _ in 0..400 {
+        match c.next_event(Duration::from_secs(20)).unwrap() {
+            Some(ev) => {
+                if let Some(x) = pick(&ev.kind) {
+                    return (x, ev.time_ns);
+                }
+            }
+            None => break,
+        }
+    }
+    panic!("no {what} event");
+}
+
+#[test]
+fn a_restarted_skill_gets_back_what_clients_set_and_monitors_keep_reading_it() {
+    let t = hello("restore");
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+    c.set_param_value("scale", "gain", ParamValue::Float(3.5))
+        .unwrap();
+    c.set_priority("scale", 7).unwrap();
+    c.deactivate(&["smooth"]).unwrap();
+    let io_log = c.set_io_log("scale", true).is_ok();
+    let id = c
+        .add_monitor("scale.scaled.value > 0", MonitorMode::Every, 1)
+        .unwrap();
+    let board = t.board();
+    let mut restored_at = 0;
+    for name in ["scale", "smooth"] {
+        let pid = skillfab_tests::registered(&board, name).unwrap().decl.pid;
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
+        next_matching(&mut c, "skill_died", |k| {
+            matches!(k, EventKind::SkillDied { skill, .. } if skill == name).then_some(())
+        });
+        // `skillfab up` restarts it (on-failure); the registration is followed by the state.
+        next_matching(&mut c, "restarted registration", |k| {
+            matches!(k, EventKind::SkillRegistered { skill, restarted: true, .. } if skill == name)
+                .then_some(())
+        });
+        let (restored, at) = next_matching(&mut c, "state_restored", |k| match k {
+            EventKind::StateRestored { skill, .. } if skill == name => Some(k.clone()),
+            _ => None,
+        });
+        let EventKind::StateRestored {
+            active,
+            params,
+            priority,
+            io_log: logged,
+            dropped,
+            ..
+        } = restored
+        else {
+            unreachable!()
+        };
+        assert!(dropped.is_empty(), "{dropped:?}");
+        if name == "scale" {
+            assert!(active);
+            assert_eq!(params, vec![("gain".to_string(), ParamValue::Float(3.5))]);
+            assert_eq!(priority, Some(7));
+            assert_eq!(logged, io_log);
+            restored_at = at;
+        } else {
+            assert!(!active);
+            assert!(params.is_empty());
+            assert_eq!(priority, None);
+        }
+    }
+    // The new scale computes with the restored gain, and the monitor reads the new process.
+    let list = c.list().unwrap();
+    let scale = list.iter().find(|s| s.name == "scale").unwrap();
+    assert_eq!(scale.priority, 7);
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(3.5)
+    );
+    t.wait_until("the new smooth to be ready and inactive", || {
+        c.list()
+            .unwrap()
+            .iter()
+            .any(|s| s.name == "smooth" && s.state.as_str() == "inactive")
+    });
+    t.wait_until("scale to compute 3.5 x tick in one cycle", || {
+        let (tick, k1) = c.query("ticker.tick.value").unwrap();
+        let (scaled, k2) = c.query("scale.scaled.value").unwrap();
+        let (Some(tick), Some(scaled)) = (tick.as_f64(), scaled.as_f64()) else {
+            return false;
+        };
+        k1 == k2 && tick > 0.0 && (scaled - 3.5 * tick).abs() < 1e-9
+    });
+    // A firing on a sample the new process sent after its state came back.
+    next_matching(
+        &mut c,
+        "monitor_fired on the new process's output",
+        |k| match k {
+            EventKind::MonitorFired {
+                id: m, stamp_ns, ..
+            } if *m == id && *stamp_ns > restored_at => Some(()),
+            _ => None,
+        },
+    );
+}
+
 #[test]
 fn monitors_go_away_with_their_client() {
     let mut t = hello("owner");

@@ -228,3 +228,61 @@ fn hot_swap_of_the_device_under_a_running_manager() {
     );
     let _ = bin("denning");
 }
+
+#[test]
+fn odometry_keeps_its_frame_across_a_hot_swap() {
+    let mut r = Robot::start("odomframe", &[]);
+    let go =
+        r.t.spawn("proposer", &["--name", "go", "--param", "translate=0.3"]);
+    r.t.wait_until("odometry to pass 0.6 m", || {
+        num(&r.client, "denning.odometry.x").is_some_and(|x| x > 0.6)
+    });
+    r.t.signal(go, Signal::SIGKILL);
+    r.t.wait_exit(go);
+    // Nobody proposes: the device sends the safe command (stop).
+    r.t.wait_until("the robot to stop", || r.truth().2 == 0.0);
+    r.t.wait_until("odometry to report the stop", || {
+        num(&r.client, "denning.odometry.v") == Some(0.0)
+    });
+    let x = num(&r.client, "denning.odometry.x").unwrap();
+    let y = num(&r.client, "denning.odometry.y").unwrap();
+    let board = r.t.board();
+    let old = skillfab_tests::registered(&board, "denning")
+        .unwrap()
+        .decl
+        .pid;
+    r.t.signal(r.dev, Signal::SIGKILL);
+    r.t.wait_exit(r.dev);
+    r.dev = r.t.spawn("denning", &["--port", r.link.to_str().unwrap()]);
+    let new = r.t.pid(r.dev);
+    assert_ne!(old, new);
+    r.t.wait_until("the new device process to register", || {
+        skillfab_tests::registered(&board, "denning")
+            .is_some_and(|s| s.decl.pid == new && s.runs > 0)
+    });
+    let k = skillfab_tests::cycle(&board);
+    // A sample the new process took from the robot after connecting (its own counters).
+    let mut odom = (f64::NAN, f64::NAN);
+    r.t.wait_until("odometry from the new device process", || {
+        let link = r.client.query("denning.link");
+        let fresh = link.is_ok_and(|(v, c)| {
+            c > k
+                && field(&v, "connected") == Value::Bool(true)
+                && field(&v, "frames").as_f64().is_some_and(|f| f > 3.0)
+        });
+        if let (true, Ok((v, c))) = (fresh, r.client.query("denning.odometry")) {
+            odom = (
+                field(&v, "x").as_f64().unwrap_or(f64::NAN),
+                field(&v, "y").as_f64().unwrap_or(f64::NAN),
+            );
+            return c > k;
+        }
+        false
+    });
+    // The new process continues the frame: where the robot stands is where it stood.
+    let (x2, y2) = odom;
+    assert!(
+        (x2 - x).abs() < 0.01 && (y2 - y).abs() < 0.01,
+        "odometry ({x:.3}, {y:.3}) before the swap, ({x2:.3}, {y2:.3}) after"
+    );
+}

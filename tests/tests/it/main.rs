@@ -11,4 +11,5 @@ mod denning;
 mod exit_lab;
 mod fabric;
 mod fabric_log;
+mod faults;
 mod polyglot;

@@ -2,7 +2,7 @@
 //! tty or the simulator's link; `--baud`), publishes the latest buffered sample at the start
 //! of every cycle without waiting for the robot, and forwards the arbitrated `drive` command.
 
-use denning::driver::{Driver, SONARS};
+use denning::driver::{Driver, Odometer, SONARS};
 use denning::transport::{Serial, Transport};
 use skill_sdk::prelude::*;
 use skillfab_msgs::{Barcodes, Battery, Bumpers, Drive, Link, Odometry, Sonar};
@@ -52,9 +52,18 @@ impl Device for Denning {
         })?;
         let baud = options.baud.unwrap_or(38_400);
         tracing::info!(%port, baud, "opening the robot's port");
-        self.driver = Some(Driver::start(Box::new(move || {
-            Serial::open(&port, baud).map(|s| Box::new(s) as Box<dyn Transport>)
-        })));
+        // The odometry frame outlives this process: a restarted or hot-swapped device
+        // continues it, so positions skills hold in it stay valid.
+        let store = options.state_dir.as_ref().and_then(|dir| {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| tracing::warn!(dir = %dir.display(), error = %e, "no odometry store"))
+                .ok()
+                .map(|()| dir.join("odometry"))
+        });
+        self.driver = Some(Driver::start_with(
+            Box::new(move || Serial::open(&port, baud).map(|s| Box::new(s) as Box<dyn Transport>)),
+            Odometer::new(store),
+        ));
         Ok(())
     }
 

@@ -30,6 +30,23 @@ pub enum EventKind {
         /// Whether a previous instance of that name existed (a restart).
         restarted: bool,
     },
+    /// A restarted skill got back what the sequencer had set for its previous instance
+    /// (right after its `SkillRegistered`).
+    StateRestored {
+        /// Instance name.
+        skill: String,
+        /// Its activation.
+        active: bool,
+        /// Parameters set by clients, re-applied.
+        params: Vec<(String, ParamValue)>,
+        /// Priority set by a client, re-applied.
+        priority: Option<i32>,
+        /// Whether its samples are logged to the fabric log again.
+        io_log: bool,
+        /// What could not be re-applied, and why (a parameter the new binary no longer
+        /// declares, or declares with another type or bounds).
+        dropped: Vec<String>,
+    },
     /// A skill was activated.
     SkillActivated {
         /// Instance name.

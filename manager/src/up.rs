@@ -26,6 +26,9 @@ const GRACE: Duration = Duration::from_secs(5);
 /// How often the supervisor looks at its children (a wake-up of `skillfab up` each time; a
 /// restart waits at least this long, plus its back-off).
 const POLL: Duration = Duration::from_millis(100);
+/// A child that ran this long before it exited starts its restart count (and back-off) anew,
+/// as systemd and Kubernetes do: a process killed now and then is restarted quickly every time.
+const STABLE: Duration = Duration::from_secs(10);
 
 /// Options of `skillfab up`.
 #[derive(Debug, Clone)]
@@ -49,6 +52,8 @@ struct Supervised {
     child: Option<Child>,
     restarts: u32,
     restart_at: Option<Instant>,
+    /// When the running child was started.
+    started: Instant,
     gave_up: bool,
 }
 
@@ -106,6 +111,7 @@ impl Supervisor {
                     child: None,
                     restarts: 0,
                     restart_at: Some(Instant::now()),
+                    started: Instant::now(),
                     gave_up: false,
                 })
                 .collect::<Vec<_>>(),
@@ -170,6 +176,9 @@ fn watch(p: &mut Supervised, domain: &Domain) {
             Ok(None) => return,
             Ok(Some(status)) => {
                 p.child = None;
+                if p.started.elapsed() >= STABLE {
+                    p.restarts = 0;
+                }
                 let failed = !status.success();
                 let again = match p.spec.restart {
                     Restart::Never => false,
@@ -202,6 +211,7 @@ fn watch(p: &mut Supervised, domain: &Domain) {
             Ok(c) => {
                 tracing::info!(process = %p.spec.name, pid = c.id(), "process started");
                 p.child = Some(c);
+                p.started = Instant::now();
             }
             Err(e) => {
                 tracing::error!(process = %p.spec.name, program = %p.spec.program.display(), error = %e, "cannot start process");

@@ -49,7 +49,7 @@ struct Args {
     /// Probability that an output byte is dropped.
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
-    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside).
+    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force).
     #[arg(long)]
     trajectory: Option<PathBuf>,
 }
@@ -148,6 +148,8 @@ fn run(args: &Args) -> anyhow::Result<()> {
     let mut period = 0.1f64;
     let mut next_status = 0.0f64;
     let mut last_command = 0.0f64;
+    let mut last_drive = 0.0f64;
+    let mut watchdog = WATCHDOG;
     let mut outbox: Vec<u8> = Vec::new();
     let started = Instant::now();
     let byte_time = 10.0 / (f64::from(args.baud) * args.time_factor);
@@ -204,15 +206,20 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 },
                 _ if !matches!(link, Link::Ready { .. }) => {}
                 Command::Enable(on) => sim.enabled = on,
-                Command::Vel(v) => sim.cmd[0] = f64::from(v).clamp(-1000.0, 1000.0) / 1000.0,
+                Command::Vel(v) => {
+                    last_drive = sim.time;
+                    sim.cmd[0] = f64::from(v).clamp(-1000.0, 1000.0) / 1000.0;
+                }
                 Command::RVel(w) => {
-                    sim.cmd[1] = (f64::from(w).clamp(-1800.0, 1800.0) / 10.0).to_radians()
+                    last_drive = sim.time;
+                    sim.cmd[1] = (f64::from(w).clamp(-1800.0, 1800.0) / 10.0).to_radians();
                 }
                 Command::Period(ms) => period = f64::from(ms.clamp(20, 1000)) / 1000.0,
+                Command::Watchdog(ms) => watchdog = f64::from(ms.clamp(100, 5000)) / 1000.0,
             }
         }
-        if sim.time - last_command > WATCHDOG && sim.cmd != [0.0, 0.0] {
-            tracing::info!("watchdog: no command for 2 s, stopping");
+        if sim.time - last_command > watchdog && sim.cmd != [0.0, 0.0] {
+            tracing::info!(watchdog_s = watchdog, "watchdog: no command, stopping");
             sim.cmd = [0.0; 2];
         }
         sim.step(DT);
@@ -238,6 +245,8 @@ fn run(args: &Args) -> anyhow::Result<()> {
                     stall: sim.stall,
                     collisions: sim.collisions,
                     outside: sim.world.is_outside([x, y]),
+                    cmd_age: sim.time - last_drive,
+                    driven: sim.cmd != [0.0, 0.0],
                 }
                 .write(t)?;
                 t.flush()?;

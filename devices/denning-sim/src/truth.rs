@@ -26,17 +26,21 @@ pub struct TruthRecord {
     pub collisions: u64,
     /// Whether the robot is in the world's outside region.
     pub outside: bool,
+    /// Simulated seconds since the last drive command (VEL or RVEL) reached the robot.
+    pub cmd_age: f64,
+    /// Whether a non-zero drive command is in force (the robot is being driven, not stopping).
+    pub driven: bool,
 }
 
 impl TruthRecord {
     /// The CSV header: the column names [`TruthRecord::read`] looks columns up by.
-    pub const HEADER: &'static str = "t,x,y,theta,v,w,stall,collisions,outside";
+    pub const HEADER: &'static str = "t,x,y,theta,v,w,stall,collisions,outside,cmd_age,driven";
 
     /// Writes the record as one CSV line.
     pub fn write(&self, out: &mut impl Write) -> io::Result<()> {
         writeln!(
             out,
-            "{:.3},{:.4},{:.4},{:.4},{:.3},{:.3},{},{},{}",
+            "{:.3},{:.4},{:.4},{:.4},{:.3},{:.3},{},{},{},{:.3},{}",
             self.t,
             self.x,
             self.y,
@@ -45,7 +49,9 @@ impl TruthRecord {
             self.w,
             u8::from(self.stall),
             self.collisions,
-            u8::from(self.outside)
+            u8::from(self.outside),
+            self.cmd_age,
+            u8::from(self.driven)
         )
     }
 
@@ -83,6 +89,8 @@ impl TruthRecord {
                     stall: at(6)? > 0.5,
                     collisions: at(7)? as u64,
                     outside: at(8)? > 0.5,
+                    cmd_age: at(9)?,
+                    driven: at(10)? > 0.5,
                 })
             })
             .collect()
@@ -105,6 +113,8 @@ mod tests {
             stall: false,
             collisions: 2,
             outside: true,
+            cmd_age: 0.1,
+            driven: true,
         };
         let mut text = format!("{}\n", TruthRecord::HEADER).into_bytes();
         r.write(&mut text).unwrap();
@@ -115,7 +125,8 @@ mod tests {
 
     #[test]
     fn columns_are_found_by_name() {
-        let text = "outside,collisions,stall,w,v,theta,y,x,t\n1,0,0,0,0,0,2,1,5\n";
+        let text =
+            "driven,cmd_age,outside,collisions,stall,w,v,theta,y,x,t\n1,0.1,1,0,0,0,0,0,2,1,5\n";
         let all = TruthRecord::parse_all(text);
         assert_eq!(all.len(), 1);
         assert_eq!(

@@ -178,6 +178,8 @@ pub enum Command {
     RVel(i16),
     /// Status period, ms.
     Period(u16),
+    /// Watchdog time, ms: the robot stops when no command came for this long.
+    Watchdog(u16),
 }
 
 fn int_arg(v: i32) -> [u8; 3] {
@@ -203,6 +205,7 @@ impl Command {
             Command::Vel(v) => with(11, i32::from(v)),
             Command::RVel(v) => with(21, i32::from(v)),
             Command::Period(ms) => with(60, i32::from(ms)),
+            Command::Watchdog(ms) => with(62, i32::from(ms)),
         }
     }
 
@@ -241,6 +244,7 @@ impl Command {
             11 => Command::Vel(sat(arg()?)),
             21 => Command::RVel(sat(arg()?)),
             60 => Command::Period(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
+            62 => Command::Watchdog(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
             code => {
                 return Err(CodecError::Unknown {
                     what: "command",
@@ -527,7 +531,7 @@ mod tests {
 
         #[test]
         fn commands_round_trip(v in any::<i16>(), ms in any::<u16>(), on in any::<bool>()) {
-            for c in [Command::Vel(v), Command::RVel(v), Command::Period(ms), Command::Enable(on), Command::Sync0] {
+            for c in [Command::Vel(v), Command::RVel(v), Command::Period(ms), Command::Watchdog(ms), Command::Enable(on), Command::Sync0] {
                 let mut d = Decoder::default();
                 d.push(&c.encode());
                 prop_assert_eq!(Command::decode(&d.next_frame().unwrap().unwrap()).unwrap(), c);

@@ -22,6 +22,8 @@ pub use crate::codec::SONARS;
 pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(500);
 /// A link without a valid packet for this long is reconnected.
 pub const LINK_TIMEOUT: Duration = Duration::from_secs(1);
+/// The robot's watchdog this driver sets at every connect (ms).
+pub const ROBOT_WATCHDOG_MS: u16 = 400;
 /// How often an unchanged drive command is sent again (the keep-alive); a changed one is
 /// sent at once.
 pub const RESEND: Duration = Duration::from_millis(100);
@@ -282,6 +284,9 @@ fn handshake(t: &mut dyn Transport, d: &mut Decoder) -> io::Result<bool> {
     }
     t.write_all(&Command::Sync1.encode())?; // OPEN
     t.write_all(&Command::Enable(true).encode())?;
+    // The robot stops on its own 400 ms after this driver goes quiet (a killed device
+    // process, a cut cable): four keep-alives' worth, not the robot's default 2 s.
+    t.write_all(&Command::Watchdog(ROBOT_WATCHDOG_MS).encode())?;
     Ok(true)
 }
 

@@ -23,6 +23,8 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use crate::faults::{Faults, Kill, Killer};
+
 /// Options of `skillfab demo exit-lab`.
 #[derive(Debug, Clone)]
 pub struct DemoOptions {
@@ -40,6 +42,8 @@ pub struct DemoOptions {
     pub verbose: bool,
     /// Give up after this much simulated time.
     pub limit_s: f64,
+    /// Faults injected into every run.
+    pub faults: Faults,
 }
 
 /// One run's outcome.
@@ -57,6 +61,18 @@ pub struct RunOutcome {
     pub collisions: u64,
     /// Sequencer steps: (what, cycle, simulated time).
     pub steps: Vec<(String, u64, f64)>,
+    /// Processes killed, and their recovery (with `--kill-every`).
+    pub kills: Vec<Kill>,
+    /// Longest time without a drive command reaching the robot (simulated s, from the
+    /// simulator's ground truth at its status period).
+    pub max_command_gap_s: f64,
+    /// Longest time a non-zero drive command stayed in force at the robot after it was 500 ms
+    /// old (simulated s): how long a stale command drove it (until the robot's watchdog or a
+    /// new command).
+    pub max_stale_drive_s: f64,
+    /// The serial link as the device reported it last: (frames, bad frames, garbage bytes,
+    /// connects).
+    pub link: Option<(u64, u64, u64, u64)>,
     #[serde(skip)]
     trajectory: Vec<TruthRecord>,
 }
@@ -132,6 +148,10 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             .with_context(|| format!("program '{name}' not found next to skillfab"))
     };
     let period_ms = 10.0 / opts.time_factor;
+    // Under injected kills every process comes back at once, every time (as on a robot with
+    // a supervisor); otherwise the launch file's defaults.
+    let killing = opts.faults.kill_every_s.is_some();
+    let (restarts, backoff_ms) = if killing { (100_000, 20) } else { (5, 200) };
     let text = |p: &Path| p.to_string_lossy().into_owned();
     let mut launch = LaunchFile {
         manager: ManagerSection {
@@ -154,6 +174,10 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                     opts.time_factor.to_string(),
                     "--trajectory".into(),
                     text(&traj),
+                    "--corrupt-rate".into(),
+                    opts.faults.corrupt_rate.to_string(),
+                    "--drop-rate".into(),
+                    opts.faults.drop_rate.to_string(),
                 ],
                 ..ProcessEntry::default()
             },
@@ -162,6 +186,8 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                 bin: text(&program("denning")?),
                 args: vec!["--port".into(), text(&link)],
                 restart: Restart::Always,
+                max_restarts: Some(restarts),
+                backoff_ms: Some(backoff_ms),
                 ..ProcessEntry::default()
             },
         ],
@@ -177,6 +203,13 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             bin: text(&program(s)?),
             active: Some(false),
             params,
+            restart: if killing {
+                Restart::OnFailure
+            } else {
+                Restart::Never
+            },
+            max_restarts: Some(restarts),
+            backoff_ms: Some(backoff_ms),
             ..ProcessEntry::default()
         });
     }
@@ -322,6 +355,10 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         time_s: 0.0,
         collisions: 0,
         steps: Vec::new(),
+        kills: Vec::new(),
+        max_command_gap_s: 0.0,
+        max_stale_drive_s: 0.0,
+        link: None,
         trajectory: Vec::new(),
     };
     let step = |c: &Client, out: &mut RunOutcome, what: &str| {
@@ -345,6 +382,13 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         far: None,
         found: None,
     };
+    let killer = opts.faults.kill_every_s.map(|every| {
+        Killer::start(
+            &net.domain,
+            Duration::from_secs_f64(every / opts.time_factor),
+            opts.faults.seed ^ seed,
+        )
+    });
     let started = Instant::now();
     loop {
         if INTERRUPTED.load(Ordering::Acquire) {
@@ -374,6 +418,23 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             }
         }
     }
+    if let Some(k) = killer {
+        out.kills = k.finish();
+    }
+    let link = |field: &str| {
+        c.query(&format!("denning.link.{field}"))
+            .ok()
+            .and_then(|(v, _)| v.as_f64())
+            .map(|x| x as u64)
+    };
+    out.link = (|| {
+        Some((
+            link("frames")?,
+            link("bad_frames")?,
+            link("garbage")?,
+            link("connects")?,
+        ))
+    })();
     c.set_param("avoid", "safe_distance", "0.6")?;
     let all: Vec<&str> = SKILLS.iter().copied().filter(|s| *s != "stop").collect();
     c.deactivate(&all)?;
@@ -383,9 +444,26 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         "avoid.safe_distance restored; skills deactivated",
     );
     out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
+    (out.max_command_gap_s, out.max_stale_drive_s) = command_gaps(&out.trajectory);
     drop(c);
     drop(net);
     Ok(out)
+}
+
+/// From the ground truth: the longest time without a drive command at the robot, and the
+/// longest a non-zero command stayed in force at the robot after it was older than
+/// 500 ms (the Denning driver's `COMMAND_TIMEOUT`): the device re-sends the fabric's command
+/// every 100 ms and replaces it by stop after 500 ms, so only a dead link or device lets a
+/// command go stale at the robot (whose own watchdog stops it after 2 s).
+fn command_gaps(rows: &[TruthRecord]) -> (f64, f64) {
+    let stale = 0.5;
+    let gap = rows.iter().map(|r| r.cmd_age).fold(0.0, f64::max);
+    let driven = rows
+        .iter()
+        .filter(|r| r.driven && r.cmd_age > stale)
+        .map(|r| r.cmd_age - stale)
+        .fold(0.0, f64::max);
+    (gap, driven)
 }
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);

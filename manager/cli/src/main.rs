@@ -3,6 +3,7 @@
 
 mod ctl;
 mod demo;
+mod faults;
 
 use clap::{Parser, Subcommand};
 use skillfab_manager::args::{DomainArg, ManagerArgs, UpArgs, init_tracing};
@@ -91,6 +92,16 @@ enum DemoCmd {
         /// Simulated seconds before a run counts as failed.
         #[arg(long, default_value_t = 300.0)]
         limit_s: f64,
+        /// Fault injection: SIGKILL to a random fabric process (the device or a skill) every
+        /// this many simulated seconds; skills restart on failure.
+        #[arg(long, value_name = "SECONDS")]
+        kill_every: Option<f64>,
+        /// Fault injection: share of the serial bytes with a flipped bit (0..1).
+        #[arg(long, default_value_t = 0.0)]
+        corrupt_rate: f64,
+        /// Fault injection: share of the serial bytes dropped (0..1).
+        #[arg(long, default_value_t = 0.0)]
+        drop_rate: f64,
     },
 }
 
@@ -179,8 +190,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     plot,
                     json,
                     limit_s,
+                    kill_every,
+                    corrupt_rate,
+                    drop_rate,
                 },
         } => {
+            if kill_every.is_some_and(|k| k.is_nan() || k < 1.0) {
+                anyhow::bail!("--kill-every must be at least 1 simulated second");
+            }
+            for (name, r) in [("--corrupt-rate", corrupt_rate), ("--drop-rate", drop_rate)] {
+                if !(0.0..=0.5).contains(&r) {
+                    anyhow::bail!("{name} must be in [0, 0.5], got {r}");
+                }
+            }
             if !(time_factor > 0.0 && time_factor <= 50.0) {
                 anyhow::bail!("--time-factor must be in (0, 50], got {time_factor}");
             }
@@ -192,6 +214,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 plot,
                 verbose: !json,
                 limit_s,
+                faults: faults::Faults {
+                    kill_every_s: kill_every,
+                    corrupt_rate,
+                    drop_rate,
+                    seed,
+                },
             };
             let summary = demo::demo(&opts)?;
             if json {

@@ -78,7 +78,17 @@ impl ClientSide {
                     }
                 };
                 self.next_id += 1;
-                let (client, request_body) = match control::decode_request(request.payload()) {
+                let bytes = request.payload();
+                let decoded = if bytes.len() > control::MAX_REQUEST_BYTES {
+                    Err(control::ControlError::Malformed(format!(
+                        "a request of {} bytes (at most {})",
+                        bytes.len(),
+                        control::MAX_REQUEST_BYTES
+                    )))
+                } else {
+                    control::decode_request(bytes)
+                };
+                let (client, request_body) = match decoded {
                     Ok(env) => (Some(env.client), Ok(env.request)),
                     Err(e) => (None, Err(e)),
                 };

@@ -16,7 +16,7 @@ impl Manager {
         hold: u32,
     ) -> Response {
         let parsed = expr::parse(&expr).map_err(|error| ControlError::BadExpression {
-            expr: expr.clone(),
+            expr: skillfab_proto::control::shorten(&expr, 120),
             error,
         })?;
         let mut paths = Vec::new();

@@ -6,12 +6,24 @@ use skillfab_proto::param::{ParamValue, check_bounds};
 
 impl Manager {
     /// Activates or deactivates every named skill, or none (an unknown name refuses all).
+    /// A skill that is away (its process died and may be restarted) gets it when it is back.
     pub(super) fn set_active(&mut self, names: &[String], active: bool) -> Response {
         let slots = names
             .iter()
-            .map(|n| self.slot_of(n))
+            .map(|n| match self.skills.away(n) {
+                Some(_) => Ok(Err(n.clone())),
+                None => self.slot_of(n).map(Ok),
+            })
             .collect::<Result<Vec<_>, _>>()?;
         for s in slots {
+            let s = match s {
+                Ok(s) => s,
+                Err(away) => {
+                    tracing::info!(skill = %away, active, "activation kept for its return");
+                    self.skills.keep(&away).active = Some(active);
+                    continue;
+                }
+            };
             let Some(e) = self.skills.get_mut(s) else {
                 continue;
             };
@@ -42,13 +54,15 @@ impl Manager {
         param: &str,
         arg: ParamArg,
     ) -> Response {
-        let s = self.slot_of(skill)?;
-        let e = self
-            .skills
-            .get_mut(s)
-            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
-        let spec = e
-            .decl
+        // A skill that is away gets the value when it is back; it is checked against the
+        // declaration it had.
+        let live = self.skills.slot_of(skill);
+        let decl = match live {
+            Some(s) => self.skills.get(s).map(|e| &e.decl),
+            None => self.skills.away(skill),
+        }
+        .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        let spec = decl
             .params
             .iter()
             .find(|p| p.name == param)
@@ -67,7 +81,7 @@ impl Manager {
                     ParamError::Unparsable {
                         param: param.into(),
                         expected: spec.kind,
-                        text: t.clone(),
+                        text: skillfab_proto::control::shorten(&t, 120),
                     },
                 )
             })?,
@@ -83,21 +97,29 @@ impl Manager {
             })?,
         };
         check_bounds(spec, value).map_err(|err| param_err(skill, err))?;
-        let old = e
-            .values
-            .iter()
-            .find(|(n, _)| n == param)
-            .map_or(spec.default, |(_, v)| *v);
-        match e.values.iter_mut().find(|(n, _)| n == param) {
-            Some(slot) => slot.1 = value,
-            None => e.values.push((param.to_string(), value)),
+        let default = spec.default;
+        let old = match live.and_then(|s| self.skills.get(s)) {
+            Some(e) => e.values.iter().find(|(n, _)| n == param).map(|(_, v)| *v),
+            None => self
+                .skills
+                .kept(skill)
+                .and_then(|k| k.params.iter().find(|(n, _)| n == param).map(|(_, v)| *v)),
         }
-        let bytes = postcard::to_allocvec(&e.values)
-            .map_err(|err| ControlError::Refused(err.to_string()))?;
-        self.board
-            .slot(s)
-            .write_params(&bytes)
-            .map_err(|err| ControlError::Refused(err.to_string()))?;
+        .unwrap_or(default);
+        if let Some(s) = live
+            && let Some(e) = self.skills.get_mut(s)
+        {
+            match e.values.iter_mut().find(|(n, _)| n == param) {
+                Some(slot) => slot.1 = value,
+                None => e.values.push((param.to_string(), value)),
+            }
+            let bytes = postcard::to_allocvec(&e.values)
+                .map_err(|err| ControlError::Refused(err.to_string()))?;
+            self.board
+                .slot(s)
+                .write_params(&bytes)
+                .map_err(|err| ControlError::Refused(err.to_string()))?;
+        }
         let kept = &mut self.skills.keep(skill).params;
         match kept.iter_mut().find(|(n, _)| n == param) {
             Some(slot) => slot.1 = value,
@@ -133,6 +155,24 @@ impl Manager {
 
     /// A skill's arbitration priority, from the next cycle start.
     pub(super) fn set_priority(&mut self, client: &str, skill: String, priority: i32) -> Response {
+        if let Some(d) = self.skills.away(&skill) {
+            // Applied when it is back.
+            let old = self
+                .skills
+                .kept(&skill)
+                .and_then(|k| k.priority)
+                .unwrap_or(d.priority);
+            self.skills.keep(&skill).priority = Some(priority);
+            if old != priority {
+                self.outbox.push(EventKind::PriorityChanged {
+                    skill,
+                    old,
+                    new: priority,
+                    by: client.to_string(),
+                });
+            }
+            return Ok(Reply::Done);
+        }
         let s = self.slot_of(&skill)?;
         if let Some(e) = self.skills.get_mut(s) {
             let old = e.decl.priority;

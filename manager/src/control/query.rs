@@ -17,18 +17,19 @@ impl Manager {
             path: text.to_string(),
             reason,
         };
-        let s = self.slot_of(skill)?;
-        let e = self
-            .skills
-            .get(s)
-            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
-        let port = e
-            .decl
+        // A skill that is away (restarting) is resolved against its last declaration.
+        let live = self.skills.slot_of(skill);
+        let decl = match live {
+            Some(s) => self.skills.get(s).map(|e| &e.decl),
+            None => self.skills.away(skill),
+        }
+        .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        let port = decl
             .outputs
             .iter()
             .find(|p| p.port == output)
             .ok_or_else(|| {
-                let names: Vec<&str> = e.decl.outputs.iter().map(|p| p.port.as_str()).collect();
+                let names: Vec<&str> = decl.outputs.iter().map(|p| p.port.as_str()).collect();
                 bad(format!(
                     "skill '{skill}' has no output '{output}' (outputs: {})",
                     names.join(", ")
@@ -36,12 +37,24 @@ impl Manager {
             })?;
         let f = value::resolve(&port.schema, field).map_err(|err| bad(err.reason))?;
         // Every proposer publishes on its channel's topic: read this skill's own proposals.
-        let slot = (port.kind == skillfab_proto::decl::PortKind::Proposal).then_some(s as u32);
+        let slot = match (port.kind == skillfab_proto::decl::PortKind::Proposal, live) {
+            (false, _) => None,
+            (true, Some(s)) => Some(s as u32),
+            (true, None) => {
+                return Err(ControlError::Refused(format!(
+                    "'{skill}' is restarting: its proposals can be read once it is back"
+                )));
+            }
+        };
         Ok((port.topic.clone(), f, slot))
     }
 
     /// Opens (once) an untyped reader of the output's topic.
+    /// Nothing to open while the skill is away: its readers open when it is ready again.
     pub(super) fn open_reader(&mut self, skill: &str, output: &str) -> Result<(), ControlError> {
+        if self.skills.away(skill).is_some() {
+            return Ok(());
+        }
         let s = self.slot_of(skill)?;
         let Some(port) = self
             .skills

@@ -4,8 +4,9 @@
 
 use super::Entry;
 use skillfab_proto::board::MAX_SLOTS;
+use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::param::ParamValue;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 
 /// What clients set for a skill, kept by name across restarts of its process.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -24,8 +25,9 @@ pub(crate) struct Skills {
     entries: Vec<Option<Entry>>,
     /// Occupied slots in registration order (lists and reports keep it).
     order: Vec<usize>,
-    /// Names that have registered before.
-    seen: HashSet<String>,
+    /// The last declaration of every name that registered (a name seen before is a restart;
+    /// while it is away, requests for it are checked against this and kept).
+    last: HashMap<String, SkillDecl>,
     /// What clients set, by skill name.
     kept: HashMap<String, Kept>,
 }
@@ -35,7 +37,7 @@ impl Skills {
         Skills {
             entries: (0..MAX_SLOTS).map(|_| None).collect(),
             order: Vec::new(),
-            seen: HashSet::new(),
+            last: HashMap::new(),
             kept: HashMap::new(),
         }
     }
@@ -69,11 +71,20 @@ impl Skills {
 
     /// Registers `entry` in slot `s`; returns whether its name registered before (a restart).
     pub(crate) fn insert(&mut self, s: usize, entry: Entry) -> bool {
-        let restarted = !self.seen.insert(entry.decl.name.clone());
+        let restarted = self
+            .last
+            .insert(entry.decl.name.clone(), entry.decl.clone())
+            .is_some();
         self.entries[s] = Some(entry);
         self.order.retain(|&o| o != s);
         self.order.push(s);
         restarted
+    }
+
+    /// The declaration of `name` if it registered before but is not registered now (its
+    /// process died or left, and may come back).
+    pub(crate) fn away(&self, name: &str) -> Option<&SkillDecl> {
+        self.slot_of(name).is_none().then(|| self.last.get(name))?
     }
 
     /// What clients set for `name`, to change (a client sets something).

@@ -421,3 +421,56 @@ fn ctl_without_a_manager_says_so() {
     assert!(!success);
     assert!(err.contains("no manager is running in domain"), "{err}");
 }
+
+#[test]
+fn requests_for_a_skill_that_is_away_apply_when_it_is_back() {
+    let mut t = TestDomain::new("away");
+    t.spawn("skillfab", &["manager", "--period-ms", "5"]);
+    t.spawn("ticker", &[]);
+    let scale = t.spawn("scale", &[]);
+    let board = t.board();
+    t.wait_until("scale to run", || {
+        skillfab_tests::registered(&board, "scale").is_some_and(|s| s.runs > 2)
+    });
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+    t.signal(scale, Signal::SIGKILL);
+    t.wait_exit(scale);
+    next_matching(&mut c, "skill_died", |k| {
+        matches!(k, EventKind::SkillDied { skill, .. } if skill == "scale").then_some(())
+    });
+    // Nobody restarts it yet: requests are checked against its last declaration and kept.
+    c.set_param("scale", "gain", "6").unwrap();
+    c.deactivate(&["scale"]).unwrap();
+    c.set_priority("scale", 3).unwrap();
+    assert!(matches!(
+        c.set_param("scale", "gain", "abc"),
+        Err(ClientError::Refused(ControlError::Param { .. }))
+    ));
+    assert!(c.set_param("scale", "nope", "1").is_err());
+    assert!(matches!(
+        c.activate(&["ghost"]),
+        Err(ClientError::Refused(ControlError::UnknownSkill(_)))
+    ));
+    t.spawn("scale", &[]);
+    let (restored, _) = next_matching(&mut c, "state_restored", |k| match k {
+        EventKind::StateRestored { skill, .. } if skill == "scale" => Some(k.clone()),
+        _ => None,
+    });
+    let EventKind::StateRestored {
+        active,
+        params,
+        priority,
+        ..
+    } = restored
+    else {
+        unreachable!()
+    };
+    assert!(!active);
+    assert_eq!(params, vec![("gain".to_string(), ParamValue::Float(6.0))]);
+    assert_eq!(priority, Some(3));
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(6.0)
+    );
+}

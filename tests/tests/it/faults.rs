@@ -110,3 +110,124 @@ fn clean_keeps_a_live_domain_and_removes_a_dead_ones_files() {
     assert!(t.domain.shm_files().is_empty());
     assert!(!t.domain.root_path().exists());
 }
+
+/// Sends `bytes` on `skillfab/control` as a plain iceoryx2 client would; returns the decoded
+/// answer (waits for it with a deadline).
+fn raw_request(
+    t: &TestDomain,
+    port: &iceoryx2::port::client::Client<iceoryx2::prelude::ipc::Service, [u8], (), [u8], ()>,
+    wake: &iceoryx2::port::notifier::Notifier<iceoryx2::prelude::ipc::Service>,
+    bytes: &[u8],
+) -> skillfab_proto::control::Response {
+    let pending = port
+        .loan_slice_uninit(bytes.len())
+        .unwrap()
+        .write_from_slice(bytes)
+        .send()
+        .unwrap();
+    wake.notify().unwrap();
+    let mut answer = None;
+    t.wait_until("an answer to raw bytes", || {
+        if let Some(a) = pending.receive().unwrap() {
+            answer = Some(skillfab_proto::control::decode_response(a.payload()).unwrap());
+        }
+        answer.is_some()
+    });
+    answer.unwrap()
+}
+
+#[test]
+fn misbehaving_clients_get_clear_errors_and_the_fabric_runs_on() {
+    use iceoryx2::prelude::AllocationStrategy;
+    use skillfab_client::{Client, ClientError};
+    use skillfab_proto::control::{ControlError, MonitorMode};
+    use skillfab_proto::{names, services};
+    let mut t = TestDomain::new("misbehave");
+    t.hello(&[]);
+    let board = t.board();
+    let good = Client::connect(&t.domain).unwrap();
+
+    // Random bytes on the control service from a plain iceoryx2 client: an error answer.
+    let node = services::node(&t.domain, "garbage").unwrap();
+    let port = services::control_service(&node)
+        .unwrap()
+        .client_builder()
+        .initial_max_slice_len(4096)
+        .allocation_strategy(AllocationStrategy::PowerOfTwo)
+        .create()
+        .unwrap();
+    let wake = services::notifier(&node, &names::control()).unwrap();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    for len in [0usize, 1, 7, 64, 3000] {
+        let bytes: Vec<u8> = (0..len)
+            .map(|_| {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                seed as u8
+            })
+            .collect();
+        let answer = raw_request(&t, &port, &wake, &bytes);
+        assert!(answer.is_err(), "{len} random bytes: {answer:?}");
+    }
+    // A client that sends and never reads its answers: its own queue fills, nobody else's.
+    for _ in 0..16 {
+        let Ok(s) = port.loan_slice_uninit(8) else {
+            break;
+        };
+        if s.write_from_slice(&[1u8; 8]).send().is_err() {
+            break;
+        }
+        let _ = wake.notify();
+    }
+
+    // A 10 000-character monitor expression and a 1 MB parameter string: clear errors.
+    let long = format!("ticker.tick.value > {}", "1".repeat(10_000));
+    match good.add_monitor(&long, MonitorMode::Once, 0) {
+        Err(ClientError::Refused(ControlError::BadExpression { expr, .. })) => {
+            assert!(expr.ends_with("(10020 bytes in all)"), "{expr}");
+        }
+        other => panic!("10 000-char expression: {other:?}"),
+    }
+    let huge = "1".repeat(1 << 20);
+    match good.set_param("scale", "gain", &huge) {
+        Err(ClientError::Refused(ControlError::Malformed(m))) => {
+            assert!(m.contains("at most 65536"), "{m}");
+        }
+        other => panic!("1 MB parameter: {other:?}"),
+    }
+    let err = good
+        .set_param("scale", "gain", &"9".repeat(2000))
+        .unwrap_err();
+    assert!(err.to_string().len() < 300, "{err}");
+    assert_eq!(good.get_param("scale", "gain").unwrap().to_string(), "2");
+
+    // 64 slots: the 62 processes beyond hello's three take the rest, the last one is refused.
+    let extra: Vec<usize> = (0..62)
+        .map(|i| {
+            let (name, remap) = (format!("extra{i}"), format!("tick=tick{i}"));
+            t.spawn(
+                "ticker",
+                &["--name", &name, "--remap", &remap, "--inactive"],
+            )
+        })
+        .collect();
+    let mut refused = None;
+    t.wait_until("61 extra skills registered and one refused", || {
+        let registered = (0..62)
+            .filter(|i| skillfab_tests::registered(&board, &format!("extra{i}")).is_some())
+            .count()
+            == 61;
+        refused = extra.iter().find_map(|&c| {
+            let log = std::fs::read_to_string(t.dir.join(format!("{c}-ticker.log"))).ok()?;
+            log.contains("no free skill slot").then_some(c)
+        });
+        registered && refused.is_some()
+    });
+
+    // Everyone else is still served, and the cycle goes on.
+    let k = cycle(&board);
+    t.wait_until("cycles to go on", || cycle(&board) > k + 20);
+    assert_eq!(good.get_param("scale", "gain").unwrap().to_string(), "2");
+    assert!(good.list().unwrap().len() >= 64);
+}

@@ -271,6 +271,18 @@ impl From<ParamError> for ParamErrorText {
     }
 }
 
+/// `text` cut to at most `max` characters for an error message (a client's 1 MB string is
+/// not echoed back): the start, then how much was left out.
+pub fn shorten(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        None => text.to_string(),
+        Some((cut, _)) => format!("{}… ({} bytes in all)", &text[..cut], text.len()),
+    }
+}
+
+/// Largest request the manager reads (bytes); a bigger one is refused unread.
+pub const MAX_REQUEST_BYTES: usize = 64 * 1024;
+
 /// The manager's answer.
 pub type Response = Result<Reply, ControlError>;
 

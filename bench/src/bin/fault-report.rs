@@ -1,0 +1,192 @@
+//! `fault-report`: the exit-lab mission under injected faults, and what they cost.
+//!
+//! ```text
+//! fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]
+//! ```
+//!
+//! Each scenario is one `skillfab demo exit-lab --runs N --json` with its faults (release
+//! binaries beside this one): `kill` — SIGKILL to a random fabric process (the Denning device
+//! or any skill; skills restart on failure) every S simulated seconds; `corrupt-1`,
+//! `corrupt-5` — 1 % / 5 % of the serial bytes with a flipped bit; `drop-1` — 1 % of them
+//! dropped. Per scenario: missions out of the lab, median mission time, the longest time
+//! without a drive command at the robot and the longest it moved on a stale one (from the
+//! simulator's ground truth), kills and their recovery (signal → the new instance registered
+//! and, if active, its first run), cycles the killed units missed, and the serial link's
+//! frames, bad frames, garbage bytes and connects.
+
+use serde_json::{Value, json};
+use std::path::PathBuf;
+use std::process::Command;
+
+struct Scenario {
+    name: &'static str,
+    args: Vec<String>,
+}
+
+fn arg_value(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Runs one scenario; returns its summary.
+fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, String> {
+    eprintln!("fault-report: {} ({})", s.name, s.args.join(" "));
+    let out = Command::new(skillfab)
+        .args(["demo", "exit-lab", "--json"])
+        .args(common)
+        .args(&s.args)
+        .output()
+        .map_err(|e| format!("{}: {e}", skillfab.display()))?;
+    // A scenario where no run left the lab exits non-zero but still prints its summary.
+    let demo: Value = serde_json::from_slice(&out.stdout).map_err(|e| {
+        format!(
+            "{}: no summary ({e}): {}",
+            s.name,
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })?;
+    let runs = demo["runs_detail"].as_array().cloned().unwrap_or_default();
+    let max_of = |key: &str| {
+        runs.iter()
+            .filter_map(|r| r[key].as_f64())
+            .fold(0.0, f64::max)
+    };
+    let kills: Vec<&Value> = runs
+        .iter()
+        .flat_map(|r| r["kills"].as_array().into_iter().flatten())
+        .collect();
+    let mut recovery: Vec<f64> = kills
+        .iter()
+        .filter_map(|k| k["recovery_ms"].as_f64())
+        .collect();
+    let unrecovered = kills.len() - recovery.len();
+    let cycles_lost: u64 = kills.iter().filter_map(|k| k["cycles_lost"].as_u64()).sum();
+    let link_sum = |i: usize| -> u64 {
+        runs.iter()
+            .filter_map(|r| r["link"].as_array().and_then(|l| l.get(i)?.as_u64()))
+            .sum()
+    };
+    let failures: Vec<Value> = runs
+        .iter()
+        .filter(|r| r["success"] != json!(true))
+        .map(|r| json!({"seed": r["seed"], "time_s": r["time_s"], "last_step": r["steps"].as_array().and_then(|s| s.iter().rev().nth(1)).cloned()}))
+        .collect();
+    Ok(json!({
+        "scenario": s.name,
+        "args": s.args.join(" "),
+        "runs": demo["runs"],
+        "out_of_the_lab": demo["successes"],
+        "median_time_s": demo["median_time_s"],
+        "collisions": runs.iter().filter_map(|r| r["collisions"].as_u64()).sum::<u64>(),
+        "max_command_gap_s": max_of("max_command_gap_s"),
+        "max_stale_drive_s": max_of("max_stale_drive_s"),
+        "kills": kills.len(),
+        "unrecovered": unrecovered,
+        "recovery_ms_p50": quantile(&mut recovery, 0.5),
+        "recovery_ms_max": quantile(&mut recovery, 1.0),
+        "cycles_lost": cycles_lost,
+        "frames": link_sum(0),
+        "bad_frames": link_sum(1),
+        "garbage_bytes": link_sum(2),
+        "connects": link_sum(3),
+        "failures": failures,
+    }))
+}
+
+fn main() -> std::process::ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!(
+            "usage: fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]"
+        );
+        return std::process::ExitCode::SUCCESS;
+    }
+    let json_out = args.iter().any(|a| a == "--json");
+    let runs = arg_value(&args, "--runs").unwrap_or_else(|| "20".into());
+    let tf = arg_value(&args, "--time-factor").unwrap_or_else(|| "4".into());
+    let every = arg_value(&args, "--kill-every").unwrap_or_else(|| "5".into());
+    let only = arg_value(&args, "--only");
+    let mut common = vec!["--runs".to_string(), runs, "--time-factor".into(), tf];
+    if let Some(w) = arg_value(&args, "--world") {
+        common.extend(["--world".into(), w]);
+    }
+    let scenarios = [
+        Scenario {
+            name: "kill",
+            args: vec!["--kill-every".into(), every],
+        },
+        Scenario {
+            name: "corrupt-1",
+            args: vec!["--corrupt-rate".into(), "0.01".into()],
+        },
+        Scenario {
+            name: "corrupt-5",
+            args: vec!["--corrupt-rate".into(), "0.05".into()],
+        },
+        Scenario {
+            name: "drop-1",
+            args: vec!["--drop-rate".into(), "0.01".into()],
+        },
+    ];
+    let skillfab = skillfab_tests::bin("skillfab");
+    let mut results = Vec::new();
+    for s in scenarios
+        .iter()
+        .filter(|s| only.as_deref().is_none_or(|o| s.name.contains(o)))
+    {
+        match run(&skillfab, s, &common) {
+            Ok(r) => results.push(r),
+            Err(e) => {
+                eprintln!("fault-report: {e}");
+                return std::process::ExitCode::FAILURE;
+            }
+        }
+    }
+    if json_out {
+        println!("{}", Value::Array(results));
+    } else {
+        println!(
+            "{:<10} {:>9} {:>8} {:>7} {:>9} {:>9} {:>6} {:>14} {:>8} {:>22}",
+            "scenario",
+            "out/runs",
+            "median",
+            "coll",
+            "cmd gap",
+            "stale",
+            "kills",
+            "recovery p50/max",
+            "cyc lost",
+            "frames/bad/garb/conn"
+        );
+        for r in &results {
+            println!(
+                "{:<10} {:>4}/{:<4} {:>7.1}s {:>7} {:>8.2}s {:>8.2}s {:>6} {:>7.0}/{:<6.0}ms {:>8} {:>22}",
+                r["scenario"].as_str().unwrap_or(""),
+                r["out_of_the_lab"],
+                r["runs"],
+                r["median_time_s"].as_f64().unwrap_or(f64::NAN),
+                r["collisions"],
+                r["max_command_gap_s"].as_f64().unwrap_or(f64::NAN),
+                r["max_stale_drive_s"].as_f64().unwrap_or(f64::NAN),
+                r["kills"],
+                r["recovery_ms_p50"].as_f64().unwrap_or(f64::NAN),
+                r["recovery_ms_max"].as_f64().unwrap_or(f64::NAN),
+                r["cycles_lost"],
+                format!(
+                    "{}/{}/{}/{}",
+                    r["frames"], r["bad_frames"], r["garbage_bytes"], r["connects"]
+                ),
+            );
+        }
+    }
+    std::process::ExitCode::SUCCESS
+}

@@ -1,0 +1,169 @@
+//! Faults injected into a run of the exit-lab demo (`--kill-every`, `--corrupt-rate`,
+//! `--drop-rate`), and what they cost: the `fault-report` benchmark runs the demo with them.
+//!
+//! The killer takes a registered unit of the fabric at random — the device process or a skill —
+//! every `kill_every_s` simulated seconds and sends it SIGKILL; `skillfab up` restarts it by
+//! its launch entry, and the killer times the recovery: the signal → the new instance
+//! registered and, if it is active, its first run done (read on the cycle board).
+
+use serde::Serialize;
+use skillfab_proto::board::{Board, MAX_SLOTS, SlotState};
+use skillfab_proto::decl::SkillDecl;
+use skillfab_proto::domain::Domain;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// What to inject.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Faults {
+    /// SIGKILL to a random unit (device or skill) every this many simulated seconds.
+    pub kill_every_s: Option<f64>,
+    /// Share of the simulator's bytes with a flipped bit.
+    pub corrupt_rate: f64,
+    /// Share of the simulator's bytes dropped.
+    pub drop_rate: f64,
+    /// Seed of the killer's choices.
+    pub seed: u64,
+}
+
+/// One kill and its recovery.
+#[derive(Debug, Clone, Serialize)]
+pub struct Kill {
+    /// The unit killed.
+    pub target: String,
+    /// Real seconds since the run's first kill was armed.
+    pub at_s: f64,
+    /// Signal → the new instance registered and (if active) its first run done, ms; `None`
+    /// if that did not happen within 10 s.
+    pub recovery_ms: Option<f64>,
+    /// Cycles the manager completed in that time (the cycles the unit missed).
+    pub cycles_lost: Option<u64>,
+}
+
+/// The killer thread of one run.
+pub struct Killer {
+    stop: Arc<AtomicBool>,
+    kills: Arc<Mutex<Vec<Kill>>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// A registered unit on the board: slot, name, pid, active.
+fn units(board: &Board) -> Vec<(usize, String, u32, bool)> {
+    (0..MAX_SLOTS)
+        .filter_map(|i| {
+            let s = board.slot(i);
+            if s.state() != SlotState::Ready {
+                return None;
+            }
+            let decl: SkillDecl = postcard::from_bytes(&s.read_decl()).ok()?;
+            Some((
+                i,
+                decl.name,
+                s.pid.load(Ordering::Acquire),
+                s.active.load(Ordering::Acquire) != 0,
+            ))
+        })
+        .collect()
+}
+
+impl Killer {
+    /// Starts killing in `domain` every `every` (real time).
+    pub fn start(domain: &Domain, every: Duration, seed: u64) -> Killer {
+        let stop = Arc::new(AtomicBool::new(false));
+        let kills = Arc::new(Mutex::new(Vec::new()));
+        let (st, ks, domain) = (stop.clone(), kills.clone(), domain.clone());
+        let thread = std::thread::spawn(move || {
+            let mut rng = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+            let armed = Instant::now();
+            let mut next = armed + every;
+            while !st.load(Ordering::Acquire) {
+                if Instant::now() < next {
+                    std::thread::sleep(Duration::from_millis(5));
+                    continue;
+                }
+                next += every;
+                let Ok(board) = Board::open(&domain.prefix()) else {
+                    continue;
+                };
+                // Only processes that still run (one killed a moment ago may still be listed).
+                let list: Vec<_> = units(&board)
+                    .into_iter()
+                    .filter(|u| skillfab_proto::board::pid_alive(u.2))
+                    .collect();
+                if list.is_empty() {
+                    continue;
+                }
+                // xorshift64: a reproducible choice per seed.
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                let (_, name, pid, active) = list[(rng % list.len() as u64) as usize].clone();
+                let k0 = board.header().cycle.load(Ordering::Acquire);
+                let killed_at = Instant::now();
+                if nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(pid as i32),
+                    nix::sys::signal::Signal::SIGKILL,
+                )
+                .is_err()
+                {
+                    continue;
+                }
+                tracing::info!(target = %name, pid, "fault: killed");
+                let mut kill = Kill {
+                    target: name.clone(),
+                    at_s: killed_at.duration_since(armed).as_secs_f64(),
+                    recovery_ms: None,
+                    cycles_lost: None,
+                };
+                let deadline = killed_at + Duration::from_secs(10);
+                while Instant::now() < deadline && !st.load(Ordering::Acquire) {
+                    let back = units(&board).into_iter().find(|(s, n, p, _)| {
+                        *n == name
+                            && *p != pid
+                            && (!active || board.slot(*s).runs.load(Ordering::Acquire) > 0)
+                    });
+                    if back.is_some() {
+                        kill.recovery_ms = Some(killed_at.elapsed().as_secs_f64() * 1000.0);
+                        kill.cycles_lost = Some(
+                            board
+                                .header()
+                                .cycle
+                                .load(Ordering::Acquire)
+                                .saturating_sub(k0),
+                        );
+                        break;
+                    }
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                if let Ok(mut k) = ks.lock() {
+                    k.push(kill);
+                }
+            }
+        });
+        Killer {
+            stop,
+            kills,
+            thread: Some(thread),
+        }
+    }
+
+    /// Stops killing; the kills so far.
+    pub fn finish(mut self) -> Vec<Kill> {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        self.kills.lock().map(|k| k.clone()).unwrap_or_default()
+    }
+}
+
+impl Drop for Killer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}

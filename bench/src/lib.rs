@@ -17,6 +17,7 @@ pub mod dora;
 pub mod floors;
 pub mod futex;
 pub mod report;
+pub mod soak;
 
 use skillfab_client::Client;
 use skillfab_proto::board::Board;

@@ -352,4 +352,82 @@ mod tests {
             .unwrap_err();
         assert!(e.to_string().contains("twice"), "{e}");
     }
+
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        /// A launch file that LaunchFile's own serializer writes from arbitrary entries.
+        fn entry() -> impl Strategy<Value = ProcessEntry> {
+            (
+                "[a-z][a-z0-9_]{0,12}",
+                proptest::collection::btree_map("[a-z]{1,6}", -1000i64..1000, 0..3),
+                proptest::option::of(any::<bool>()),
+                proptest::option::of(-20i32..20),
+                prop_oneof![Just(Restart::Never), Just(Restart::OnFailure), Just(Restart::Always)],
+                proptest::collection::vec("[a-z0-9=./-]{0,10}", 0..3),
+            )
+                .prop_map(|(name, params, active, priority, restart, args)| ProcessEntry {
+                    name,
+                    bin: "/bin/sh".into(),
+                    params: params
+                        .into_iter()
+                        .map(|(k, v)| (k, toml::Value::Integer(v)))
+                        .collect(),
+                    active,
+                    priority,
+                    restart,
+                    args,
+                    ..ProcessEntry::default()
+                })
+        }
+
+        proptest! {
+            /// Any text: an error or a launch, never a panic; an error names the file.
+            #[test]
+            fn any_text_parses_or_is_refused_with_the_file_named(text in "\\PC{0,400}") {
+                if let Err(e) = parse(&text) {
+                    prop_assert!(e.to_string().contains("t.toml"), "{}", e);
+                }
+            }
+
+            /// Text that is almost a launch file (fragments of its keys and values, shuffled).
+            #[test]
+            fn launch_like_fragments_never_panic(parts in proptest::collection::vec(
+                prop_oneof![
+                    Just("[manager]\n"), Just("[[process]]\n"), Just("name = \"a\"\n"),
+                    Just("bin = \"/bin/sh\"\n"), Just("period_ms = 5\n"), Just("period_ms = -1\n"),
+                    Just("params = { g = 1.5 }\n"), Just("restart = \"sometimes\"\n"),
+                    Just("priority = 99999999999\n"), Just("active = \"yes\"\n"), Just("= =\n"),
+                    Just("registers = false\n"), Just("args = [1, 2]\n"), Just("deadline_ms = nan\n"),
+                ],
+                0..12,
+            )) {
+                let _ = parse(&parts.concat());
+            }
+
+            /// Entries written by the serializer come back with the arguments they ask for.
+            #[test]
+            fn written_entries_become_their_arguments(entries in proptest::collection::vec(entry(), 1..5)) {
+                let mut seen = std::collections::HashSet::new();
+                let entries: Vec<ProcessEntry> =
+                    entries.into_iter().filter(|e| seen.insert(e.name.clone())).collect();
+                let file = LaunchFile { manager: ManagerSection::default(), process: entries.clone() };
+                let text = toml::to_string(&file).unwrap();
+                let launch = parse(&text).unwrap();
+                prop_assert_eq!(launch.processes.len(), entries.len());
+                for (e, p) in entries.iter().zip(&launch.processes) {
+                    prop_assert_eq!(&p.name, &e.name);
+                    prop_assert_eq!(p.restart, e.restart);
+                    prop_assert_eq!(&p.args[..2], &["--name".to_string(), e.name.clone()][..]);
+                    prop_assert_eq!(p.args.contains(&"--inactive".to_string()), e.active == Some(false));
+                    for (k, v) in &e.params {
+                        let arg = format!("{k}={}", v.as_integer().unwrap());
+                        prop_assert!(p.args.contains(&arg), "{} missing in {:?}", arg, p.args);
+                    }
+                    prop_assert!(p.args.ends_with(&e.args));
+                }
+            }
+        }
+    }
 }

@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]
+//! fault-report --soak CYCLES [--json]
 //! ```
 //!
 //! Each scenario is one `skillfab demo exit-lab --runs N --json` with its faults (release
@@ -13,6 +14,11 @@
 //! simulator's ground truth), kills and their recovery (signal → the new instance registered
 //! and, if active, its first run), cycles the killed units missed, and the serial link's
 //! frames, bad frames, garbage bytes and connects.
+//!
+//! `--soak CYCLES` instead runs the hello and the exit-lab networks back to back for that many
+//! cycles each and samples every process of the domain (resident memory, open fds, threads)
+//! and the domain's `/dev/shm` bytes; it reports the slopes after warm-up
+//! ([`skillfab_bench::soak`]).
 
 use serde_json::{Value, json};
 use std::path::PathBuf;
@@ -111,6 +117,46 @@ fn main() -> std::process::ExitCode {
         return std::process::ExitCode::SUCCESS;
     }
     let json_out = args.iter().any(|a| a == "--json");
+    if let Some(n) = arg_value(&args, "--soak") {
+        let Ok(cycles) = n.parse::<u64>() else {
+            eprintln!("fault-report: --soak takes a number of cycles, got '{n}'");
+            return std::process::ExitCode::FAILURE;
+        };
+        let mut out = Vec::new();
+        for network in ["hello", "exit-lab"] {
+            eprintln!("fault-report: soak {network}, {cycles} cycles back to back");
+            match skillfab_bench::soak::soak(network, cycles, std::time::Duration::from_secs(1)) {
+                Ok(s) => out.push(s.json()),
+                Err(e) => {
+                    eprintln!("fault-report: {e}");
+                    return std::process::ExitCode::FAILURE;
+                }
+            }
+        }
+        if json_out {
+            println!("{}", Value::Array(out));
+        } else {
+            println!(
+                "{:<9} {:>9} {:>7} {:>6} {:>28} {:>34}",
+                "network", "cycles", "secs", "procs", "after warm-up rss/fds/thr/shm", "slope per 100k cycles rss/fds/thr/shm"
+            );
+            for s in &out {
+                let a = &s["after_warm_up"];
+                let d = &s["slope_per_100k_cycles"];
+                let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+                println!(
+                    "{:<9} {:>9} {:>7.0} {:>6} {:>28} {:>34}",
+                    s["network"].as_str().unwrap_or(""),
+                    s["cycles"],
+                    f(&s["secs"]),
+                    a["processes"],
+                    format!("{:.0}K/{}/{}/{:.0}K", f(&a["rss_kib"]), a["fds"], a["threads"], f(&a["shm_kib"])),
+                    format!("{:+.1}K/{:+.2}/{:+.2}/{:+.1}K", f(&d["rss_kib"]), f(&d["fds"]), f(&d["threads"]), f(&d["shm_kib"])),
+                );
+            }
+        }
+        return std::process::ExitCode::SUCCESS;
+    }
     let runs = arg_value(&args, "--runs").unwrap_or_else(|| "20".into());
     let tf = arg_value(&args, "--time-factor").unwrap_or_else(|| "4".into());
     let every = arg_value(&args, "--kill-every").unwrap_or_else(|| "5".into());

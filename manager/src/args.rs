@@ -92,6 +92,9 @@ pub struct ManagerArgs {
     /// Do not start cycling until these skills registered (comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub wait_for: Vec<String>,
+    /// Seconds to wait for them before giving up.
+    #[arg(long, default_value_t = 30.0)]
+    pub wait_timeout_s: f64,
 }
 
 /// `up`: start a manager and the processes of a launch file; supervise them.
@@ -114,6 +117,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
         deadline_ms,
         paused,
         wait_for,
+        wait_timeout_s,
     } = args;
     let mut config = ManagerConfig::new(domain);
     if let Some(p) = pace.pace()? {
@@ -123,6 +127,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
     config.paused = paused;
     config.max_cycles = pace.cycles;
     config.wait_for = wait_for;
+    config.wait_timeout = Duration::from_secs_f64(wait_timeout_s.max(0.0));
     config.param_log = pace.param_log.clone();
     let mut manager = Manager::new(config).context("starting the manager")?;
     let report = manager.run(&|_| false);
@@ -133,15 +138,15 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
 /// Runs a launch file: a manager plus its supervised processes; prints the manager's report.
 pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
     let launch = Launch::load(&args.launch)?;
-    let report = up(UpOptions {
+    up(UpOptions {
         launch,
         domain,
         cycles: args.pace.cycles,
         pace: args.pace.pace()?,
         wait_timeout: Duration::from_secs_f64(args.wait_timeout_s.max(0.0)),
         param_log: args.pace.param_log.clone(),
-    })?;
-    print_report(&report, args.pace.json)
+        json: args.pace.json,
+    })
 }
 
 fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {

@@ -364,21 +364,27 @@ mod tests {
                 proptest::collection::btree_map("[a-z]{1,6}", -1000i64..1000, 0..3),
                 proptest::option::of(any::<bool>()),
                 proptest::option::of(-20i32..20),
-                prop_oneof![Just(Restart::Never), Just(Restart::OnFailure), Just(Restart::Always)],
+                prop_oneof![
+                    Just(Restart::Never),
+                    Just(Restart::OnFailure),
+                    Just(Restart::Always)
+                ],
                 proptest::collection::vec("[a-z0-9=./-]{0,10}", 0..3),
             )
-                .prop_map(|(name, params, active, priority, restart, args)| ProcessEntry {
-                    name,
-                    bin: "/bin/sh".into(),
-                    params: params
-                        .into_iter()
-                        .map(|(k, v)| (k, toml::Value::Integer(v)))
-                        .collect(),
-                    active,
-                    priority,
-                    restart,
-                    args,
-                    ..ProcessEntry::default()
+                .prop_map(|(name, params, active, priority, restart, args)| {
+                    ProcessEntry {
+                        name,
+                        bin: "/bin/sh".into(),
+                        params: params
+                            .into_iter()
+                            .map(|(k, v)| (k, toml::Value::Integer(v)))
+                            .collect(),
+                        active,
+                        priority,
+                        restart,
+                        args,
+                        ..ProcessEntry::default()
+                    }
                 })
         }
 

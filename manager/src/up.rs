@@ -6,13 +6,13 @@
 //! child gets SIGTERM, then SIGKILL after a grace period; finally, when no process of the
 //! domain is left, the manager removes its shared-memory files.
 
-use crate::engine::{Manager, ManagerConfig, Pace};
+use crate::engine::Pace;
 use crate::launch::{Launch, ProcessSpec, Restart};
-use crate::stats::Report;
-use anyhow::{Context, bail};
+use anyhow::Context;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use skillfab_proto::domain::{DOMAIN_ENV, Domain};
+use skillfab_proto::services;
 use std::os::fd::AsFd;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
@@ -45,6 +45,8 @@ pub struct UpOptions {
     pub wait_timeout: Duration,
     /// The fabric log file (`None`: the default, see [`crate::engine::default_log_path`]).
     pub param_log: Option<std::path::PathBuf>,
+    /// The manager prints its report as JSON.
+    pub json: bool,
 }
 
 struct Supervised {
@@ -260,45 +262,205 @@ fn terminate_all(list: &mut [Supervised]) {
     }
 }
 
-/// Runs `skillfab up` until Ctrl-C/SIGTERM or `cycles`; returns the report.
-pub fn up(opts: UpOptions) -> anyhow::Result<Report> {
-    let mut config = ManagerConfig::new(opts.domain.clone());
-    if let Some(p) = opts.launch.period {
-        config.pace = if p.is_zero() {
+/// How many times in a row a crashed manager is restarted before `up` gives up (the count
+/// starts anew after [`STABLE`] of running, as for any child).
+const MANAGER_RESTARTS: u32 = 20;
+
+/// The arguments of the manager's own process: `skillfab-manager manager …` with the launch
+/// file's pacing and the flags `up` was given. `restart` > 0 names a fresh fabric log file
+/// when one was given (a file is never written by two managers).
+fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
+    let mut a: Vec<String> = vec![
+        "manager".into(),
+        "--domain".into(),
+        opts.domain.name().into(),
+    ];
+    let pace = opts.pace.or(opts.launch.period.map(|p| {
+        if p.is_zero() {
             Pace::FreeRun
         } else {
             Pace::Period(p)
-        };
+        }
+    }));
+    match pace {
+        Some(Pace::FreeRun) => a.push("--free-run".into()),
+        Some(Pace::Period(p)) => a.extend(["--period-ms".into(), ms(p)]),
+        None => {}
     }
-    if let Some(p) = opts.pace {
-        config.pace = p;
+    if let Some(d) = opts.launch.deadline {
+        a.extend(["--deadline-ms".into(), ms(d)]);
     }
-    config.deadline = opts.launch.deadline;
-    config.max_cycles = opts.cycles;
-    config.wait_timeout = opts.wait_timeout;
-    config.param_log = opts.param_log.clone();
-    config.wait_for = opts
+    if let Some(n) = opts.cycles {
+        a.extend(["--cycles".into(), n.to_string()]);
+    }
+    let wait_for: Vec<&str> = opts
         .launch
         .processes
         .iter()
         .filter(|p| p.registers)
-        .map(|p| p.name.clone())
+        .map(|p| p.name.as_str())
         .collect();
-    let mut manager = Manager::new(config).context("starting the manager")?;
+    if !wait_for.is_empty() {
+        a.extend(["--wait-for".into(), wait_for.join(",")]);
+    }
+    a.extend([
+        "--wait-timeout-s".into(),
+        opts.wait_timeout.as_secs_f64().to_string(),
+    ]);
+    if let Some(f) = &opts.param_log {
+        let f = if restart == 0 {
+            f.clone()
+        } else {
+            let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned());
+            let ext = f.extension().map(|e| format!(".{}", e.to_string_lossy()));
+            f.with_file_name(format!(
+                "{}-restart{restart}{}",
+                stem.unwrap_or_default(),
+                ext.unwrap_or_default()
+            ))
+        };
+        a.extend(["--param-log".into(), f.to_string_lossy().into_owned()]);
+    }
+    if opts.json {
+        a.push("--json".into());
+    }
+    a
+}
+
+fn ms(d: Duration) -> String {
+    (d.as_secs_f64() * 1000.0).to_string()
+}
+
+/// Starts the manager's process: in its own process group, with SIGTERM when `up` dies; its
+/// stdout is ours (the report).
+fn spawn_manager(opts: &UpOptions, restart: u32) -> anyhow::Result<Child> {
+    let exe = std::env::current_exe().context("finding skillfab-manager")?;
+    let mut cmd = Command::new(exe);
+    cmd.args(manager_args(opts, restart))
+        .env_remove(DOMAIN_ENV)
+        .stdin(Stdio::null());
+    let parent = nix::unistd::getpid();
+    // SAFETY: only async-signal-safe system calls run between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            let _ = nix::unistd::setpgid(Pid::from_raw(0), Pid::from_raw(0));
+            let _ = nix::sys::prctl::set_pdeathsig(Signal::SIGTERM);
+            if nix::unistd::getppid() != parent {
+                return Err(std::io::Error::other("parent exited"));
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn().context("starting the manager")
+}
+
+/// Whether a manager's exit was a crash to recover from (killed by a signal, or a panic),
+/// not an answer (done, stopped, or refused with an error it printed).
+fn crashed(status: std::process::ExitStatus) -> bool {
+    use std::os::unix::process::ExitStatusExt;
+    status.signal().is_some() || status.code() == Some(101)
+}
+
+/// Sends `signal` to a child's process group and waits for it (SIGKILL after [`GRACE`]).
+fn stop_child(child: &mut Child, signal: Signal) -> Option<std::process::ExitStatus> {
+    if let Some(g) = group(child) {
+        let _ = kill(g, signal);
+    }
+    let deadline = Instant::now() + GRACE;
+    loop {
+        match child.try_wait() {
+            Ok(Some(s)) => return Some(s),
+            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(5)),
+            _ => {
+                if let Some(g) = group(child) {
+                    let _ = kill(g, Signal::SIGKILL);
+                }
+                return child.wait().ok();
+            }
+        }
+    }
+}
+
+/// Runs `skillfab up` until Ctrl-C/SIGTERM or the manager's cycle budget is spent.
+///
+/// The manager is a process of its own, like the skills: a crashed manager (killed, or a
+/// panic) is started again at once. It takes over the board and the state file its
+/// predecessor left (see `engine::state`), the skills register with it again and get their
+/// state back. The manager prints the report when it ends; `up` then stops the other
+/// processes and, once none of the domain's processes is left, removes its files.
+pub fn up(opts: UpOptions) -> anyhow::Result<()> {
+    // Installs the SIGINT/SIGTERM handler before any child exists.
+    let mut terminated = services::termination_requested();
     let supervisor = Supervisor::start(opts.launch.processes.clone(), opts.domain.clone());
-    let result = manager.run(&|cycles| cycles == 0 && !supervisor.given_up().is_empty());
-    let given_up = supervisor.given_up();
-    supervisor.stop();
-    let cycles = manager.cycle();
-    if !manager.shutdown() {
-        tracing::info!(domain = %opts.domain, "other processes still use the domain; its files stay");
+    let mut manager = spawn_manager(&opts, 0)?;
+    let (mut restarts, mut since) = (0u32, Instant::now());
+    let mut failure = None;
+    loop {
+        terminated = terminated || services::termination_requested();
+        if terminated {
+            // The skills first (the manager sees them leave), then the manager.
+            supervisor.stop();
+            stop_child(&mut manager, Signal::SIGTERM);
+            break;
+        }
+        match manager.try_wait() {
+            Ok(None) => {}
+            Ok(Some(status)) if crashed(status) => {
+                if since.elapsed() >= STABLE {
+                    restarts = 0;
+                }
+                if restarts >= MANAGER_RESTARTS {
+                    failure = Some(anyhow::anyhow!(
+                        "the manager crashed {restarts} times in a row ({status}); giving up"
+                    ));
+                    supervisor.stop();
+                    break;
+                }
+                restarts += 1;
+                tracing::warn!(%status, restarts, "manager crashed; restarting it");
+                manager = spawn_manager(&opts, restarts)?;
+                since = Instant::now();
+                continue;
+            }
+            Ok(Some(status)) => {
+                if !status.success() {
+                    failure = Some(anyhow::anyhow!("the manager exited with {status}"));
+                }
+                supervisor.stop();
+                break;
+            }
+            Err(e) => {
+                failure = Some(anyhow::Error::from(e).context("watching the manager"));
+                supervisor.stop();
+                stop_child(&mut manager, Signal::SIGTERM);
+                break;
+            }
+        }
+        let given_up = supervisor.given_up();
+        if !given_up.is_empty() && cycles_done(&opts.domain) == 0 {
+            supervisor.stop();
+            stop_child(&mut manager, Signal::SIGTERM);
+            failure = Some(anyhow::anyhow!(
+                "processes exited before the fabric started: {}",
+                given_up.join(", ")
+            ));
+            break;
+        }
+        std::thread::sleep(POLL);
     }
-    let report = result.context("running the manager")?;
-    if cycles == 0 && !given_up.is_empty() {
-        bail!(
-            "processes exited before the fabric started: {}",
-            given_up.join(", ")
-        );
+    match skillfab_proto::clean::clean(&opts.domain) {
+        Ok(c) if !c.alive.is_empty() => {
+            tracing::info!(domain = %opts.domain, "other processes still use the domain; its files stay")
+        }
+        Ok(_) => {}
+        Err(e) => tracing::warn!(domain = %opts.domain, error = %e, "domain not cleaned"),
     }
-    Ok(report)
+    failure.map_or(Ok(()), Err)
+}
+
+/// Cycles the domain's manager has run (0 before it starts cycling, or with no board).
+fn cycles_done(domain: &Domain) -> u64 {
+    skillfab_proto::board::Board::open(&domain.prefix()).map_or(0, |b| {
+        b.header().cycle.load(std::sync::atomic::Ordering::Acquire)
+    })
 }

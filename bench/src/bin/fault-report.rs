@@ -138,7 +138,12 @@ fn main() -> std::process::ExitCode {
         } else {
             println!(
                 "{:<9} {:>9} {:>7} {:>6} {:>28} {:>34}",
-                "network", "cycles", "secs", "procs", "after warm-up rss/fds/thr/shm", "slope per 100k cycles rss/fds/thr/shm"
+                "network",
+                "cycles",
+                "secs",
+                "procs",
+                "after warm-up rss/fds/thr/shm",
+                "slope per 100k cycles rss/fds/thr/shm"
             );
             for s in &out {
                 let a = &s["after_warm_up"];
@@ -150,8 +155,20 @@ fn main() -> std::process::ExitCode {
                     s["cycles"],
                     f(&s["secs"]),
                     a["processes"],
-                    format!("{:.0}K/{}/{}/{:.0}K", f(&a["rss_kib"]), a["fds"], a["threads"], f(&a["shm_kib"])),
-                    format!("{:+.1}K/{:+.2}/{:+.2}/{:+.1}K", f(&d["rss_kib"]), f(&d["fds"]), f(&d["threads"]), f(&d["shm_kib"])),
+                    format!(
+                        "{:.0}K/{}/{}/{:.0}K",
+                        f(&a["rss_kib"]),
+                        a["fds"],
+                        a["threads"],
+                        f(&a["shm_kib"])
+                    ),
+                    format!(
+                        "{:+.1}K/{:+.2}/{:+.2}/{:+.1}K",
+                        f(&d["rss_kib"]),
+                        f(&d["fds"]),
+                        f(&d["threads"]),
+                        f(&d["shm_kib"])
+                    ),
                 );
             }
         }

@@ -386,6 +386,8 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         Killer::start(
             &net.domain,
             Duration::from_secs_f64(every / opts.time_factor),
+            // The manager's period: 10 ms of simulated time.
+            Duration::from_secs_f64(0.01 / opts.time_factor),
             opts.faults.seed ^ seed,
         )
     });

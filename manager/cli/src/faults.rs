@@ -1,10 +1,12 @@
 //! Faults injected into a run of the exit-lab demo (`--kill-every`, `--corrupt-rate`,
 //! `--drop-rate`), and what they cost: the `fault-report` benchmark runs the demo with them.
 //!
-//! The killer takes a registered unit of the fabric at random — the device process or a skill —
-//! every `kill_every_s` simulated seconds and sends it SIGKILL; `skillfab up` restarts it by
-//! its launch entry, and the killer times the recovery: the signal → the new instance
-//! registered and, if it is active, its first run done (read on the cycle board).
+//! The killer takes a process of the fabric at random — the manager, the device process or a
+//! skill — every `kill_every_s` simulated seconds and sends it SIGKILL; `skillfab up` restarts
+//! it (the manager always, the others by their launch entries), and the killer times the
+//! recovery, read on the cycle board: for a unit, the signal → the new instance registered and,
+//! if it is active, its first run done; for the manager, the signal → a new manager's first
+//! cycle with every unit that was registered back.
 
 use serde::Serialize;
 use skillfab_proto::board::{Board, MAX_SLOTS, SlotState};
@@ -42,6 +44,23 @@ pub struct Kill {
     pub cycles_lost: Option<u64>,
 }
 
+/// The manager's place in the killer's list (not a board slot).
+const MANAGER: usize = usize::MAX;
+const MANAGER_NAME: &str = "manager";
+
+/// Whether a manager other than `dead` runs in `domain`, has cycled past `k0` and has every
+/// unit of `names` registered again; the cycles since `k0` if so.
+fn manager_back(domain: &Domain, dead: u32, k0: u64, names: &[String]) -> Option<u64> {
+    let board = Board::open(&domain.prefix()).ok()?;
+    let h = board.header();
+    if !board.manager_alive() || h.manager_pid.load(Ordering::Acquire) == dead {
+        return None;
+    }
+    let k = h.cycle.load(Ordering::Acquire);
+    let registered: Vec<String> = units(&board).into_iter().map(|u| u.1).collect();
+    (k > k0 && names.iter().all(|n| registered.contains(n))).then_some(k - k0)
+}
+
 /// The killer thread of one run.
 pub struct Killer {
     stop: Arc<AtomicBool>,
@@ -70,7 +89,7 @@ fn units(board: &Board) -> Vec<(usize, String, u32, bool)> {
 
 impl Killer {
     /// Starts killing in `domain` every `every` (real time).
-    pub fn start(domain: &Domain, every: Duration, seed: u64) -> Killer {
+    pub fn start(domain: &Domain, every: Duration, period: Duration, seed: u64) -> Killer {
         let stop = Arc::new(AtomicBool::new(false));
         let kills = Arc::new(Mutex::new(Vec::new()));
         let (st, ks, domain) = (stop.clone(), kills.clone(), domain.clone());
@@ -88,10 +107,15 @@ impl Killer {
                     continue;
                 };
                 // Only processes that still run (one killed a moment ago may still be listed).
-                let list: Vec<_> = units(&board)
+                let mut list: Vec<_> = units(&board)
                     .into_iter()
                     .filter(|u| skillfab_proto::board::pid_alive(u.2))
                     .collect();
+                let unit_names: Vec<String> = list.iter().map(|u| u.1.clone()).collect();
+                if board.manager_alive() {
+                    let pid = board.header().manager_pid.load(Ordering::Acquire);
+                    list.push((MANAGER, MANAGER_NAME.to_string(), pid, true));
+                }
                 if list.is_empty() {
                     continue;
                 }
@@ -99,7 +123,7 @@ impl Killer {
                 rng ^= rng << 13;
                 rng ^= rng >> 7;
                 rng ^= rng << 17;
-                let (_, name, pid, active) = list[(rng % list.len() as u64) as usize].clone();
+                let (slot, name, pid, active) = list[(rng % list.len() as u64) as usize].clone();
                 let k0 = board.header().cycle.load(Ordering::Acquire);
                 let killed_at = Instant::now();
                 if nix::sys::signal::kill(
@@ -119,20 +143,34 @@ impl Killer {
                 };
                 let deadline = killed_at + Duration::from_secs(10);
                 while Instant::now() < deadline && !st.load(Ordering::Acquire) {
-                    let back = units(&board).into_iter().find(|(s, n, p, _)| {
-                        *n == name
-                            && *p != pid
-                            && (!active || board.slot(*s).runs.load(Ordering::Acquire) > 0)
-                    });
-                    if back.is_some() {
-                        kill.recovery_ms = Some(killed_at.elapsed().as_secs_f64() * 1000.0);
-                        kill.cycles_lost = Some(
-                            board
-                                .header()
-                                .cycle
-                                .load(Ordering::Acquire)
-                                .saturating_sub(k0),
-                        );
+                    let back = if slot == MANAGER {
+                        manager_back(&domain, pid, k0, &unit_names)
+                    } else {
+                        units(&board)
+                            .into_iter()
+                            .find(|(s, n, p, _)| {
+                                *n == name
+                                    && *p != pid
+                                    && (!active || board.slot(*s).runs.load(Ordering::Acquire) > 0)
+                            })
+                            .map(|_| {
+                                board
+                                    .header()
+                                    .cycle
+                                    .load(Ordering::Acquire)
+                                    .saturating_sub(k0)
+                            })
+                    };
+                    if let Some(cycles) = back {
+                        let elapsed = killed_at.elapsed();
+                        kill.recovery_ms = Some(elapsed.as_secs_f64() * 1000.0);
+                        // A unit misses the cycles run without it; while the manager is away
+                        // no cycle runs: those due in that time are lost.
+                        kill.cycles_lost = Some(if slot == MANAGER {
+                            (elapsed.as_secs_f64() / period.as_secs_f64()) as u64
+                        } else {
+                            cycles
+                        });
                         break;
                     }
                     std::thread::sleep(Duration::from_millis(1));

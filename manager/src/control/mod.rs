@@ -113,7 +113,7 @@ impl ControlPlane {
 
     /// Carries out every request that arrived.
     pub fn serve(&mut self, m: &mut Manager) {
-        let mut answered = false;
+        let mut answers = Vec::new();
         while let Ok(inc) = self.from_clients.try_recv() {
             let response = match inc.request {
                 Err(e) => Err(e),
@@ -128,16 +128,22 @@ impl ControlPlane {
             if let Err(e) = &response {
                 tracing::info!(client = inc.client.as_deref().unwrap_or("?"), error = %e, "request refused");
             }
-            let _ = self.to_clients.send(Outgoing::Answer {
+            answers.push(Outgoing::Answer {
                 id: inc.id,
                 client: inc.client,
                 response,
             });
-            answered = true;
         }
-        if answered {
-            let _ = self.poke.notify();
+        if answers.is_empty() {
+            return;
         }
+        // What a client was told is done is in the state file before it is told: a manager
+        // killed right after the answer comes back with it.
+        m.save_state_if_changed();
+        for a in answers {
+            let _ = self.to_clients.send(a);
+        }
+        let _ = self.poke.notify();
     }
 
     /// Hands queued events and finished `step` answers to the control thread.
@@ -181,6 +187,7 @@ impl ControlPlane {
         m.monitors
             .retain(|mon| client_pid(&mon.client).is_none_or(pid_alive));
         if m.monitors.len() != before {
+            m.state_check = true;
             tracing::info!(
                 removed = before - m.monitors.len(),
                 "monitors of departed clients removed"
@@ -227,6 +234,8 @@ impl Manager {
 
     /// Carries out one request.
     pub(crate) fn handle(&mut self, client: &str, request: Request) -> Response {
+        // Most requests change nothing; the state file is rewritten only if its bytes differ.
+        self.state_check = true;
         match request {
             Request::List => Ok(Reply::Skills(self.list())),
             Request::Activate(names) => self.set_active(&names, true),

@@ -8,7 +8,7 @@ use skillfab_proto::control::MonitorMode;
 
 impl Manager {
     /// Parses and type-checks a monitor expression against the outputs it reads; installs it.
-    pub(super) fn add_monitor(
+    pub(crate) fn add_monitor(
         &mut self,
         client: &str,
         expr: String,

@@ -17,6 +17,7 @@ mod cycle;
 mod observe;
 mod registry;
 mod skills;
+mod state;
 
 use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
@@ -219,6 +220,10 @@ pub struct Manager {
     pub(crate) recorder: Option<Recorder>,
     /// Skills whose samples are logged, with their ports.
     pub(crate) io_log: HashMap<String, Vec<IoPort>>,
+    /// A request or a registration may have changed what the state file holds.
+    pub(crate) state_check: bool,
+    /// The state file's bytes as last written.
+    state_written: Vec<u8>,
 }
 
 /// A port whose samples go to the fabric log.
@@ -250,6 +255,8 @@ impl Manager {
         let node = services::node(&config.domain, "skillfab-manager")?;
         // The control server exists before the board announces the manager to clients.
         let control = ControlPlane::new(&config.domain, &node)?;
+        // A predecessor that died: its skills are told at once, and cycles number on.
+        let previous_cycle = Board::retire_dead(&config.domain.prefix());
         let board = Board::create(&config.domain.prefix())?;
         let now = Instant::now();
         let log_path = config
@@ -270,7 +277,8 @@ impl Manager {
                 None
             }
         };
-        Ok(Manager {
+        let saved = state::Saved::load(&config.domain);
+        let mut manager = Manager {
             paused: config.paused,
             config,
             board,
@@ -278,7 +286,7 @@ impl Manager {
             skills: Skills::new(),
             plan: Plan::default(),
             dirty: true,
-            cycle: 0,
+            cycle: previous_cycle.unwrap_or(0),
             running: None,
             next_start: now,
             stop_at: None,
@@ -297,7 +305,13 @@ impl Manager {
             deaths: 0,
             last_liveness: now,
             last_node_sweep: now,
-        })
+            state_check: false,
+            state_written: Vec::new(),
+        };
+        if let Some(saved) = saved {
+            manager.restore_state(saved);
+        }
+        Ok(manager)
     }
 
     /// Runs until SIGINT/SIGTERM, until `stop(cycles_done)` returns true, or until
@@ -330,6 +344,7 @@ impl Manager {
                 control.forget_dead_clients(self);
             }
             control.serve(self);
+            self.save_state_if_changed();
             self.advance()?;
             control.flush(self);
             self.stats.add_work(thread_cpu_ns().saturating_sub(awake));

@@ -143,6 +143,8 @@ impl Manager {
                 });
             }
         }
+        let before = self.monitors.len();
         self.monitors.retain(|m| !m.spent());
+        self.state_check |= self.monitors.len() != before;
     }
 }

@@ -134,6 +134,7 @@ impl Manager {
                 device: name.clone(),
             });
         }
+        self.state_check = true;
         self.outbox.push(EventKind::SkillRegistered {
             skill: name.clone(),
             pid,

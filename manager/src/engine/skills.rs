@@ -6,10 +6,10 @@ use super::Entry;
 use skillfab_proto::board::MAX_SLOTS;
 use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::param::ParamValue;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// What clients set for a skill, kept by name across restarts of its process.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub(crate) struct Kept {
     /// Activation, once a client changed it.
     pub(crate) active: Option<bool>,
@@ -95,6 +95,24 @@ impl Skills {
     /// What clients set for `name`, if anything.
     pub(crate) fn kept(&self, name: &str) -> Option<&Kept> {
         self.kept.get(name)
+    }
+
+    /// What clients set and the last declarations, by name, for the state file.
+    pub(crate) fn saved(&self) -> (BTreeMap<String, Kept>, BTreeMap<String, SkillDecl>) {
+        let kept = self.kept.iter().map(|(k, v)| (k.clone(), v.clone()));
+        let last = self.last.iter().map(|(k, v)| (k.clone(), v.clone()));
+        (kept.collect(), last.collect())
+    }
+
+    /// Takes over a previous manager's: every name in `last` registers as a restart and gets
+    /// what `kept` holds for it.
+    pub(crate) fn restore(
+        &mut self,
+        kept: BTreeMap<String, Kept>,
+        last: BTreeMap<String, SkillDecl>,
+    ) {
+        self.kept.extend(kept);
+        self.last.extend(last);
     }
 
     /// Takes the skill out of slot `s`.

@@ -75,6 +75,9 @@ pub struct CycleTimes {
     pub round_trip_us: Vec<f32>,
 }
 
+/// A request sent, its answer awaited.
+type Pending = iceoryx2::pending_response::PendingResponse<ipc::Service, [u8], (), [u8], ()>;
+
 /// The events subscriber and the listener woken after each publication.
 type EventsPort = (Subscriber<ipc::Service, [u8], ()>, Listener<ipc::Service>);
 
@@ -151,20 +154,15 @@ impl Client {
         self.timeout = timeout;
     }
 
-    /// Sends a request and waits for the answer.
+    /// Sends a request and waits for the answer. A manager that dies before it answers and is
+    /// replaced (`skillfab up` restarts it) is asked again: the new one has the state the old
+    /// one saved, so a request it already carried out is carried out once more, to the same
+    /// effect — except `monitor`, which then installs a second monitor.
     pub fn request(&self, request: &Request) -> Result<Reply, ClientError> {
         let bytes = control::encode_request(&self.id, request)
             .map_err(|e| ClientError::Decode(e.to_string()))?;
-        let pending = self
-            .port
-            .loan_slice_uninit(bytes.len())
-            .map_err(|e| sdk("loan request", e))?
-            .write_from_slice(&bytes)
-            .send()
-            .map_err(|e| sdk("send request", e))?;
-        self.wake
-            .notify()
-            .map_err(|e| sdk("wake the control plane", e))?;
+        let mut serving = self.manager_pid();
+        let mut pending = self.send(&bytes)?;
         let patient = matches!(request, Request::Step(_));
         let start = Instant::now();
         // Poll often at first: the answer usually comes within a cycle, and the manager
@@ -181,14 +179,44 @@ impl Client {
             }
             let _ = self.answers.timed_wait(|_| {}, nap);
             nap = (nap * 2).min(Duration::from_millis(100));
-            if start.elapsed() > Duration::from_secs(1) && !self.manager_alive() {
-                return Err(ClientError::NoManager(self.domain.name().to_string()));
+            if nap < Duration::from_millis(100) {
+                continue;
+            }
+            // No answer for a while: is it still the manager that was asked?
+            match self.manager_pid() {
+                Some(pid) if Some(pid) != serving => {
+                    serving = Some(pid);
+                    pending = self.send(&bytes)?;
+                }
+                None if start.elapsed() > Duration::from_secs(1) => {
+                    return Err(ClientError::NoManager(self.domain.name().to_string()));
+                }
+                _ => {}
             }
         }
     }
 
-    fn manager_alive(&self) -> bool {
-        Board::open(&self.domain.prefix()).is_ok_and(|b| b.manager_alive())
+    /// Sends an encoded request and wakes the control plane.
+    fn send(&self, bytes: &[u8]) -> Result<Pending, ClientError> {
+        let pending = self
+            .port
+            .loan_slice_uninit(bytes.len())
+            .map_err(|e| sdk("loan request", e))?
+            .write_from_slice(bytes)
+            .send()
+            .map_err(|e| sdk("send request", e))?;
+        self.wake
+            .notify()
+            .map_err(|e| sdk("wake the control plane", e))?;
+        Ok(pending)
+    }
+
+    /// The process id of the domain's running manager.
+    fn manager_pid(&self) -> Option<u32> {
+        Board::open(&self.domain.prefix())
+            .ok()
+            .filter(Board::manager_alive)
+            .map(|b| b.header().manager_pid.load(Ordering::Acquire))
     }
 
     fn done(&self, request: Request) -> Result<(), ClientError> {

@@ -262,6 +262,29 @@ impl Board {
         Ok(board)
     }
 
+    /// Retires the board a manager that died left behind, before a new manager creates its
+    /// own: marks it closed and rings every slot, so its skills notice at once (not at their
+    /// next liveness tick) and register with the new board. Returns the last cycle it ran, so
+    /// the new manager numbers on from there; `None` if there is no such board (none, or its
+    /// manager is alive).
+    pub fn retire_dead(prefix: &str) -> Option<u64> {
+        let old = Board::open(prefix).ok()?;
+        let h = old.header();
+        if pid_alive(h.manager_pid.load(Ordering::Acquire)) {
+            return None;
+        }
+        let cycle = h.cycle.load(Ordering::Acquire);
+        old.close();
+        old.ring(u64::MAX);
+        Some(cycle)
+    }
+
+    /// Whether the board is still open (one atomic load: cheap enough for every wake-up; a
+    /// closed board means its manager left or was replaced).
+    pub fn is_open(&self) -> bool {
+        self.header().open.load(Ordering::Acquire) == 1
+    }
+
     /// Opens the board of a domain; fails while no manager has created it.
     pub fn open(prefix: &str) -> Result<Board, Error> {
         let name = crate::names::board(prefix);

@@ -125,7 +125,8 @@ pub(super) fn serve<U: Unit>(
             i.poll()?;
         }
         let now = Instant::now();
-        if now >= next_tick {
+        // A closed board is checked at once: its manager left, or died and was replaced.
+        if now >= next_tick || !board.is_open() {
             next_tick = now + LIVENESS_TICK;
             if !board.manager_alive()
                 || slot.state() != SlotState::Ready

@@ -397,6 +397,83 @@ fn a_restarted_skill_gets_back_what_clients_set_and_monitors_keep_reading_it() {
 }
 
 #[test]
+fn a_killed_manager_comes_back_with_what_clients_set_and_their_monitors() {
+    use skillfab_proto::board::Board;
+    use std::sync::atomic::Ordering;
+    let t = hello("mgrkill");
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+    c.set_param_value("scale", "gain", ParamValue::Float(2.5))
+        .unwrap();
+    c.set_priority("scale", 4).unwrap();
+    c.deactivate(&["smooth"]).unwrap();
+    let id = c
+        .add_monitor("scale.scaled.value > 0", MonitorMode::Every, 1)
+        .unwrap();
+    let old = t.board();
+    let pid = old.header().manager_pid.load(Ordering::Acquire);
+    let before = skillfab_tests::cycle(&old);
+    let killed_at = skillfab_proto::header::now_ns();
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
+
+    // `skillfab up` starts a new manager; its skills register with it again.
+    let new_manager = || {
+        Board::open(&t.domain.prefix()).ok().filter(|b| {
+            b.manager_alive()
+                && b.header().manager_pid.load(Ordering::Acquire) != pid
+                && ["ticker", "scale", "smooth"]
+                    .iter()
+                    .all(|n| skillfab_tests::registered(b, n).is_some())
+        })
+    };
+    t.wait_until("a new manager with the three skills", || {
+        new_manager().is_some()
+    });
+    let board = new_manager().unwrap();
+    t.wait_until("the new manager to cycle", || {
+        skillfab_tests::cycle(&board) > 0
+    });
+    // Cycles number on from where the dead manager was.
+    assert!(skillfab_tests::cycle(&board) > before);
+
+    // The same client, not reconnected, is answered by the new manager, which has the state.
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.5)
+    );
+    t.wait_until("scale back at priority 4 and smooth back inactive", || {
+        let list = c.list().unwrap();
+        let state = |n: &str| list.iter().find(|s| s.name == n).cloned();
+        state("scale").is_some_and(|s| s.priority == 4 && s.state.as_str() == "active")
+            && state("smooth").is_some_and(|s| s.state.as_str() == "inactive")
+    });
+    let monitors = c.monitors().unwrap();
+    assert!(
+        monitors.iter().any(|m| m.id == id && m.client == c.id()),
+        "{monitors:?}"
+    );
+    t.wait_until("scale to compute 2.5 x tick in one cycle", || {
+        let (tick, k1) = c.query("ticker.tick.value").unwrap();
+        let (scaled, k2) = c.query("scale.scaled.value").unwrap();
+        let (Some(tick), Some(scaled)) = (tick.as_f64(), scaled.as_f64()) else {
+            return false;
+        };
+        k1 == k2 && tick > 0.0 && (scaled - 2.5 * tick).abs() < 1e-9
+    });
+    // The client's monitor fires on samples sent after the kill, under its old id.
+    next_matching(
+        &mut c,
+        "the monitor firing after the restart",
+        |k| match k {
+            EventKind::MonitorFired {
+                id: m, stamp_ns, ..
+            } if *m == id && *stamp_ns > killed_at => Some(()),
+            _ => None,
+        },
+    );
+}
+
+#[test]
 fn monitors_go_away_with_their_client() {
     let mut t = hello("owner");
     let m = t.spawn("skillfab", &["ctl", "monitor", "ticker.tick.value < 0"]);

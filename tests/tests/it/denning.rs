@@ -166,6 +166,29 @@ fn a_drive_proposal_moves_the_robot_and_the_robot_watchdog_stops_it() {
 }
 
 #[test]
+fn a_lost_manager_stops_the_robot_and_the_next_manager_drives_it_again() {
+    let mut r = Robot::start("mgrlost", &[]);
+    let manager = 0; // Robot::start spawns the manager first.
+    r.t.spawn("proposer", &["--name", "go", "--param", "translate=0.3"]);
+    r.t.wait_until("the simulated robot to move", || r.truth().2 > 0.1);
+    // No manager, no cycles: the device's command goes stale and it sends stop (500 ms)
+    // while it keeps the link and the robot's watchdog fed.
+    r.t.signal(manager, Signal::SIGKILL);
+    r.t.wait_exit(manager);
+    r.t.wait_until("the device to stop the drive", || r.truth().2 == 0.0);
+    assert!(
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(r.t.pid(r.dev) as i32), None).is_ok(),
+        "the device process outlives its manager"
+    );
+    // A new manager: device and proposer register with it and the robot drives on.
+    r.t.spawn(
+        "skillfab",
+        &["manager", "--period-ms", "20", "--deadline-ms", "2000"],
+    );
+    r.t.wait_until("the robot to move again", || r.truth().2 > 0.1);
+}
+
+#[test]
 fn corrupted_bytes_are_counted_and_data_keeps_flowing() {
     let r = Robot::start("corrupt", &["--corrupt-rate", "0.01", "--seed", "3"]);
     let link = |c: &Client| c.query("denning.link").unwrap().0;

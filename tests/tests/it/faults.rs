@@ -73,7 +73,7 @@ fn a_domain_is_private_to_the_user_who_runs_it() {
 #[test]
 fn clean_keeps_a_live_domain_and_removes_a_dead_ones_files() {
     let mut t = TestDomain::new("clean");
-    t.hello(&[]);
+    let up = t.hello(&[]);
     let board = t.board();
     let out = t.run("skillfab", &["clean", "--json"]);
     assert!(out.status.success());
@@ -84,9 +84,18 @@ fn clean_keeps_a_live_domain_and_removes_a_dead_ones_files() {
     t.wait_until("cycles to go on after clean", || cycle(&board) > k + 10);
     drop(board);
 
-    // Every process of the domain killed at once: nothing removes its files.
+    // Every process of the domain killed at once, and the `skillfab up` that would restart
+    // them: nothing removes its files. (Stopped first, they cannot act on their parent's
+    // death either.)
     let pids = skillfab_proto::clean::live_pids(&t.domain);
     assert!(pids.len() >= 4, "manager and three skills: {pids:?}");
+    for p in &pids {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(*p as i32),
+            nix::sys::signal::Signal::SIGSTOP,
+        );
+    }
+    t.signal(up, nix::sys::signal::Signal::SIGKILL);
     for p in &pids {
         let _ = nix::sys::signal::kill(
             nix::unistd::Pid::from_raw(*p as i32),

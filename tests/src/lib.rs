@@ -52,6 +52,16 @@ pub fn repo_root() -> PathBuf {
         .to_path_buf()
 }
 
+/// A compiler or `make` command that writes its outputs with umask 022 whatever this
+/// process's umask is at the moment it forks: iceoryx2 sets the process-wide umask for an
+/// instant while it creates an event listener, and a compiler started by another test in that
+/// instant would write an executable nobody may run.
+pub fn build_command(program: &str) -> Command {
+    let mut c = Command::new("sh");
+    c.args(["-c", "umask 022 && exec \"$0\" \"$@\"", program]);
+    c
+}
+
 /// Builds the C and C++ example skills and sequencer (`make -C skills`, gcc and g++) next to
 /// the workspace's programs, once per test process; they link to `libskillfab.so` there.
 pub fn build_foreign_examples() {
@@ -67,7 +77,7 @@ pub fn build_foreign_examples() {
                 out.display()
             ));
         }
-        let r = Command::new("make")
+        let r = build_command("make")
             .arg("-C")
             .arg(repo_root().join("skills"))
             .arg(format!("OUT={}", out.display()))

@@ -5,9 +5,10 @@ use super::*;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
+use iceoryx2::prelude::BackpressureStrategy;
 use skillfab_proto::board::{Board, pid_alive};
 use skillfab_proto::control;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 
 /// The control thread's ports: the clients' side of the manager.
 pub(super) struct ClientSide {
@@ -22,17 +23,34 @@ pub(super) struct ClientSide {
     prefix: String,
     /// One notifier per client that asked something: wakes it when its answer is in.
     clients: HashMap<String, Notifier<ipc::Service>>,
-    pending: HashMap<u64, Pending>,
+    /// Requests handed to the engine, by id: the request to answer, and who sent it under
+    /// which number.
+    pending: HashMap<u64, (Pending, Option<(String, u64)>)>,
+    /// The same, by (client, number): a repeat of a request still being carried out takes
+    /// the first one's place (the client waits on the repeat).
+    in_flight: HashMap<(String, u64), u64>,
+    /// The last answers given to each client, by request number, to give again when the
+    /// client asks again (the answer did not reach it) instead of carrying the request out
+    /// twice.
+    answered: HashMap<String, VecDeque<(u64, Vec<u8>)>>,
     next_id: u64,
 }
+
+/// Answers kept per client for repeats: a client waits for each answer before it asks again,
+/// so the last few are all a repeat can be about.
+const ANSWERS_KEPT: usize = 4;
 
 impl ClientSide {
     pub(super) fn open(domain: &Domain) -> Result<ClientSide, SdkError> {
         let node = services::node(domain, "skillfab-control")?;
         let server = services::control_service(&node)?
             .server_builder()
-            .initial_max_slice_len(4096)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(control::MAX_ANSWER_BYTES)
+            .allocation_strategy(AllocationStrategy::Static)
+            // A client whose answer queue is full (it stopped reading) loses that answer; the
+            // default, retrying until it reads, would stall every other client behind it.
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .max_loaned_responses_per_request(1)
             .create()
             .map_err(|e| SdkError::transport("control server", e))?;
         let events = services::events_service(&node)?
@@ -51,6 +69,8 @@ impl ClientSide {
             _node: node,
             clients: HashMap::new(),
             pending: HashMap::new(),
+            in_flight: HashMap::new(),
+            answered: HashMap::new(),
             next_id: 0,
         })
     }
@@ -88,11 +108,29 @@ impl ClientSide {
                 } else {
                     control::decode_request(bytes)
                 };
-                let (client, request_body) = match decoded {
-                    Ok(env) => (Some(env.client), Ok(env.request)),
+                let (from, request_body) = match decoded {
+                    Ok(env) => (Some((env.client, env.seq)), Ok(env.request)),
                     Err(e) => (None, Err(e)),
                 };
-                self.pending.insert(self.next_id, request);
+                if let Some((client, seq)) = &from {
+                    if let Some(bytes) = self
+                        .answered
+                        .get(client)
+                        .and_then(|a| a.iter().find(|(n, _)| n == seq).map(|(_, b)| b.clone()))
+                    {
+                        self.send_answer(&request, Some(client), &bytes);
+                        continue;
+                    }
+                    if let Some(id) = self.in_flight.get(&(client.clone(), *seq))
+                        && let Some(first) = self.pending.get_mut(id)
+                    {
+                        first.0 = request;
+                        continue;
+                    }
+                    self.in_flight.insert((client.clone(), *seq), self.next_id);
+                }
+                let client = from.as_ref().map(|(c, _)| c.clone());
+                self.pending.insert(self.next_id, (request, from));
                 let _ = to_engine.send(Incoming {
                     id: self.next_id,
                     client,
@@ -110,8 +148,17 @@ impl ClientSide {
                         client,
                         response,
                     } => {
-                        if let Some(req) = self.pending.remove(&id) {
-                            self.answer(&req, client.as_deref(), &response);
+                        if let Some((req, from)) = self.pending.remove(&id) {
+                            let bytes = control::encode_response(&response);
+                            self.send_answer(&req, client.as_deref(), &bytes);
+                            if let Some((client, seq)) = from {
+                                self.in_flight.remove(&(client.clone(), seq));
+                                let kept = self.answered.entry(client).or_default();
+                                if kept.len() == ANSWERS_KEPT {
+                                    kept.pop_front();
+                                }
+                                kept.push_back((seq, bytes));
+                            }
                         }
                     }
                     Outgoing::Events(events) => self.publish(&events),
@@ -120,6 +167,8 @@ impl ClientSide {
             if last_sweep.elapsed() > std::time::Duration::from_secs(1) {
                 last_sweep = std::time::Instant::now();
                 self.clients
+                    .retain(|c, _| client_pid(c).is_none_or(pid_alive));
+                self.answered
                     .retain(|c, _| client_pid(c).is_none_or(pid_alive));
             }
         }
@@ -136,7 +185,7 @@ impl ClientSide {
         }
     }
 
-    fn answer(&mut self, request: &Pending, client: Option<&str>, response: &Response) {
+    fn send_answer(&mut self, request: &Pending, client: Option<&str>, bytes: &[u8]) {
         // The client's wake-up service exists while it waits: open it (never create it).
         if let Some(c) = client
             && !self.clients.contains_key(c)
@@ -148,10 +197,9 @@ impl ClientSide {
                 Err(e) => tracing::debug!(client = c, error = %e, "client has no wake-up service"),
             }
         }
-        let bytes = control::encode_response(response);
         let sent = request
             .loan_slice_uninit(bytes.len())
-            .map(|r| r.write_from_slice(&bytes))
+            .map(|r| r.write_from_slice(bytes))
             .map_err(|e| format!("{e:?}"))
             .and_then(|r| r.send().map_err(|e| format!("{e:?}")));
         if let Err(e) = sent {

@@ -33,7 +33,8 @@ use skillfab_proto::domain::Domain;
 use skillfab_proto::param::ParamValue;
 use skillfab_proto::value::Value;
 use skillfab_proto::{names, services};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// Why a control call failed.
@@ -55,6 +56,12 @@ pub enum ClientError {
     /// An answer that does not decode.
     #[error("undecodable answer: {0}")]
     Decode(String),
+    /// Every place on the control plane stayed taken for as long as the client waits.
+    #[error("the manager serves at most {max} clients at once and none left")]
+    Full {
+        /// Clients served at once.
+        max: usize,
+    },
     /// An answer of the wrong kind for the request.
     #[error("unexpected answer: {0}")]
     Unexpected(String),
@@ -75,17 +82,57 @@ pub struct CycleTimes {
     pub round_trip_us: Vec<f32>,
 }
 
+/// The control plane's client port.
+type ControlPort = iceoryx2::port::client::Client<ipc::Service, [u8], (), [u8], ()>;
+
+/// How long a client waits for an answer before it asks again (doubling, at most
+/// [`RETRY_MAX`]). An answer usually comes within a cycle; a repeat costs a new port and is
+/// answered once by the manager whatever happened to the first.
+const RETRY_AFTER: Duration = Duration::from_secs(1);
+const RETRY_MAX: Duration = Duration::from_secs(4);
+
 /// A request sent, its answer awaited.
 type Pending = iceoryx2::pending_response::PendingResponse<ipc::Service, [u8], (), [u8], ()>;
 
 /// The events subscriber and the listener woken after each publication.
 type EventsPort = (Subscriber<ipc::Service, [u8], ()>, Listener<ipc::Service>);
 
+/// A port on the control plane; while its places are all taken ([`services::CONTROL_MAX_CLIENTS`]
+/// clients at once), waits for one until `deadline`.
+fn control_port(node: &Node<ipc::Service>, deadline: Instant) -> Result<ControlPort, ClientError> {
+    use iceoryx2::service::port_factory::client::ClientCreateError;
+    loop {
+        match services::control_service(node)?
+            .client_builder()
+            .initial_max_slice_len(control::MAX_REQUEST_BYTES)
+            .allocation_strategy(AllocationStrategy::Static)
+            .create()
+        {
+            Ok(p) => return Ok(p),
+            Err(ClientCreateError::ExceedsMaxSupportedClients) if Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(ClientCreateError::ExceedsMaxSupportedClients) => {
+                return Err(ClientError::Full {
+                    max: services::CONTROL_MAX_CLIENTS,
+                });
+            }
+            Err(e) => return Err(sdk("control client", e)),
+        }
+    }
+}
+
 /// A connection to a domain's manager.
 pub struct Client {
     id: String,
     domain: Domain,
-    port: iceoryx2::port::client::Client<ipc::Service, [u8], (), [u8], ()>,
+    /// Renewed when an answer is overdue (see [`Client::request`]); `None` between dropping
+    /// the old one and getting a new one.
+    port: Mutex<Option<ControlPort>>,
+    /// The number of the last request sent.
+    seq: AtomicU64,
+    /// Held for the whole of a request: the port has room for one at a time.
+    turn: Mutex<()>,
     wake: Notifier<ipc::Service>,
     answers: Listener<ipc::Service>,
     node: Node<ipc::Service>,
@@ -122,18 +169,15 @@ impl Client {
         }
         let node = services::node(domain, &format!("client-{id}"))?;
         let answers = services::listener(&node, &names::client(&id))?;
-        let port = services::control_service(&node)?
-            .client_builder()
-            .initial_max_slice_len(4096)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .map_err(|e| sdk("control client", e))?;
+        let port = control_port(&node, Instant::now() + Duration::from_secs(10))?;
         let wake = services::notifier(&node, &names::control())?;
         Ok(Client {
             id,
             domain: domain.clone(),
+            port: Mutex::new(Some(port)),
+            seq: AtomicU64::new(0),
+            turn: Mutex::new(()),
             node,
-            port,
             wake,
             answers,
             events: None,
@@ -154,22 +198,46 @@ impl Client {
         self.timeout = timeout;
     }
 
-    /// Sends a request and waits for the answer. A manager that dies before it answers and is
-    /// replaced (`skillfab up` restarts it) is asked again: the new one has the state the old
-    /// one saved, so a request it already carried out is carried out once more, to the same
-    /// effect — except `monitor`, which then installs a second monitor.
+    /// Sends a request and waits for the answer.
+    ///
+    /// The request carries a number. With no answer after [`RETRY_AFTER`] (doubling), it is
+    /// sent again, under the same number, on a new port: iceoryx2 0.10 can miss a connection
+    /// when many clients connect at once, and a request or an answer on it is lost; a new
+    /// port makes the server connect again. The manager carries a number out once: a repeat
+    /// gets the answer already given, or waits for the first. A manager that dies before it
+    /// answers and is replaced (`skillfab up` restarts it) is asked again too: the new one
+    /// has the state the old one saved, but not its answers, so a request the old one carried
+    /// out is carried out once more — to the same effect, except `monitor`, which then installs
+    /// a second monitor.
     pub fn request(&self, request: &Request) -> Result<Reply, ClientError> {
-        let bytes = control::encode_request(&self.id, request)
+        // One request at a time on the port (threads sharing a client take turns).
+        let _turn = self
+            .turn
+            .lock()
+            .map_err(|_| ClientError::Unexpected("client poisoned".into()))?;
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
+        let bytes = control::encode_request(&self.id, seq, request)
             .map_err(|e| ClientError::Decode(e.to_string()))?;
+        if bytes.len() > control::MAX_REQUEST_BYTES {
+            // What the manager would answer; the port's samples could not even hold it.
+            return Err(ClientError::Refused(ControlError::Malformed(format!(
+                "a request of {} bytes (at most {})",
+                bytes.len(),
+                control::MAX_REQUEST_BYTES
+            ))));
+        }
         let mut serving = self.manager_pid();
-        let mut pending = self.send(&bytes)?;
+        let mut pending = Some(self.send(&bytes)?);
         let patient = matches!(request, Request::Step(_));
         let start = Instant::now();
+        let (mut retry, mut retry_at) = (RETRY_AFTER, start + RETRY_AFTER);
         // Poll often at first: the answer usually comes within a cycle, and the manager
         // finishes connecting its answer channel when this side polls.
         let mut nap = Duration::from_micros(500);
         loop {
-            if let Some(answer) = pending.receive().map_err(|e| sdk("receive answer", e))? {
+            if let Some(p) = &pending
+                && let Some(answer) = p.receive().map_err(|e| sdk("receive answer", e))?
+            {
                 let response = control::decode_response(answer.payload())
                     .map_err(|e| ClientError::Decode(e.to_string()))?;
                 return Ok(response?);
@@ -179,6 +247,16 @@ impl Client {
             }
             let _ = self.answers.timed_wait(|_| {}, nap);
             nap = (nap * 2).min(Duration::from_millis(100));
+            let now = Instant::now();
+            if now >= retry_at {
+                // The pending answer holds the old port's place: it goes first.
+                drop(pending.take());
+                self.renew_port()?;
+                pending = Some(self.send(&bytes)?);
+                retry = (retry * 2).min(RETRY_MAX);
+                retry_at = now + retry;
+                continue;
+            }
             if nap < Duration::from_millis(100) {
                 continue;
             }
@@ -186,7 +264,9 @@ impl Client {
             match self.manager_pid() {
                 Some(pid) if Some(pid) != serving => {
                     serving = Some(pid);
-                    pending = self.send(&bytes)?;
+                    drop(pending.take());
+                    self.renew_port()?;
+                    pending = Some(self.send(&bytes)?);
                 }
                 None if start.elapsed() > Duration::from_secs(1) => {
                     return Err(ClientError::NoManager(self.domain.name().to_string()));
@@ -198,8 +278,17 @@ impl Client {
 
     /// Sends an encoded request and wakes the control plane.
     fn send(&self, bytes: &[u8]) -> Result<Pending, ClientError> {
-        let pending = self
+        let mut port = self
             .port
+            .lock()
+            .map_err(|_| ClientError::Unexpected("control port poisoned".into()))?;
+        if port.is_none() {
+            *port = Some(control_port(&self.node, Instant::now() + self.timeout)?);
+        }
+        let Some(port) = port.as_ref() else {
+            return Err(ClientError::Unexpected("no control port".into()));
+        };
+        let pending = port
             .loan_slice_uninit(bytes.len())
             .map_err(|e| sdk("loan request", e))?
             .write_from_slice(bytes)
@@ -209,6 +298,18 @@ impl Client {
             .notify()
             .map_err(|e| sdk("wake the control plane", e))?;
         Ok(pending)
+    }
+
+    /// Replaces the control port by a new one (the manager's server connects to it anew).
+    fn renew_port(&self) -> Result<(), ClientError> {
+        let mut port = self
+            .port
+            .lock()
+            .map_err(|_| ClientError::Unexpected("control port poisoned".into()))?;
+        // The old one goes first: a client holds one of the control plane's places.
+        drop(port.take());
+        *port = Some(control_port(&self.node, Instant::now() + self.timeout)?);
+        Ok(())
     }
 
     /// The process id of the domain's running manager.

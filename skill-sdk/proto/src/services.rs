@@ -124,15 +124,26 @@ pub fn subscriber<T: Message>(
         .map_err(|e| Error::transport(&format!("subscriber on '{topic}'"), e))
 }
 
+/// (most notifiers and listeners, most nodes) of event service `name`: every control client
+/// has a notifier on the control plane's wake-up, the other events have a few ports each.
+fn event_sizes(name: &str) -> (usize, usize) {
+    if name == crate::names::control() {
+        (CONTROL_MAX_NODES, CONTROL_MAX_NODES)
+    } else {
+        (EVENT_MAX_PORTS, MAX_NODES)
+    }
+}
+
 fn event(
     node: &Node<ipc::Service>,
     name: &str,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, Error> {
+    let (ports, nodes) = event_sizes(name);
     node.service_builder(&service_name(name)?)
         .event()
-        .max_notifiers(EVENT_MAX_PORTS)
-        .max_listeners(EVENT_MAX_PORTS)
-        .max_nodes(MAX_NODES)
+        .max_notifiers(ports)
+        .max_listeners(ports)
+        .max_nodes(nodes)
         .open_or_create()
         .map_err(|e| Error::transport(&format!("open event '{name}'"), e))
 }
@@ -150,11 +161,12 @@ pub fn notifier_existing(
     node: &Node<ipc::Service>,
     name: &str,
 ) -> Result<Notifier<ipc::Service>, Error> {
+    let (ports, nodes) = event_sizes(name);
     node.service_builder(&service_name(name)?)
         .event()
-        .max_notifiers(EVENT_MAX_PORTS)
-        .max_listeners(EVENT_MAX_PORTS)
-        .max_nodes(MAX_NODES)
+        .max_notifiers(ports)
+        .max_listeners(ports)
+        .max_nodes(nodes)
         .open()
         .map_err(|e| Error::transport(&format!("open event '{name}'"), e))?
         .notifier_builder()
@@ -310,15 +322,30 @@ pub fn control_service(node: &Node<ipc::Service>) -> Result<ControlFactory, Erro
         .request_response::<[u8], [u8]>()
         .max_clients(CONTROL_MAX_CLIENTS)
         .max_servers(2)
-        .max_nodes(MAX_NODES)
-        .max_active_requests_per_client(4)
-        .max_response_buffer_size(4)
+        .max_nodes(CONTROL_MAX_NODES)
+        // A client asks one thing at a time and reads one answer (a repeat goes out on a new
+        // port). The server's bookkeeping per client connection grows with the product of
+        // these and with the answer segment's 255 possible reallocations: at 4/4/2 it was
+        // ~2 M entries per connection and a connection update took a second with 30 clients.
+        .max_active_requests_per_client(1)
+        .max_loaned_requests(1)
+        .max_response_buffer_size(1)
+        .max_borrowed_responses_per_pending_response(1)
         .open_or_create()
         .map_err(|e| Error::transport(&format!("open '{name}'"), e))
 }
 
-/// Clients of the control plane at once (sequencers, CLI calls, consoles).
-pub const CONTROL_MAX_CLIENTS: usize = 24;
+/// Clients of the control plane at once (sequencers, CLI calls, consoles, scripts running
+/// `skillfab ctl` in parallel). The manager's answer segment grows with it (about 34 MB of
+/// address space at 128, of which only what is used is memory: the file is sparse).
+pub const CONTROL_MAX_CLIENTS: usize = 128;
+/// Processes on the control plane's services: the clients, the manager, and room for a
+/// restarted manager while the dead one's ports are cleaned up.
+pub const CONTROL_MAX_NODES: usize = CONTROL_MAX_CLIENTS + 4;
+/// Clients reading the events stream at once. Each costs the events publisher
+/// [`EVENT_BUFFER`] samples of [`EVENT_MAX_BYTES`] (4 MiB of address space): the stream is
+/// subscribed only by clients that read events, so this bounds those, not all clients.
+pub const EVENTS_MAX_SUBSCRIBERS: usize = 24;
 /// Events a subscriber may queue: for bursts (a subscriber counts gaps by `seq`); 20 s of a
 /// monitor firing every cycle at 100 Hz.
 pub const EVENT_BUFFER: usize = 2048;
@@ -335,8 +362,8 @@ pub fn events_service(node: &Node<ipc::Service>) -> Result<EventsFactory, Error>
     node.service_builder(&service_name(&name)?)
         .publish_subscribe::<[u8]>()
         .max_publishers(2)
-        .max_subscribers(CONTROL_MAX_CLIENTS)
-        .max_nodes(MAX_NODES)
+        .max_subscribers(EVENTS_MAX_SUBSCRIBERS)
+        .max_nodes(CONTROL_MAX_NODES)
         .history_size(0)
         .subscriber_max_buffer_size(EVENT_BUFFER)
         .subscriber_max_borrowed_samples(2)

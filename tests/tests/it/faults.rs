@@ -240,3 +240,117 @@ fn misbehaving_clients_get_clear_errors_and_the_fabric_runs_on() {
     assert_eq!(good.get_param("scale", "gain").unwrap().to_string(), "2");
     assert!(good.list().unwrap().len() >= 64);
 }
+
+#[test]
+fn a_hundred_clients_at_once_a_flood_and_a_foreign_publisher_of_the_wrong_type() {
+    use iceoryx2::prelude::*;
+    use skillfab_client::Client;
+    use skillfab_proto::{names, services};
+    let mut t = TestDomain::new("crowd");
+    t.hello(&[]);
+    let board = t.board();
+    let k0 = cycle(&board);
+
+    // 100 clients at once, each in its own thread and iceoryx2 node: every one is served.
+    let domain = t.domain.clone();
+    let served: Vec<Result<String, String>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..100)
+            .map(|_| {
+                let domain = domain.clone();
+                s.spawn(move || {
+                    let mut c = Client::connect(&domain).map_err(|e| e.to_string())?;
+                    // Served is what counts here, not how soon (the suite may load the cores).
+                    c.set_timeout(std::time::Duration::from_secs(60));
+                    let n = c.list().map_err(|e| e.to_string())?.len();
+                    let gain = c.get_param("scale", "gain").map_err(|e| e.to_string())?;
+                    Ok(format!("{n} {gain}"))
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let failed: Vec<&String> = served.iter().filter_map(|r| r.as_ref().err()).collect();
+    assert!(
+        failed.is_empty(),
+        "{} refused, the first: {:?}",
+        failed.len(),
+        failed.first()
+    );
+    assert!(
+        served.iter().all(|r| r.as_deref() == Ok("3 2")),
+        "{served:?}"
+    );
+
+    // A client that floods requests from 4 threads while another is served.
+    let flooding = std::sync::atomic::AtomicBool::new(true);
+    let (flood, answered) = std::thread::scope(|s| {
+        let floods: Vec<_> = (0..4)
+            .map(|_| {
+                s.spawn(|| {
+                    let c = Client::connect(&t.domain).unwrap();
+                    let mut n = 0u64;
+                    while flooding.load(std::sync::atomic::Ordering::Relaxed) {
+                        c.query("ticker.tick.value").unwrap();
+                        n += 1;
+                    }
+                    n
+                })
+            })
+            .collect();
+        let other = Client::connect(&t.domain).unwrap();
+        let mut answered = 0;
+        for _ in 0..50 {
+            assert_eq!(other.get_param("scale", "gain").unwrap().to_string(), "2");
+            answered += 1;
+        }
+        flooding.store(false, std::sync::atomic::Ordering::Relaxed);
+        let flood: u64 = floods.into_iter().map(|h| h.join().unwrap()).sum();
+        (flood, answered)
+    });
+    assert!(flood > 0 && answered == 50);
+
+    // A plain iceoryx2 publisher on a fabric topic with another type: iceoryx2 refuses it
+    // (the service's type details differ), the fabric's topic is untouched.
+    let node = services::node(&t.domain, "foreign").unwrap();
+    let wrong = node
+        .service_builder(&ServiceName::new(&names::topic("tick")).unwrap())
+        .publish_subscribe::<u64>()
+        .user_header::<skillfab_proto::header::SampleHeader>()
+        .open_or_create();
+    let Err(err) = wrong else {
+        panic!("a publisher of the wrong type was let in")
+    };
+    let err = format!("{err:?}");
+    assert!(err.contains("IncompatibleTypes"), "{err}");
+    // The same on a topic no skill produces yet: a skill that later reads it with the right
+    // type is refused with an error naming the topic, and leaves; the fabric runs on.
+    let squatter = node
+        .service_builder(&ServiceName::new(&names::topic("squat")).unwrap())
+        .publish_subscribe::<u64>()
+        .user_header::<skillfab_proto::header::SampleHeader>()
+        .open_or_create()
+        .unwrap();
+    let victim = t.spawn(
+        "scale",
+        &[
+            "--name",
+            "victim",
+            "--remap",
+            "tick=squat",
+            "--remap",
+            "scaled=victim_out",
+        ],
+    );
+    let status = t.wait_exit(victim);
+    assert!(!status.success());
+    let log = std::fs::read_to_string(t.dir.join(format!("{victim}-scale.log"))).unwrap();
+    assert!(log.contains("squat"), "{log}");
+    drop(squatter);
+
+    // Everyone else is still served and the cycle went on throughout.
+    let c = Client::connect(&t.domain).unwrap();
+    t.wait_until("the refused skill gone from the list", || {
+        c.list().unwrap().len() == 3
+    });
+    t.wait_until("cycles to go on", || cycle(&board) > k0 + 50);
+}

@@ -92,7 +92,7 @@ fn generated_c_and_python_layouts_agree_with_rust() {
     std::fs::write(&probe, codegen::c_layout_probe(&codegen::shared_schemas())).unwrap();
     let exe = t.dir.join("probe");
     run_ok(
-        Command::new("gcc")
+        skillfab_tests::build_command("gcc")
             .args(["-std=c11", "-Wall", "-Werror", "-I"])
             .arg(repo_root().join("skill-sdk/capi/include"))
             .arg(&probe)
@@ -179,7 +179,7 @@ fn a_c_skill_links_statically_too() {
     );
     let exe = t.dir.join("scale_c_static");
     run_ok(
-        Command::new("gcc")
+        skillfab_tests::build_command("gcc")
             .arg("-I")
             .arg(repo_root().join("skill-sdk/capi/include"))
             .arg(repo_root().join("skills/c/scale_c.c"))

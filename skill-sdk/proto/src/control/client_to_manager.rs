@@ -11,6 +11,10 @@ pub struct RequestEnvelope {
     pub version: u16,
     /// The client's id (`<pid>-<n>`); monitors belong to it.
     pub client: String,
+    /// The client's number for this request: a client that got no answer sends the same
+    /// request again under the same number, and the manager answers it once (it re-sends the
+    /// answer it gave, or answers the repeat when the first is still being carried out).
+    pub seq: u64,
     /// The request.
     pub request: Request,
 }
@@ -106,10 +110,15 @@ pub enum Request {
 }
 
 /// Encodes a request.
-pub fn encode_request(client: &str, request: &Request) -> Result<Vec<u8>, postcard::Error> {
+pub fn encode_request(
+    client: &str,
+    seq: u64,
+    request: &Request,
+) -> Result<Vec<u8>, postcard::Error> {
     postcard::to_allocvec(&RequestEnvelope {
         version: PROTOCOL_VERSION,
         client: client.to_string(),
+        seq,
         request: request.clone(),
     })
 }

@@ -280,8 +280,14 @@ pub fn shorten(text: &str, max: usize) -> String {
     }
 }
 
-/// Largest request the manager reads (bytes); a bigger one is refused unread.
+/// Largest request the manager reads (bytes); a bigger one is refused unread (the client
+/// refuses to send it, with the same error).
 pub const MAX_REQUEST_BYTES: usize = 64 * 1024;
+/// Largest answer (bytes): a bigger one (a query of a whole large message) is answered with
+/// an error that says so. The control plane's samples have fixed sizes: iceoryx2 keeps
+/// bookkeeping per client connection for every segment a growing sender may ever allocate
+/// (255), which made each connection cost seconds with 100 clients.
+pub const MAX_ANSWER_BYTES: usize = 256 * 1024;
 
 /// The manager's answer.
 pub type Response = Result<Reply, ControlError>;
@@ -296,15 +302,21 @@ pub struct ExprError {
     pub message: String,
 }
 
-/// Encodes a response.
+/// Encodes a response; one over [`MAX_ANSWER_BYTES`] becomes an error answer saying so.
 pub fn encode_response(response: &Response) -> Vec<u8> {
+    let error = |text: String| {
+        postcard::to_allocvec(&Response::Err(ControlError::Refused(text))).unwrap_or_default()
+    };
     // Encoding into a Vec of plain data cannot fail; fall back to an error reply anyway.
-    postcard::to_allocvec(response).unwrap_or_else(|e| {
-        postcard::to_allocvec(&Response::Err(ControlError::Refused(format!(
-            "encoding reply: {e}"
-        ))))
-        .unwrap_or_default()
-    })
+    match postcard::to_allocvec(response) {
+        Ok(b) if b.len() <= MAX_ANSWER_BYTES => b,
+        Ok(b) => error(format!(
+            "the answer is {} bytes, more than the {MAX_ANSWER_BYTES} an answer may have: \
+             ask for a field or a range of it",
+            b.len()
+        )),
+        Err(e) => error(format!("encoding reply: {e}")),
+    }
 }
 
 /// Decodes a response.

@@ -18,7 +18,7 @@ pub use manager_to_client::*;
 use crate::schema::MessageSchema;
 
 /// Version of this protocol; bumped on any incompatible change.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// The declared type names of a skill's schema, for lists.
 pub fn type_name(schema: &MessageSchema) -> String {
@@ -83,7 +83,7 @@ mod tests {
             param: "gain".into(),
             value: ParamArg::Text("3".into()),
         };
-        let b = encode_request("12-1", &r).unwrap();
+        let b = encode_request("12-1", 7, &r).unwrap();
         assert_eq!(decode_request(&b).unwrap().request, r);
         let mut other = b.clone();
         other[0] = 9; // a varint 9: another protocol version
@@ -112,7 +112,7 @@ mod tests {
         #[test]
         fn set_param_requests_round_trip(skill in "[a-z]{1,12}", param in "[a-z_]{1,12}", text in ".{0,32}", client in "[0-9]{1,6}-[0-9]{1,3}") {
             let r = Request::SetParam { skill, param, value: ParamArg::Text(text) };
-            let env = decode_request(&encode_request(&client, &r).unwrap()).unwrap();
+            let env = decode_request(&encode_request(&client, 3, &r).unwrap()).unwrap();
             proptest::prop_assert_eq!(env.request, r);
             proptest::prop_assert_eq!(env.client, client);
         }

@@ -13,6 +13,7 @@
 // Benchmark set-up: a failed step should stop the run right there, with its message.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+pub mod crowd;
 pub mod dora;
 pub mod floors;
 pub mod futex;

@@ -54,6 +54,20 @@ pub trait Skill: Default + 'static {
         input: Self::Inputs<'_>,
         output: &mut Self::Outputs<'_>,
     ) -> SkillResult;
+
+    /// What this instance must not lose if its process dies — its memory: a map of where the
+    /// robot has been, an estimate built over many cycles — as bytes. The runtime keeps the
+    /// newest in the domain (taken at most once a second, on the liveness tick, never within a
+    /// run) and gives it to the next instance of the same name before its first run
+    /// ([`Skill::restore`]); an instance that leaves cleanly drops it, so the next one starts
+    /// afresh. `None` (the default): nothing to keep.
+    fn snapshot(&self) -> Option<Vec<u8>> {
+        None
+    }
+
+    /// Takes back what an earlier instance of this name kept ([`Skill::snapshot`]). Bytes it
+    /// cannot read should be ignored (a new version of the skill may have another layout).
+    fn restore(&mut self, _snapshot: &[u8]) {}
 }
 
 /// What a run knows besides its inputs.

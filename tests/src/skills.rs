@@ -429,3 +429,36 @@ blob!(
     BlobSink4M,
     BlobSink4MIn
 );
+
+/// Output of [`Counter`].
+#[derive(Outputs)]
+pub struct CounterOut<'a> {
+    /// Runs so far, over every instance of this name.
+    pub count: Output<'a, skillfab_msgs::Tick>,
+}
+
+/// Sync, no inputs: counts its runs, and keeps the count across restarts of its process
+/// ([`Skill::snapshot`]).
+#[derive(Default)]
+pub struct Counter {
+    runs: u64,
+}
+
+impl Skill for Counter {
+    type Params = NoParams;
+    type Inputs<'a> = ();
+    type Outputs<'a> = CounterOut<'a>;
+    fn compute(&mut self, _: &Ctx<NoParams>, _: (), o: &mut CounterOut) -> SkillResult {
+        self.runs += 1;
+        o.count.set(skillfab_msgs::Tick { value: self.runs });
+        Ok(())
+    }
+    fn snapshot(&self) -> Option<Vec<u8>> {
+        Some(self.runs.to_le_bytes().to_vec())
+    }
+    fn restore(&mut self, snapshot: &[u8]) {
+        if let Ok(b) = snapshot.try_into() {
+            self.runs = u64::from_le_bytes(b);
+        }
+    }
+}

@@ -3,17 +3,22 @@
 //! ```text
 //! fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]
 //! fault-report --soak CYCLES [--json]
+//! fault-report --clients [SECS] [--json]
 //! ```
 //!
 //! Each scenario is one `skillfab demo exit-lab --runs N --json` with its faults (release
-//! binaries beside this one): `kill` — SIGKILL to a random fabric process (the Denning device
-//! or any skill; skills restart on failure) every S simulated seconds; `corrupt-1`,
-//! `corrupt-5` — 1 % / 5 % of the serial bytes with a flipped bit; `drop-1` — 1 % of them
-//! dropped. Per scenario: missions out of the lab, median mission time, the longest time
+//! binaries beside this one): `kill` — SIGKILL to a random fabric process (the manager, the
+//! Denning device or any skill; skills restart on failure) every S simulated seconds;
+//! `corrupt-1`, `corrupt-5` — 1 % / 5 % of the serial bytes with a flipped bit; `drop-1` —
+//! 1 % of them dropped; `sim-restart` — the simulator (the robot's serial side) killed every
+//! 20 simulated seconds and restarted where the robot was. Per scenario: missions out of the lab, median mission time, the longest time
 //! without a drive command at the robot and the longest it moved on a stale one (from the
 //! simulator's ground truth), kills and their recovery (signal → the new instance registered
 //! and, if active, its first run), cycles the killed units missed, and the serial link's
 //! frames, bad frames, garbage bytes and connects.
+//!
+//! `--clients SECS` runs the hello network at 100 Hz for SECS alone and SECS under
+//! misbehaving clients ([`skillfab_bench::crowd`]): cycles, overruns and latency per window.
 //!
 //! `--soak CYCLES` instead runs the hello and the exit-lab networks back to back for that many
 //! cycles each and samples every process of the domain (resident memory, open fds, threads)
@@ -75,6 +80,26 @@ fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, Str
         .filter_map(|k| k["recovery_ms"].as_f64())
         .collect();
     let unrecovered = kills.len() - recovery.len();
+    // Recovery by what was killed: the manager, the device, the simulator, a skill.
+    let class = |t: &str| match t {
+        "manager" | "denning" | "denning-sim" => t.to_string(),
+        _ => "skill".to_string(),
+    };
+    let mut by_target: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+    for k in &kills {
+        let t = class(k["target"].as_str().unwrap_or(""));
+        let v = by_target.entry(t).or_default();
+        if let Some(ms) = k["recovery_ms"].as_f64() {
+            v.push(ms);
+        }
+    }
+    let by_target: serde_json::Map<String, Value> = by_target
+        .into_iter()
+        .map(|(t, mut v)| {
+            let n = v.len();
+            (t, json!({"recovered": n, "ms_p50": quantile(&mut v, 0.5), "ms_max": quantile(&mut v, 1.0)}))
+        })
+        .collect();
     let cycles_lost: u64 = kills.iter().filter_map(|k| k["cycles_lost"].as_u64()).sum();
     let link_sum = |i: usize| -> u64 {
         runs.iter()
@@ -99,6 +124,7 @@ fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, Str
         "unrecovered": unrecovered,
         "recovery_ms_p50": quantile(&mut recovery, 0.5),
         "recovery_ms_max": quantile(&mut recovery, 1.0),
+        "recovery_by_target": by_target,
         "cycles_lost": cycles_lost,
         "frames": link_sum(0),
         "bad_frames": link_sum(1),
@@ -112,11 +138,65 @@ fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
         println!(
-            "usage: fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]"
+            "usage: fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]\n       fault-report --soak CYCLES [--json]\n       fault-report --clients [SECS] [--json]"
         );
         return std::process::ExitCode::SUCCESS;
     }
     let json_out = args.iter().any(|a| a == "--json");
+    if args.iter().any(|a| a == "--clients") {
+        let secs: f64 = arg_value(&args, "--clients")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(10.0);
+        eprintln!(
+            "fault-report: hello at 100 Hz, {secs} s alone, then {secs} s under misbehaving clients"
+        );
+        return match skillfab_bench::crowd::crowd(secs) {
+            Ok((alone, abused)) => {
+                let w = |name: &str, w: &skillfab_bench::crowd::Window| {
+                    json!({"window": name, "cycles": w.cycles, "overruns": w.overruns,
+                        "cycle_latency_us_p50": w.latency_us.0, "cycle_latency_us_p99": w.latency_us.1,
+                        "answer_us_p50": w.answer_us.0, "answer_us_p99": w.answer_us.1,
+                        "answers": w.answers, "abuse_answered": w.abuse_answered,
+                        "abuse_failed": w.abuse_failed})
+                };
+                let out = [w("alone", &alone), w("misbehaving clients", &abused)];
+                if json_out {
+                    println!("{}", Value::Array(out.to_vec()));
+                } else {
+                    println!(
+                        "{:<20} {:>7} {:>9} {:>22} {:>24} {:>16}",
+                        "window",
+                        "cycles",
+                        "overruns",
+                        "cycle p50/p99 µs",
+                        "good client p50/p99 µs",
+                        "abuse ok/failed"
+                    );
+                    for r in &out {
+                        let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+                        println!(
+                            "{:<20} {:>7} {:>9} {:>22} {:>24} {:>16}",
+                            r["window"].as_str().unwrap_or(""),
+                            r["cycles"],
+                            r["overruns"],
+                            format!(
+                                "{:.0}/{:.0}",
+                                f("cycle_latency_us_p50"),
+                                f("cycle_latency_us_p99")
+                            ),
+                            format!("{:.0}/{:.0}", f("answer_us_p50"), f("answer_us_p99")),
+                            format!("{}/{}", r["abuse_answered"], r["abuse_failed"]),
+                        );
+                    }
+                }
+                std::process::ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("fault-report: {e}");
+                std::process::ExitCode::FAILURE
+            }
+        };
+    }
     if let Some(n) = arg_value(&args, "--soak") {
         let Ok(cycles) = n.parse::<u64>() else {
             eprintln!("fault-report: --soak takes a number of cycles, got '{n}'");
@@ -198,6 +278,10 @@ fn main() -> std::process::ExitCode {
         Scenario {
             name: "drop-1",
             args: vec!["--drop-rate".into(), "0.01".into()],
+        },
+        Scenario {
+            name: "sim-restart",
+            args: vec!["--kill-sim-every".into(), "20".into()],
         },
     ];
     let skillfab = skillfab_tests::bin("skillfab");

@@ -9,7 +9,7 @@
 use anyhow::{Context, bail};
 use clap::Parser;
 use denning::codec::{Command, Decoder, Packet};
-use denning_sim::sim::{Rng, Sim};
+use denning_sim::sim::{Physical, Rng, Sim};
 use denning_sim::truth::TruthRecord;
 use denning_sim::world::World;
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
@@ -52,6 +52,11 @@ struct Args {
     /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force).
     #[arg(long)]
     trajectory: Option<PathBuf>,
+    /// Keep the robot's physical state (pose, odometry, velocities, time) in this file, and
+    /// resume from it if it exists: a restarted simulator is the same robot where it was, with
+    /// a new serial link (the trajectory is appended to).
+    #[arg(long)]
+    state: Option<PathBuf>,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -132,23 +137,38 @@ fn run(args: &Args) -> anyhow::Result<()> {
     println!("{}", slave_path.display());
     let _ = std::io::stdout().flush();
 
+    let mut sim = Sim::new(world, args.seed);
+    let resumed = args.state.as_deref().and_then(load_state);
+    if let Some(p) = resumed {
+        tracing::info!(time = p.time, x = p.pose[0], y = p.pose[1], "robot resumed");
+        sim.resume(p);
+    }
     let mut trajectory = match &args.trajectory {
         Some(p) => Some(std::io::BufWriter::new(
-            std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
+            std::fs::OpenOptions::new()
+                .create(true)
+                .write(true)
+                .append(resumed.is_some())
+                .truncate(resumed.is_none())
+                .open(p)
+                .with_context(|| format!("creating {}", p.display()))?,
         )),
         None => None,
     };
-    if let Some(t) = trajectory.as_mut() {
+    if let Some(t) = trajectory.as_mut()
+        && resumed.is_none()
+    {
         writeln!(t, "{}", TruthRecord::HEADER)?;
     }
-    let mut sim = Sim::new(world, args.seed);
     let mut faults = Rng::new(args.seed.wrapping_mul(31).wrapping_add(7));
     let mut decoder = Decoder::default();
     let mut link = Link::Sync(0);
     let mut period = 0.1f64;
-    let mut next_status = 0.0f64;
-    let mut last_command = 0.0f64;
-    let mut last_drive = 0.0f64;
+    // Resumed: time goes on from where the robot was.
+    let t0 = sim.time;
+    let mut next_status = t0;
+    let mut last_command = t0;
+    let mut last_drive = t0;
     let mut watchdog = WATCHDOG;
     let mut outbox: Vec<u8> = Vec::new();
     let started = Instant::now();
@@ -251,6 +271,9 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 .write(t)?;
                 t.flush()?;
             }
+            if let Some(path) = &args.state {
+                save_state(path, &sim.physical())?;
+            }
         }
         // Bytes out, with fault injection, paced at the baud rate.
         if !outbox.is_empty() {
@@ -270,7 +293,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
             send_budget += bytes.len() as f64 * byte_time;
         }
         // Real time: one step of simulated time, or the line time of the bytes sent.
-        let target = (sim.time / args.time_factor).max(send_budget);
+        let target = ((sim.time - t0) / args.time_factor).max(send_budget);
         let elapsed = started.elapsed().as_secs_f64();
         if target > elapsed {
             std::thread::sleep(Duration::from_secs_f64(target - elapsed));
@@ -282,6 +305,28 @@ fn run(args: &Args) -> anyhow::Result<()> {
     }
     tracing::info!(time = sim.time, collisions = sim.collisions, "robot off");
     Ok(())
+}
+
+/// The robot's state from `path`; `None` if there is none (a fresh robot) or it is unreadable
+/// (said).
+fn load_state(path: &std::path::Path) -> Option<Physical> {
+    let text = std::fs::read_to_string(path).ok()?;
+    match toml::from_str(&text) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            tracing::warn!(file = %path.display(), error = %e, "robot state ignored");
+            None
+        }
+    }
+}
+
+/// Writes the robot's state: to a temporary file, renamed over the old one, so a simulator
+/// killed while writing leaves the previous state.
+fn save_state(path: &std::path::Path, p: &Physical) -> anyhow::Result<()> {
+    let tmp = path.with_extension("new");
+    std::fs::write(&tmp, toml::to_string(p)?)
+        .with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
 }
 
 fn write_all(fd: &OwnedFd, mut bytes: &[u8]) -> anyhow::Result<()> {

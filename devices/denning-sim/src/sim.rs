@@ -82,6 +82,23 @@ pub struct Sim {
     next_group: usize,
 }
 
+/// What the robot keeps when the process that simulates its serial side restarts: its body
+/// (pose, velocities, collisions so far) and its controller's odometry, at a simulated time.
+/// A real robot does not jump back to its start because its link process crashed.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Physical {
+    /// True pose (m, m, rad).
+    pub pose: [f64; 3],
+    /// Odometry pose.
+    pub odom: [f64; 3],
+    /// Velocities (m/s, rad/s).
+    pub vel: [f64; 2],
+    /// Collisions so far.
+    pub collisions: u64,
+    /// Simulated time (s).
+    pub time: f64,
+}
+
 fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
@@ -108,6 +125,27 @@ impl Sim {
             drift,
             next_group: 0,
         }
+    }
+
+    /// The robot's physical state, to resume from.
+    pub fn physical(&self) -> Physical {
+        Physical {
+            pose: self.pose,
+            odom: self.odom,
+            vel: self.vel,
+            collisions: self.collisions,
+            time: self.time,
+        }
+    }
+
+    /// Puts the robot back in `p` (motors off and no command, as after a power-on of the
+    /// link: the device enables them again at its handshake).
+    pub fn resume(&mut self, p: Physical) {
+        self.pose = p.pose;
+        self.odom = p.odom;
+        self.vel = p.vel;
+        self.collisions = p.collisions;
+        self.time = p.time;
     }
 
     fn clearance(&self, p: [f64; 2]) -> (f64, Option<[f64; 2]>) {

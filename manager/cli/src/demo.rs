@@ -143,6 +143,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         .with_context(|| format!("world {}", opts.world.display()))?;
     let link = dir.join("robot");
     let traj = dir.join("trajectory.csv");
+    let robot_state = dir.join("robot.state");
     let program = |name: &str| {
         find_program(name, Path::new("."))
             .with_context(|| format!("program '{name}' not found next to skillfab"))
@@ -178,7 +179,17 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                     opts.faults.corrupt_rate.to_string(),
                     "--drop-rate".into(),
                     opts.faults.drop_rate.to_string(),
+                    "--state".into(),
+                    text(&robot_state),
                 ],
+                // Killed on purpose, the robot's link comes back (where the robot was).
+                restart: if opts.faults.kill_sim_every_s.is_some() {
+                    Restart::Always
+                } else {
+                    Restart::Never
+                },
+                max_restarts: Some(100_000),
+                backoff_ms: Some(20),
                 ..ProcessEntry::default()
             },
             ProcessEntry {
@@ -382,6 +393,13 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         far: None,
         found: None,
     };
+    let sim_killer = opts.faults.kill_sim_every_s.map(|every| {
+        Killer::start_sim(
+            &net.domain,
+            &net.dir.join("robot"),
+            Duration::from_secs_f64(every / opts.time_factor),
+        )
+    });
     let killer = opts.faults.kill_every_s.map(|every| {
         Killer::start(
             &net.domain,
@@ -422,6 +440,9 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     }
     if let Some(k) = killer {
         out.kills = k.finish();
+    }
+    if let Some(k) = sim_killer {
+        out.kills.extend(k.finish());
     }
     let link = |field: &str| {
         c.query(&format!("denning.link.{field}"))

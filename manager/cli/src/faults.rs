@@ -22,6 +22,9 @@ use std::time::{Duration, Instant};
 pub struct Faults {
     /// SIGKILL to a random unit (device or skill) every this many simulated seconds.
     pub kill_every_s: Option<f64>,
+    /// SIGKILL to the simulator (the robot's serial side) every this many simulated seconds;
+    /// it comes back where the robot was (`denning-sim --state`).
+    pub kill_sim_every_s: Option<f64>,
     /// Share of the simulator's bytes with a flipped bit.
     pub corrupt_rate: f64,
     /// Share of the simulator's bytes dropped.
@@ -42,6 +45,17 @@ pub struct Kill {
     pub recovery_ms: Option<f64>,
     /// Cycles the manager completed in that time (the cycles the unit missed).
     pub cycles_lost: Option<u64>,
+}
+
+/// The process whose command line holds every one of `words` (the simulator of one run is
+/// found by its program name and its link path).
+fn process_with_args(words: &[&str]) -> Option<u32> {
+    std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
+        let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+        let cmdline = std::fs::read(e.path().join("cmdline")).ok()?;
+        let text = String::from_utf8_lossy(&cmdline);
+        words.iter().all(|w| text.contains(w)).then_some(pid)
+    })
 }
 
 /// The manager's place in the killer's list (not a board slot).
@@ -174,6 +188,73 @@ impl Killer {
                         break;
                     }
                     std::thread::sleep(Duration::from_millis(1));
+                }
+                if let Ok(mut k) = ks.lock() {
+                    k.push(kill);
+                }
+            }
+        });
+        Killer {
+            stop,
+            kills,
+            thread: Some(thread),
+        }
+    }
+
+    /// Starts killing the simulator linked at `link` every `every` (real time): the recovery
+    /// is the signal → the device connected to the new one (its `link.connects` counts it).
+    pub fn start_sim(domain: &Domain, link: &std::path::Path, every: Duration) -> Killer {
+        let stop = Arc::new(AtomicBool::new(false));
+        let kills = Arc::new(Mutex::new(Vec::new()));
+        let (st, ks, domain) = (stop.clone(), kills.clone(), domain.clone());
+        let link = link.to_string_lossy().into_owned();
+        let thread = std::thread::spawn(move || {
+            let armed = Instant::now();
+            let mut next = armed + every;
+            let mut client = None;
+            while !st.load(Ordering::Acquire) {
+                if Instant::now() < next {
+                    std::thread::sleep(Duration::from_millis(5));
+                    continue;
+                }
+                next += every;
+                if client.is_none() {
+                    client = skillfab_client::Client::connect(&domain).ok();
+                }
+                let Some(c) = client.as_ref() else { continue };
+                let connects = |c: &skillfab_client::Client| -> Option<(f64, bool)> {
+                    let n = c.query("denning.link.connects").ok()?.0.as_f64()?;
+                    let up = c.query("denning.link.connected").ok()?.0.as_f64()? != 0.0;
+                    Some((n, up))
+                };
+                let (Some(pid), Some((before, _))) =
+                    (process_with_args(&["denning-sim", &link]), connects(c))
+                else {
+                    continue;
+                };
+                let killed_at = Instant::now();
+                if nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(pid as i32),
+                    nix::sys::signal::Signal::SIGKILL,
+                )
+                .is_err()
+                {
+                    continue;
+                }
+                tracing::info!(target = "denning-sim", pid, "fault: killed");
+                let mut kill = Kill {
+                    target: "denning-sim".into(),
+                    at_s: killed_at.duration_since(armed).as_secs_f64(),
+                    recovery_ms: None,
+                    cycles_lost: None,
+                };
+                let deadline = killed_at + Duration::from_secs(10);
+                while Instant::now() < deadline && !st.load(Ordering::Acquire) {
+                    if connects(c).is_some_and(|(n, up)| up && n > before) {
+                        kill.recovery_ms = Some(killed_at.elapsed().as_secs_f64() * 1000.0);
+                        break;
+                    }
+                    std::thread::sleep(Duration::from_millis(2));
                 }
                 if let Ok(mut k) = ks.lock() {
                     k.push(kill);

@@ -96,6 +96,10 @@ enum DemoCmd {
         /// this many simulated seconds; skills restart on failure.
         #[arg(long, value_name = "SECONDS")]
         kill_every: Option<f64>,
+        /// Fault injection: SIGKILL to the simulator every this many simulated seconds; it is
+        /// restarted and resumes the robot where it was, the device reconnects.
+        #[arg(long, value_name = "SECONDS")]
+        kill_sim_every: Option<f64>,
         /// Fault injection: share of the serial bytes with a flipped bit (0..1).
         #[arg(long, default_value_t = 0.0)]
         corrupt_rate: f64,
@@ -191,12 +195,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     json,
                     limit_s,
                     kill_every,
+                    kill_sim_every,
                     corrupt_rate,
                     drop_rate,
                 },
         } => {
-            if kill_every.is_some_and(|k| k.is_nan() || k < 1.0) {
-                anyhow::bail!("--kill-every must be at least 1 simulated second");
+            for (name, k) in [
+                ("--kill-every", kill_every),
+                ("--kill-sim-every", kill_sim_every),
+            ] {
+                if k.is_some_and(|k| k.is_nan() || k < 1.0) {
+                    anyhow::bail!("{name} must be at least 1 simulated second");
+                }
             }
             for (name, r) in [("--corrupt-rate", corrupt_rate), ("--drop-rate", drop_rate)] {
                 if !(0.0..=0.5).contains(&r) {
@@ -216,6 +226,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 limit_s,
                 faults: faults::Faults {
                     kill_every_s: kill_every,
+                    kill_sim_every_s: kill_sim_every,
                     corrupt_rate,
                     drop_rate,
                     seed,

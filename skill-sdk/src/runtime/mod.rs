@@ -208,6 +208,65 @@ pub(crate) trait Unit: 'static {
     fn init(&mut self) -> Result<(), SdkError> {
         Ok(())
     }
+    /// What the unit keeps across restarts of its process ([`crate::Skill::snapshot`]).
+    fn snapshot(&self) -> Option<Vec<u8>> {
+        None
+    }
+    /// Takes back what an earlier instance kept.
+    fn restore(&mut self, _snapshot: &[u8]) {}
+}
+
+/// Where a unit's snapshot is kept: `<domain root>/skills/<name>/snapshot` (the root is the
+/// user's own, 0700; the file goes with the domain).
+pub(crate) struct Snapshots {
+    path: std::path::PathBuf,
+    /// What was last written (a snapshot that did not change is not written again).
+    written: Vec<u8>,
+}
+
+impl Snapshots {
+    fn new(domain: &Domain, name: &str) -> Snapshots {
+        Snapshots {
+            path: domain
+                .root_path()
+                .join("skills")
+                .join(name)
+                .join("snapshot"),
+            written: Vec::new(),
+        }
+    }
+
+    /// What an earlier instance kept, if anything.
+    fn load(&mut self) -> Option<Vec<u8>> {
+        let bytes = std::fs::read(&self.path).ok()?;
+        self.written = bytes.clone();
+        Some(bytes)
+    }
+
+    /// Keeps `unit`'s snapshot if it changed: written to a temporary file and renamed, so a
+    /// process killed while writing leaves the previous one.
+    pub(crate) fn keep<U: Unit>(&mut self, unit: &U) {
+        let Some(bytes) = unit.snapshot() else { return };
+        if bytes == self.written {
+            return;
+        }
+        let tmp = self.path.with_extension("new");
+        let written = self
+            .path
+            .parent()
+            .map_or(Ok(()), std::fs::create_dir_all)
+            .and_then(|()| std::fs::write(&tmp, &bytes))
+            .and_then(|()| std::fs::rename(&tmp, &self.path));
+        match written {
+            Ok(()) => self.written = bytes,
+            Err(e) => tracing::warn!(error = %e, "snapshot not kept"),
+        }
+    }
+
+    /// An instance that leaves on purpose: the next one starts afresh.
+    fn drop_file(&self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
 }
 
 /// Parameters and cycle bookkeeping shared by skills and devices.
@@ -218,6 +277,8 @@ pub(crate) struct Common<P> {
     /// Last cycle this unit finished (ran, skipped or failed) for.
     last_cycle: u64,
     name: String,
+    /// The unit's snapshot across restarts.
+    snapshots: Snapshots,
 }
 
 /// A unit's runtime ports.
@@ -316,11 +377,20 @@ fn run<U: Unit>(
     let node = services::node(&domain, &decl.name)?;
     let mut io: Option<Io> = None;
     unit.init()?;
+    let mut snapshots = Snapshots::new(&domain, &decl.name);
+    if let Some(bytes) = snapshots.load() {
+        tracing::info!(
+            bytes = bytes.len(),
+            "restored what an earlier instance kept"
+        );
+        unit.restore(&bytes);
+    }
     let mut common = Common {
         params,
         param_gen: 0,
         last_cycle: 0,
         name: decl.name.clone(),
+        snapshots,
     };
     let mut decl = decl;
     loop {
@@ -376,6 +446,7 @@ fn run<U: Unit>(
                     board.ring_manager();
                 }
                 tracing::info!("leaving");
+                common.snapshots.drop_file();
                 return Ok(());
             }
             End::ManagerGone => {

@@ -144,6 +144,12 @@ pub(crate) fn finish_run(link: &Link<'_>, r: RunRecord) {
 
 impl<S: Skill> Unit for SkillUnit<S> {
     type Params = S::Params;
+    fn snapshot(&self) -> Option<Vec<u8>> {
+        self.0.snapshot()
+    }
+    fn restore(&mut self, snapshot: &[u8]) {
+        self.0.restore(snapshot);
+    }
     fn mode(&self) -> Mode {
         S::MODE
     }

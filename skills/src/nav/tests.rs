@@ -266,6 +266,34 @@ fn wander_drives_on_and_bounces_off_what_is_ahead() {
 }
 
 #[test]
+fn a_restarted_wander_keeps_its_visit_map_and_draws_on() {
+    let mut h = Harness::<Wander>::new();
+    h.input("sonar", ring(|_| 5.0));
+    for k in 0..300 {
+        h.input(
+            "odometry",
+            Odometry {
+                x: 0.01 * f64::from(k),
+                ..Odometry::default()
+            },
+        );
+        h.step().unwrap();
+    }
+    let kept = h.skill().snapshot().unwrap();
+    let mut again = Wander::default();
+    again.restore(&kept);
+    assert_eq!(
+        again.snapshot().unwrap(),
+        kept,
+        "the same map and generator"
+    );
+    // Bytes of another layout change nothing.
+    let mut fresh = Wander::default();
+    fresh.restore(b"wander-0 something else");
+    assert_eq!(fresh.snapshot(), Wander::default().snapshot());
+}
+
+#[test]
 fn stop_proposes_standing_still() {
     let mut h = Harness::<Stop>::new();
     assert_eq!(

@@ -151,4 +151,48 @@ impl Skill for Wander {
         });
         Ok(())
     }
+
+    /// The visit map and the random generator's state: a restarted wander goes on covering
+    /// the room instead of starting its search again (the odometry frame survives device
+    /// restarts, so the map stays in place).
+    fn snapshot(&self) -> Option<Vec<u8>> {
+        let mut b = Vec::with_capacity(24 + 12 * self.visits.len());
+        b.extend(SNAPSHOT_TAG);
+        b.extend(self.rng.to_le_bytes());
+        b.extend(self.driven.to_le_bytes());
+        let mut cells: Vec<_> = self.visits.iter().collect();
+        cells.sort_unstable();
+        for (&(x, y), &n) in cells {
+            b.extend(x.to_le_bytes());
+            b.extend(y.to_le_bytes());
+            b.extend(n.to_le_bytes());
+        }
+        Some(b)
+    }
+
+    fn restore(&mut self, snapshot: &[u8]) {
+        let Some(rest) = snapshot.strip_prefix(SNAPSHOT_TAG.as_slice()) else {
+            return;
+        };
+        let word = |b: &[u8], at: usize| -> Option<[u8; 8]> { b.get(at..at + 8)?.try_into().ok() };
+        let (Some(rng), Some(driven)) = (word(rest, 0), word(rest, 8)) else {
+            return;
+        };
+        let quad = |b: &[u8]| -> [u8; 4] { [b[0], b[1], b[2], b[3]] };
+        let cells = rest[16..].chunks_exact(12).map(|c| {
+            (
+                (
+                    i32::from_le_bytes(quad(&c[0..])),
+                    i32::from_le_bytes(quad(&c[4..])),
+                ),
+                u32::from_le_bytes(quad(&c[8..])),
+            )
+        });
+        self.visits = cells.collect();
+        self.rng = u64::from_le_bytes(rng);
+        self.driven = f64::from_le_bytes(driven);
+    }
 }
+
+/// First bytes of a wander snapshot (its layout's version).
+const SNAPSHOT_TAG: &[u8; 8] = b"wander-1";

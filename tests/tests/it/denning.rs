@@ -218,6 +218,59 @@ fn the_device_survives_the_simulator_restarting() {
 }
 
 #[test]
+fn a_restarted_simulator_resumes_the_robot_where_it_was() {
+    let mut r = Robot::start("simresume", &[]);
+    // Restart the first simulator with a state file (Robot::start's has none).
+    let state = r.t.dir.join("robot.state");
+    let (world, link, traj) = (r.world.clone(), r.link.clone(), r.trajectory.clone());
+    let state_arg = state.to_str().unwrap().to_string();
+    r.t.signal(r.sim, Signal::SIGKILL);
+    r.t.wait_exit(r.sim);
+    let _ = std::fs::remove_file(&link);
+    r.sim = Robot::spawn_sim(&mut r.t, &world, &link, &traj, &["--state", &state_arg]);
+    r.wait_connected(2);
+    r.t.spawn("proposer", &["--name", "go", "--param", "translate=0.3"]);
+    r.t.wait_until("the robot to drive 0.3 m", || r.truth().0 > 2.3);
+
+    // Killed mid-motion and started again with the same state: the same robot, where it was.
+    r.t.signal(r.sim, Signal::SIGKILL);
+    r.t.wait_exit(r.sim);
+    let before = r.truth();
+    let rows_before = std::fs::read_to_string(&traj).unwrap().lines().count();
+    let _ = std::fs::remove_file(&link);
+    r.sim = Robot::spawn_sim(&mut r.t, &world, &link, &traj, &["--state", &state_arg]);
+    r.wait_connected(3);
+    r.t.wait_until("the resumed robot's first rows", || {
+        std::fs::read_to_string(&traj).unwrap().lines().count() > rows_before + 2
+    });
+    let text = std::fs::read_to_string(&traj).unwrap();
+    let first_after: Vec<f64> = text
+        .lines()
+        .nth(rows_before)
+        .unwrap()
+        .split(',')
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    // The state is saved with every ground-truth row: at most one row of motion apart.
+    assert!(
+        (first_after[1] - before.0).abs() < 0.1,
+        "x {} -> {}",
+        before.0,
+        first_after[1]
+    );
+    assert!(
+        (first_after[2] - before.1).abs() < 0.1,
+        "y {} -> {}",
+        before.1,
+        first_after[2]
+    );
+    // One trajectory, one clock: the header is not written again and time goes on.
+    assert_eq!(text.lines().filter(|l| l.starts_with('t')).count(), 1);
+    // And it drives on from there.
+    r.t.wait_until("the robot to drive on", || r.truth().0 > before.0 + 0.2);
+}
+
+#[test]
 fn hot_swap_of_the_device_under_a_running_manager() {
     let mut r = Robot::start("hotswap", &[]);
     r.client.subscribe().unwrap();

@@ -423,3 +423,51 @@ fn a_plain_iceoryx2_client_reads_a_skills_output_from_the_documented_names() {
         "no new sample after the wake-ups"
     );
 }
+
+#[test]
+fn a_killed_skill_comes_back_with_what_it_kept_and_a_clean_leave_drops_it() {
+    let mut t = TestDomain::new("snapshot");
+    let launch = t.launch_file(
+        "[manager]\nperiod_ms = 5\n[[process]]\nname = \"counter\"\nbin = \"{bin:counter}\"\nrestart = \"on-failure\"\n",
+    );
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    let file = t.domain.root_path().join("skills/counter/snapshot");
+    let kept = || {
+        std::fs::read(&file)
+            .ok()
+            .and_then(|b| b.try_into().ok())
+            .map(u64::from_le_bytes)
+    };
+    t.wait_until("a snapshot of more than 100 runs", || {
+        kept().is_some_and(|n| n > 100)
+    });
+    let pid = skillfab_tests::registered(&board, "counter").unwrap().decl.pid;
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let at_kill = kept().unwrap();
+    t.wait_until("the restarted counter to run", || {
+        skillfab_tests::registered(&board, "counter")
+            .is_some_and(|s| s.decl.pid != pid && s.runs > 5)
+    });
+    let back = cycle(&board);
+    let c = skillfab_client::Client::connect(&t.domain).unwrap();
+    let (value, k) = c.query("counter.count.value").unwrap();
+    assert!(k >= back - 1, "a sample of the new instance ({k} vs {back})");
+    // It counts on from what the dead one kept (a fresh one would be at its few runs).
+    assert!(
+        value.as_f64().unwrap() > at_kill as f64,
+        "{value} after a snapshot of {at_kill}"
+    );
+    // A clean leave (SIGTERM; `on-failure` does not restart it): the next one starts afresh.
+    let new_pid = skillfab_tests::registered(&board, "counter").unwrap().decl.pid;
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(new_pid as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    t.wait_until("the snapshot to be dropped", || !file.exists());
+}

@@ -152,6 +152,9 @@ pub struct DoorLocate {
     found: Door,
 }
 
+/// First bytes of a door_locate snapshot (its layout's version).
+const SNAPSHOT_TAG: &[u8; 8] = b"door-v1\0";
+
 /// Readings kept for refitting the wall and rebuilding the evidence.
 const HISTORY: usize = 6000;
 /// Readings the wall is refitted on (the newest).
@@ -397,5 +400,62 @@ impl Skill for DoorLocate {
         }
         o.door.set(self.found);
         Ok(())
+    }
+
+    /// The readings gathered, the wall and the door found: a restarted door_locate goes on
+    /// from its evidence instead of searching again (the odometry frame survives device
+    /// restarts, so they stay in place). The evidence bins are rebuilt at the next refit.
+    fn snapshot(&self) -> Option<Vec<u8>> {
+        let mut b = Vec::with_capacity(96 + 32 * self.history.len());
+        b.extend(SNAPSHOT_TAG);
+        let mut f = |x: f64| b.extend(x.to_le_bytes());
+        let d = self.found;
+        for x in [f64::from(u8::from(d.found)), d.x, d.y, d.heading, d.width] {
+            f(x);
+        }
+        match self.wall {
+            Some(w) => [1.0, w.phi, w.rho, w.anchor.0, w.anchor.1]
+                .into_iter()
+                .for_each(&mut f),
+            None => [0.0; 5].into_iter().for_each(&mut f),
+        }
+        for r in &self.history {
+            [r.o.0, r.o.1, r.a, r.r].into_iter().for_each(&mut f);
+        }
+        Some(b)
+    }
+
+    fn restore(&mut self, snapshot: &[u8]) {
+        let Some(rest) = snapshot.strip_prefix(SNAPSHOT_TAG.as_slice()) else {
+            return;
+        };
+        let v: Vec<f64> = rest
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+            .collect();
+        if v.len() < 10 || !(v.len() - 10).is_multiple_of(4) {
+            return;
+        }
+        self.found = Door {
+            found: v[0] != 0.0,
+            x: v[1],
+            y: v[2],
+            heading: v[3],
+            width: v[4],
+        };
+        self.wall = (v[5] != 0.0).then_some(Wall {
+            phi: v[6],
+            rho: v[7],
+            anchor: (v[8], v[9]),
+        });
+        self.history = v[10..]
+            .chunks_exact(4)
+            .map(|r| Ray {
+                o: (r[0], r[1]),
+                a: r[2],
+                r: r[3],
+            })
+            .collect();
+        self.fitted = 0;
     }
 }

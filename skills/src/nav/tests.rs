@@ -294,6 +294,25 @@ fn a_restarted_wander_keeps_its_visit_map_and_draws_on() {
 }
 
 #[test]
+fn a_restarted_door_locate_keeps_its_readings_and_its_door() {
+    let mut d = DoorLocate::default();
+    d.restore(b"nonsense");
+    let empty = d.snapshot().unwrap();
+    assert_eq!(empty, DoorLocate::default().snapshot().unwrap());
+    // A snapshot with a door, a wall and readings comes back byte for byte.
+    let mut b = empty[..8].to_vec();
+    let door = [1.0, 2.0, 3.0, 0.5, 0.9];
+    let wall = [1.0, 0.25, 4.0, 2.0, 3.5];
+    let rays = [0.1, 0.2, 1.0, f64::INFINITY, 0.3, 0.4, -1.0, 2.5];
+    for x in door.iter().chain(&wall).chain(&rays) {
+        b.extend(x.to_le_bytes());
+    }
+    let mut again = DoorLocate::default();
+    again.restore(&b);
+    assert_eq!(again.snapshot().unwrap(), b);
+}
+
+#[test]
 fn stop_proposes_standing_still() {
     let mut h = Harness::<Stop>::new();
     assert_eq!(

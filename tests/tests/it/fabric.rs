@@ -442,7 +442,10 @@ fn a_killed_skill_comes_back_with_what_it_kept_and_a_clean_leave_drops_it() {
     t.wait_until("a snapshot of more than 100 runs", || {
         kept().is_some_and(|n| n > 100)
     });
-    let pid = skillfab_tests::registered(&board, "counter").unwrap().decl.pid;
+    let pid = skillfab_tests::registered(&board, "counter")
+        .unwrap()
+        .decl
+        .pid;
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(pid as i32),
         nix::sys::signal::Signal::SIGKILL,
@@ -456,14 +459,20 @@ fn a_killed_skill_comes_back_with_what_it_kept_and_a_clean_leave_drops_it() {
     let back = cycle(&board);
     let c = skillfab_client::Client::connect(&t.domain).unwrap();
     let (value, k) = c.query("counter.count.value").unwrap();
-    assert!(k >= back - 1, "a sample of the new instance ({k} vs {back})");
+    assert!(
+        k >= back - 1,
+        "a sample of the new instance ({k} vs {back})"
+    );
     // It counts on from what the dead one kept (a fresh one would be at its few runs).
     assert!(
         value.as_f64().unwrap() > at_kill as f64,
         "{value} after a snapshot of {at_kill}"
     );
     // A clean leave (SIGTERM; `on-failure` does not restart it): the next one starts afresh.
-    let new_pid = skillfab_tests::registered(&board, "counter").unwrap().decl.pid;
+    let new_pid = skillfab_tests::registered(&board, "counter")
+        .unwrap()
+        .decl
+        .pid;
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(new_pid as i32),
         nix::sys::signal::Signal::SIGTERM,

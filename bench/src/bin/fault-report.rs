@@ -11,7 +11,7 @@
 //! Denning device or any skill; skills restart on failure) every S simulated seconds;
 //! `corrupt-1`, `corrupt-5` — 1 % / 5 % of the serial bytes with a flipped bit; `drop-1` —
 //! 1 % of them dropped; `sim-restart` — the simulator (the robot's serial side) killed every
-//! 20 simulated seconds and restarted where the robot was. Per scenario: missions out of the lab, median mission time, the longest time
+//! 60 simulated seconds and restarted where the robot was. Per scenario: missions out of the lab, median mission time, the longest time
 //! without a drive command at the robot and the longest it moved on a stale one (from the
 //! simulator's ground truth), kills and their recovery (signal → the new instance registered
 //! and, if active, its first run), cycles the killed units missed, and the serial link's
@@ -281,7 +281,7 @@ fn main() -> std::process::ExitCode {
         },
         Scenario {
             name: "sim-restart",
-            args: vec!["--kill-sim-every".into(), "20".into()],
+            args: vec!["--kill-sim-every".into(), "60".into()],
         },
     ];
     let skillfab = skillfab_tests::bin("skillfab");

@@ -86,6 +86,13 @@ fn spawn(spec: &ProcessSpec, domain: &Domain) -> std::io::Result<Child> {
     if let Ok(err) = std::io::stderr().as_fd().try_clone_to_owned() {
         cmd.stdout(Stdio::from(err));
     }
+    own_group_ended_with_us(&mut cmd);
+    cmd.spawn()
+}
+
+/// Makes the child of `cmd` the leader of a process group of its own (a terminal's Ctrl-C
+/// reaches only `up`) that gets SIGTERM when `up` dies.
+fn own_group_ended_with_us(cmd: &mut Command) {
     let parent = nix::unistd::getpid();
     // SAFETY: only async-signal-safe system calls run between fork and exec.
     unsafe {
@@ -99,7 +106,6 @@ fn spawn(spec: &ProcessSpec, domain: &Domain) -> std::io::Result<Child> {
             Ok(())
         });
     }
-    cmd.spawn()
 }
 
 impl Supervisor {
@@ -339,18 +345,7 @@ fn spawn_manager(opts: &UpOptions, restart: u32) -> anyhow::Result<Child> {
     cmd.args(manager_args(opts, restart))
         .env_remove(DOMAIN_ENV)
         .stdin(Stdio::null());
-    let parent = nix::unistd::getpid();
-    // SAFETY: only async-signal-safe system calls run between fork and exec.
-    unsafe {
-        cmd.pre_exec(move || {
-            let _ = nix::unistd::setpgid(Pid::from_raw(0), Pid::from_raw(0));
-            let _ = nix::sys::prctl::set_pdeathsig(Signal::SIGTERM);
-            if nix::unistd::getppid() != parent {
-                return Err(std::io::Error::other("parent exited"));
-            }
-            Ok(())
-        });
-    }
+    own_group_ended_with_us(&mut cmd);
     cmd.spawn().context("starting the manager")
 }
 

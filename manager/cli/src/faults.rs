@@ -104,10 +104,8 @@ fn units(board: &Board) -> Vec<(usize, String, u32, bool)> {
 impl Killer {
     /// Starts killing in `domain` every `every` (real time).
     pub fn start(domain: &Domain, every: Duration, period: Duration, seed: u64) -> Killer {
-        let stop = Arc::new(AtomicBool::new(false));
-        let kills = Arc::new(Mutex::new(Vec::new()));
-        let (st, ks, domain) = (stop.clone(), kills.clone(), domain.clone());
-        let thread = std::thread::spawn(move || {
+        let domain = domain.clone();
+        Killer::spawn(move |st, ks| {
             let mut rng = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
             let armed = Instant::now();
             let mut next = armed + every;
@@ -193,22 +191,15 @@ impl Killer {
                     k.push(kill);
                 }
             }
-        });
-        Killer {
-            stop,
-            kills,
-            thread: Some(thread),
-        }
+        })
     }
 
     /// Starts killing the simulator linked at `link` every `every` (real time): the recovery
     /// is the signal → the device connected to the new one (its `link.connects` counts it).
     pub fn start_sim(domain: &Domain, link: &std::path::Path, every: Duration) -> Killer {
-        let stop = Arc::new(AtomicBool::new(false));
-        let kills = Arc::new(Mutex::new(Vec::new()));
-        let (st, ks, domain) = (stop.clone(), kills.clone(), domain.clone());
+        let domain = domain.clone();
         let link = link.to_string_lossy().into_owned();
-        let thread = std::thread::spawn(move || {
+        Killer::spawn(move |st, ks| {
             let armed = Instant::now();
             let mut next = armed + every;
             let mut client = None;
@@ -260,11 +251,18 @@ impl Killer {
                     k.push(kill);
                 }
             }
-        });
+        })
+    }
+
+    /// Runs `body` on a thread of its own with the stop flag and the list of kills.
+    fn spawn(body: impl FnOnce(Arc<AtomicBool>, Arc<Mutex<Vec<Kill>>>) + Send + 'static) -> Killer {
+        let stop = Arc::new(AtomicBool::new(false));
+        let kills = Arc::new(Mutex::new(Vec::new()));
+        let (st, ks) = (stop.clone(), kills.clone());
         Killer {
             stop,
             kills,
-            thread: Some(thread),
+            thread: Some(std::thread::spawn(move || body(st, ks))),
         }
     }
 

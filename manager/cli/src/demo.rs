@@ -196,6 +196,12 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                 name: "denning".into(),
                 bin: text(&program("denning")?),
                 args: vec!["--port".into(), text(&link)],
+                // Blind after 500 ms of the robot's time.
+                params: [(
+                    "blind_ms".to_string(),
+                    toml::Value::Float(500.0 / opts.time_factor),
+                )]
+                .into(),
                 restart: Restart::Always,
                 max_restarts: Some(restarts),
                 backoff_ms: Some(backoff_ms),

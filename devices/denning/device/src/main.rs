@@ -35,14 +35,29 @@ pub struct Channels<'a> {
     pub drive: Command<'a, Drive>,
 }
 
+/// Parameters of the device.
+#[derive(Params, Debug, Clone)]
+pub struct DenningParams {
+    /// The robot is driven only while it is seen: when no good status frame came for this
+    /// long, the device commands stop whatever was proposed (the sonar ring is as old as
+    /// that, and obstacles come closer unseen). In the robot's time (a simulator faster
+    /// than real time needs it divided by its time factor).
+    #[param(default = 500.0, min = 1.0, max = 10000.0)]
+    pub blind_ms: f64,
+}
+
 /// The device.
 #[derive(Default)]
 pub struct Denning {
     driver: Option<Driver>,
+    /// When the newest good status frame arrived (read at each cycle's sample).
+    seen: Option<Instant>,
+    /// Whether the last command was replaced by stop (said once per blind spell).
+    blind: bool,
 }
 
 impl Device for Denning {
-    type Params = NoParams;
+    type Params = DenningParams;
     type Outputs<'a> = Sensors<'a>;
     type Commands<'a> = Channels<'a>;
 
@@ -67,11 +82,12 @@ impl Device for Denning {
         Ok(())
     }
 
-    fn sample(&mut self, _: &Ctx<NoParams>, out: &mut Sensors) -> SkillResult {
+    fn sample(&mut self, _: &Ctx<DenningParams>, out: &mut Sensors) -> SkillResult {
         let Some(d) = &self.driver else {
             return Ok(());
         };
         let s = d.latest();
+        self.seen = s.received;
         let now = Instant::now();
         let ms = |t: Instant| now.duration_since(t).as_secs_f64() * 1000.0;
         let sonar = out.sonar.get_mut();
@@ -121,9 +137,27 @@ impl Device for Denning {
         Ok(())
     }
 
-    fn command(&mut self, _: &Ctx<NoParams>, c: Channels) -> SkillResult {
-        if let Some(d) = &self.driver {
+    fn command(&mut self, ctx: &Ctx<DenningParams>, c: Channels) -> SkillResult {
+        let Some(d) = &self.driver else {
+            return Ok(());
+        };
+        let limit = std::time::Duration::from_secs_f64(ctx.params.blind_ms / 1000.0);
+        let seen = self.seen.is_some_and(|t| t.elapsed() < limit);
+        if seen {
             d.command(c.drive.translate, c.drive.rotate);
+        } else {
+            d.command(0.0, 0.0);
+        }
+        if seen == self.blind {
+            self.blind = !seen;
+            if self.blind {
+                tracing::warn!(
+                    blind_ms = ctx.params.blind_ms,
+                    "no good frame from the robot: stopped"
+                );
+            } else {
+                tracing::info!("the robot is seen again: driving");
+            }
         }
         Ok(())
     }

@@ -58,6 +58,18 @@ fn process_with_args(words: &[&str]) -> Option<u32> {
     })
 }
 
+/// Sends SIGKILL to `pid` (the fault's `target`); when it was sent, if it was.
+fn sigkill(pid: u32, target: &str) -> Option<Instant> {
+    let at = Instant::now();
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(i32::try_from(pid).ok()?),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .ok()?;
+    tracing::info!(%target, pid, "fault: killed");
+    Some(at)
+}
+
 /// The manager's place in the killer's list (not a board slot).
 const MANAGER: usize = usize::MAX;
 const MANAGER_NAME: &str = "manager";
@@ -137,16 +149,9 @@ impl Killer {
                 rng ^= rng << 17;
                 let (slot, name, pid, active) = list[(rng % list.len() as u64) as usize].clone();
                 let k0 = board.header().cycle.load(Ordering::Acquire);
-                let killed_at = Instant::now();
-                if nix::sys::signal::kill(
-                    nix::unistd::Pid::from_raw(pid as i32),
-                    nix::sys::signal::Signal::SIGKILL,
-                )
-                .is_err()
-                {
+                let Some(killed_at) = sigkill(pid, &name) else {
                     continue;
-                }
-                tracing::info!(target = %name, pid, "fault: killed");
+                };
                 let mut kill = Kill {
                     target: name.clone(),
                     at_s: killed_at.duration_since(armed).as_secs_f64(),
@@ -223,16 +228,9 @@ impl Killer {
                 else {
                     continue;
                 };
-                let killed_at = Instant::now();
-                if nix::sys::signal::kill(
-                    nix::unistd::Pid::from_raw(pid as i32),
-                    nix::sys::signal::Signal::SIGKILL,
-                )
-                .is_err()
-                {
+                let Some(killed_at) = sigkill(pid, "denning-sim") else {
                     continue;
-                }
-                tracing::info!(target = "denning-sim", pid, "fault: killed");
+                };
                 let mut kill = Kill {
                     target: "denning-sim".into(),
                     at_s: killed_at.duration_since(armed).as_secs_f64(),

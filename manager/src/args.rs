@@ -13,6 +13,9 @@ use skillfab_proto::domain::{DOMAIN_ENV, Domain};
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// The period when none is given: 100 Hz.
+pub const DEFAULT_PERIOD: Duration = Duration::from_millis(10);
+
 #[derive(Args, Debug, Clone)]
 pub struct PaceArgs {
     /// Cycle period in milliseconds (default 10: 100 Hz).
@@ -33,11 +36,31 @@ pub struct PaceArgs {
     /// change).
     #[arg(long, value_name = "FILE")]
     pub param_log: Option<PathBuf>,
+    /// Lock-step: cycles back to back, each one period of simulated time (the period of
+    /// --period-ms, else the launch file's, else 10 ms); a simulator in lock-step advances one
+    /// period per cycle. No overruns short of 10 s.
+    #[arg(long, conflicts_with = "free_run")]
+    pub lockstep: bool,
+    /// Number the first cycle N (a replay numbers cycles as its recording did).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub first_cycle: u64,
 }
 
 impl PaceArgs {
     /// The pace the flags ask for (`None`: the default).
     pub fn pace(&self) -> anyhow::Result<Option<Pace>> {
+        let pace = self.paced()?;
+        Ok(if self.lockstep {
+            Some(Pace::LockStep(
+                pace.and_then(Pace::period).unwrap_or(DEFAULT_PERIOD),
+            ))
+        } else {
+            pace
+        })
+    }
+
+    /// The pace of --period-ms and --free-run alone.
+    pub fn paced(&self) -> anyhow::Result<Option<Pace>> {
         if self.free_run {
             return Ok(Some(Pace::FreeRun));
         }
@@ -107,6 +130,10 @@ pub struct UpArgs {
     /// Seconds to wait for every skill to register before the first cycle.
     #[arg(long, default_value_t = 30.0)]
     pub wait_timeout_s: f64,
+    /// Start with cycling stopped (`skillfab ctl resume` starts it): a sequencer sets up
+    /// before the first cycle, so a lock-step run does not depend on when it connected.
+    #[arg(long)]
+    pub paused: bool,
 }
 
 /// Runs a domain's manager until it is stopped (or its cycle budget is spent), then prints
@@ -129,6 +156,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
     config.wait_for = wait_for;
     config.wait_timeout = Duration::from_secs_f64(wait_timeout_s.max(0.0));
     config.param_log = pace.param_log.clone();
+    config.first_cycle = pace.first_cycle;
     let mut manager = Manager::new(config).context("starting the manager")?;
     let report = manager.run(&|_| false);
     manager.shutdown();
@@ -142,7 +170,10 @@ pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
         launch,
         domain,
         cycles: args.pace.cycles,
-        pace: args.pace.pace()?,
+        pace: args.pace.paced()?,
+        lockstep: args.pace.lockstep,
+        paused: args.paused,
+        first_cycle: args.pace.first_cycle,
         wait_timeout: Duration::from_secs_f64(args.wait_timeout_s.max(0.0)),
         param_log: args.pace.param_log.clone(),
         json: args.pace.json,

@@ -41,6 +41,12 @@ pub struct UpOptions {
     pub cycles: Option<u64>,
     /// Pacing (overrides the launch file).
     pub pace: Option<Pace>,
+    /// Lock-step at the period of `pace`, else the launch file's, else 10 ms.
+    pub lockstep: bool,
+    /// Start with cycling stopped.
+    pub paused: bool,
+    /// The first cycle's number.
+    pub first_cycle: u64,
     /// How long to wait for every skill to register before cycling.
     pub wait_timeout: Duration,
     /// The fabric log file (`None`: the default, see [`crate::engine::default_log_path`]).
@@ -289,9 +295,24 @@ fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
         }
     }));
     match pace {
+        _ if opts.lockstep => a.extend([
+            "--lockstep".into(),
+            "--period-ms".into(),
+            ms(pace
+                .and_then(Pace::period)
+                .unwrap_or(crate::args::DEFAULT_PERIOD)),
+        ]),
         Some(Pace::FreeRun) => a.push("--free-run".into()),
         Some(Pace::Period(p)) => a.extend(["--period-ms".into(), ms(p)]),
+        Some(Pace::LockStep(p)) => a.extend(["--lockstep".into(), "--period-ms".into(), ms(p)]),
         None => {}
+    }
+    // A restarted manager takes the pause and the cycle number from its predecessor.
+    if restart == 0 && opts.paused {
+        a.push("--paused".into());
+    }
+    if restart == 0 && opts.first_cycle > 1 {
+        a.extend(["--first-cycle".into(), opts.first_cycle.to_string()]);
     }
     if let Some(d) = opts.launch.deadline {
         a.extend(["--deadline-ms".into(), ms(d)]);

@@ -26,6 +26,9 @@ use crate::ports::{ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, Po
 use crate::skill::{Ctx, Skill, SkillError};
 use std::any::Any;
 
+/// The period a harness steps at (its [`crate::skill::Clock`]).
+pub const HARNESS_PERIOD: std::time::Duration = std::time::Duration::from_millis(10);
+
 /// An in-process driver for one skill body.
 pub struct Harness<S: Skill> {
     skill: S,
@@ -81,6 +84,16 @@ impl<S: Skill> Default for Harness<S> {
 }
 
 impl<S: Skill> Harness<S> {
+    /// The clock a harness step runs with: lock-step at [`HARNESS_PERIOD`], time = cycle ×
+    /// period.
+    fn clock(cycle: u64) -> crate::skill::Clock {
+        crate::skill::Clock {
+            time: HARNESS_PERIOD * u32::try_from(cycle).unwrap_or(u32::MAX),
+            period: Some(HARNESS_PERIOD),
+            lockstep: true,
+        }
+    }
+
     /// A fresh skill with default parameters, before cycle 1.
     pub fn new() -> Self {
         let input_names: Vec<String> = <S::Inputs<'static> as InputSet<'static>>::ports()
@@ -172,6 +185,7 @@ impl<S: Skill> Harness<S> {
                 params: &self.params,
                 cycle,
                 name: "harness",
+                clock: Self::clock(cycle),
             };
             self.skill.compute(&ctx, input, &mut out)
         };

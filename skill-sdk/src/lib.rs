@@ -122,7 +122,7 @@ pub mod prelude {
     pub use crate::device::{Device, DeviceOptions};
     pub use crate::params::{NoParams, Params};
     pub use crate::ports::{Input, Output, Proposal};
-    pub use crate::skill::{Ctx, Skill, SkillError, SkillResult};
+    pub use crate::skill::{Clock, Ctx, Skill, SkillError, SkillResult};
     pub use skill_sdk_macros::{Inputs, Message, Outputs, Params};
 }
 

@@ -3,6 +3,7 @@
 use crate::decl::Mode;
 use crate::params::Params;
 use crate::ports::{InputSet, OutputSet};
+pub use skillfab_proto::board::Clock;
 use std::fmt;
 
 /// A skill: typed inputs, outputs and parameters, and a compute body.
@@ -79,6 +80,43 @@ pub struct Ctx<'a, P> {
     pub cycle: u64,
     /// The instance name.
     pub name: &'a str,
+    /// The cycle's time, period and mode. A skill that needs the time reads `clock.time`, never
+    /// the wall clock, and draws random numbers from [`Ctx::rng`]: then a recorded run replays
+    /// identically (docs/replay.md, "Determinism rules").
+    pub clock: Clock,
+}
+
+impl<P> Ctx<'_, P> {
+    /// A random generator for this run, seeded by the instance name and the cycle: the same
+    /// numbers in a replay, after a restart, and from any cycle on. (A skill that wants one
+    /// stream over many cycles keeps its own generator, seeded by a parameter, and keeps its
+    /// state in [`Skill::snapshot`].)
+    pub fn rng(&self) -> CycleRng {
+        // FNV-1a of the name, mixed with the cycle.
+        let h = self.name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
+        CycleRng(h ^ self.cycle.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+    }
+}
+
+/// A small seeded generator (splitmix64), from [`Ctx::rng`].
+#[derive(Debug, Clone)]
+pub struct CycleRng(u64);
+
+impl CycleRng {
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
 }
 
 /// The result of a run.

@@ -57,6 +57,12 @@ struct Args {
     /// a new serial link (the trajectory is appended to).
     #[arg(long)]
     state: Option<PathBuf>,
+    /// Lock-step: the robot stands still until the client sends STEP n (PROTOCOL.md), then
+    /// advances n ms of simulated time, sends what the robot sent in them and acknowledges.
+    /// Bytes are not paced. A run is then a function of world, seed and commands, at
+    /// whatever speed the host allows.
+    #[arg(long)]
+    lockstep: bool,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -160,22 +166,41 @@ fn run(args: &Args) -> anyhow::Result<()> {
     {
         writeln!(t, "{}", TruthRecord::HEADER)?;
     }
-    let mut faults = Rng::new(args.seed.wrapping_mul(31).wrapping_add(7));
-    let mut decoder = Decoder::default();
-    let mut link = Link::Sync(0);
-    let mut period = 0.1f64;
+    let faults = Rng::new(args.seed.wrapping_mul(31).wrapping_add(7));
     // Resumed: time goes on from where the robot was.
     let t0 = sim.time;
-    let mut next_status = t0;
-    let mut last_command = t0;
-    let mut last_drive = t0;
-    let mut watchdog = WATCHDOG;
-    let mut outbox: Vec<u8> = Vec::new();
+    let mut robot = Robot {
+        sim,
+        link: Link::Sync(0),
+        period: 0.1,
+        next_status: t0,
+        last_command: t0,
+        last_drive: t0,
+        watchdog: WATCHDOG,
+        outbox: Vec::new(),
+        trajectory,
+        state: args.state.clone(),
+        faults,
+    };
+    let mut decoder = Decoder::default();
+    if args.lockstep {
+        tracing::info!("lock-step: the robot moves only when told to STEP");
+    }
     let started = Instant::now();
     let byte_time = 10.0 / (f64::from(args.baud) * args.time_factor);
     let mut send_budget = 0.0f64; // seconds of line time already used
     while !STOP.load(Ordering::Acquire) {
-        // Commands in.
+        // Commands in: in lock-step, wait for them (the robot has nothing else to do).
+        if args.lockstep {
+            let mut fds = [nix::poll::PollFd::new(
+                master.as_fd(),
+                nix::poll::PollFlags::POLLIN,
+            )];
+            match nix::poll::poll(&mut fds, nix::poll::PollTimeout::from(100u16)) {
+                Ok(_) | Err(nix::Error::EINTR) => {}
+                Err(e) => return Err(e).context("waiting for the pty"),
+            }
+        }
         let mut buf = [0u8; 256];
         loop {
             match nix::unistd::read(master.as_fd(), &mut buf) {
@@ -188,118 +213,38 @@ fn run(args: &Args) -> anyhow::Result<()> {
             let Ok(cmd) = frame.and_then(|p| Command::decode(&p)) else {
                 continue;
             };
-            last_command = sim.time;
-            let streaming = link == Link::Ready { open: true };
             match cmd {
-                // SYNC0 while streaming is the keep-alive (PULSE); otherwise it (re)starts
-                // the handshake.
-                Command::Sync0 if streaming => {}
-                Command::Sync0 => {
-                    link = Link::Sync(1);
-                    sim.enabled = false;
-                    sim.cmd = [0.0; 2];
-                    outbox.extend(Packet::Sync(0).encode());
+                Command::Step(ms) if args.lockstep => {
+                    robot.last_command = robot.sim.time;
+                    robot.step_ms(ms)?;
                 }
-                Command::Sync1 => match link {
-                    Link::Sync(1) => {
-                        link = Link::Sync(2);
-                        outbox.extend(Packet::Sync(1).encode());
-                    }
-                    Link::Ready { .. } => {
-                        link = Link::Ready { open: true };
-                        tracing::info!("client connected");
-                    }
-                    _ => {}
-                },
-                Command::Sync2 => match link {
-                    Link::Sync(2) => {
-                        link = Link::Ready { open: false };
-                        outbox.extend(Packet::Sync(2).encode());
-                    }
-                    // CLOSE: stop, and wait for a new handshake.
-                    Link::Ready { .. } => {
-                        link = Link::Sync(0);
-                        sim.enabled = false;
-                        sim.cmd = [0.0; 2];
-                    }
-                    _ => {}
-                },
-                _ if !matches!(link, Link::Ready { .. }) => {}
-                Command::Enable(on) => sim.enabled = on,
-                Command::Vel(v) => {
-                    last_drive = sim.time;
-                    sim.cmd[0] = f64::from(v).clamp(-1000.0, 1000.0) / 1000.0;
-                }
-                Command::RVel(w) => {
-                    last_drive = sim.time;
-                    sim.cmd[1] = (f64::from(w).clamp(-1800.0, 1800.0) / 10.0).to_radians();
-                }
-                Command::Period(ms) => period = f64::from(ms.clamp(20, 1000)) / 1000.0,
-                Command::Watchdog(ms) => watchdog = f64::from(ms.clamp(100, 5000)) / 1000.0,
+                // A robot in real time steps on its own.
+                Command::Step(_) => {}
+                cmd => robot.command(cmd),
             }
         }
-        if sim.time - last_command > watchdog && sim.cmd != [0.0, 0.0] {
-            tracing::info!(watchdog_s = watchdog, "watchdog: no command, stopping");
-            sim.cmd = [0.0; 2];
+        if !args.lockstep {
+            robot.advance(DT)?;
         }
-        sim.step(DT);
-        if sim.time >= next_status {
-            next_status += period;
-            if link == (Link::Ready { open: true }) {
-                let status = sim.status();
-                outbox.extend(Packet::Status(status).encode());
-                let seen = sim.camera();
-                if !seen.is_empty() {
-                    outbox.extend(Packet::Barcodes(seen).encode());
-                }
-            }
-            if let Some(t) = trajectory.as_mut() {
-                let [x, y, theta] = sim.pose;
-                TruthRecord {
-                    t: sim.time,
-                    x,
-                    y,
-                    theta,
-                    v: sim.vel[0],
-                    w: sim.vel[1],
-                    stall: sim.stall,
-                    collisions: sim.collisions,
-                    outside: sim.world.is_outside([x, y]),
-                    cmd_age: sim.time - last_drive,
-                    driven: sim.cmd != [0.0, 0.0],
-                }
-                .write(t)?;
-                t.flush()?;
-            }
-            if let Some(path) = &args.state {
-                save_state(path, &sim.physical())?;
-            }
-        }
-        // Bytes out, with fault injection, paced at the baud rate.
-        if !outbox.is_empty() {
-            let mut bytes: Vec<u8> = Vec::with_capacity(outbox.len());
-            for b in outbox.drain(..) {
-                if args.drop_rate > 0.0 && faults.uniform() < args.drop_rate {
-                    continue;
-                }
-                let b = if args.corrupt_rate > 0.0 && faults.uniform() < args.corrupt_rate {
-                    b ^ (1 << (faults.uniform() * 8.0) as u32)
-                } else {
-                    b
-                };
-                bytes.push(b);
-            }
+        // Bytes out, with fault injection, paced at the baud rate (not in lock-step: there
+        // the robot's time is not the host's).
+        if !robot.outbox.is_empty() {
+            let bytes = robot.faulty_output(args.corrupt_rate, args.drop_rate);
             write_all(&master, &bytes)?;
             send_budget += bytes.len() as f64 * byte_time;
         }
+        if args.lockstep {
+            continue;
+        }
         // Real time: one step of simulated time, or the line time of the bytes sent.
-        let target = ((sim.time - t0) / args.time_factor).max(send_budget);
+        let target = ((robot.sim.time - t0) / args.time_factor).max(send_budget);
         let elapsed = started.elapsed().as_secs_f64();
         if target > elapsed {
             std::thread::sleep(Duration::from_secs_f64(target - elapsed));
         }
         send_budget = send_budget.max(started.elapsed().as_secs_f64());
     }
+    let sim = robot.sim;
     if let Some(link) = &args.link {
         let _ = std::fs::remove_file(link);
     }
@@ -327,6 +272,160 @@ fn save_state(path: &std::path::Path, p: &Physical) -> anyhow::Result<()> {
     std::fs::write(&tmp, toml::to_string(p)?)
         .with_context(|| format!("writing {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The robot's side of the link: the simulated body, the protocol state, what goes out.
+struct Robot {
+    sim: Sim,
+    link: Link,
+    /// Status period (s).
+    period: f64,
+    next_status: f64,
+    last_command: f64,
+    last_drive: f64,
+    /// Watchdog (s).
+    watchdog: f64,
+    outbox: Vec<u8>,
+    trajectory: Option<std::io::BufWriter<std::fs::File>>,
+    state: Option<PathBuf>,
+    /// Random source of the injected faults.
+    faults: Rng,
+}
+
+impl Robot {
+    /// Applies one command (any but STEP).
+    fn command(&mut self, cmd: Command) {
+        let sim = &mut self.sim;
+        self.last_command = sim.time;
+        let streaming = self.link == Link::Ready { open: true };
+        match cmd {
+            // SYNC0 while streaming is the keep-alive (PULSE); otherwise it (re)starts
+            // the handshake.
+            Command::Sync0 if streaming => {}
+            Command::Sync0 => {
+                self.link = Link::Sync(1);
+                sim.enabled = false;
+                sim.cmd = [0.0; 2];
+                self.outbox.extend(Packet::Sync(0).encode());
+            }
+            Command::Sync1 => match self.link {
+                Link::Sync(1) => {
+                    self.link = Link::Sync(2);
+                    self.outbox.extend(Packet::Sync(1).encode());
+                }
+                Link::Ready { .. } => {
+                    self.link = Link::Ready { open: true };
+                    tracing::info!("client connected");
+                }
+                _ => {}
+            },
+            Command::Sync2 => match self.link {
+                Link::Sync(2) => {
+                    self.link = Link::Ready { open: false };
+                    self.outbox.extend(Packet::Sync(2).encode());
+                }
+                // CLOSE: stop, and wait for a new handshake.
+                Link::Ready { .. } => {
+                    self.link = Link::Sync(0);
+                    sim.enabled = false;
+                    sim.cmd = [0.0; 2];
+                }
+                _ => {}
+            },
+            _ if !matches!(self.link, Link::Ready { .. }) => {}
+            Command::Enable(on) => sim.enabled = on,
+            Command::Vel(v) => {
+                self.last_drive = sim.time;
+                sim.cmd[0] = f64::from(v).clamp(-1000.0, 1000.0) / 1000.0;
+            }
+            Command::RVel(w) => {
+                self.last_drive = sim.time;
+                sim.cmd[1] = (f64::from(w).clamp(-1800.0, 1800.0) / 10.0).to_radians();
+            }
+            Command::Period(ms) => self.period = f64::from(ms.clamp(20, 1000)) / 1000.0,
+            Command::Watchdog(ms) => self.watchdog = f64::from(ms.clamp(100, 5000)) / 1000.0,
+            Command::Step(_) => {}
+        }
+    }
+
+    /// Lock-step: advances `ms` milliseconds (in steps of at most [`DT`]), then acknowledges
+    /// with the robot's time.
+    fn step_ms(&mut self, ms: u16) -> anyhow::Result<()> {
+        let mut left = f64::from(ms) / 1000.0;
+        while left > 1e-9 {
+            let dt = left.min(DT);
+            self.advance(dt)?;
+            left -= dt;
+        }
+        let now_ms = (self.sim.time * 1000.0)
+            .round()
+            .clamp(0.0, f64::from(u32::MAX)) as u32;
+        self.outbox.extend(Packet::Stepped(now_ms).encode());
+        Ok(())
+    }
+
+    /// One step of `dt` seconds: the watchdog, the body, and the status and barcode packets,
+    /// ground truth and kept state when a status is due.
+    fn advance(&mut self, dt: f64) -> anyhow::Result<()> {
+        let sim = &mut self.sim;
+        if sim.time - self.last_command > self.watchdog && sim.cmd != [0.0, 0.0] {
+            tracing::info!(watchdog_s = self.watchdog, "watchdog: no command, stopping");
+            sim.cmd = [0.0; 2];
+        }
+        sim.step(dt);
+        // (A little slack: lock-step sub-steps add up to the period only up to rounding.)
+        if sim.time + 1e-9 < self.next_status {
+            return Ok(());
+        }
+        self.next_status += self.period;
+        if self.link == (Link::Ready { open: true }) {
+            let status = sim.status();
+            self.outbox.extend(Packet::Status(status).encode());
+            let seen = sim.camera();
+            if !seen.is_empty() {
+                self.outbox.extend(Packet::Barcodes(seen).encode());
+            }
+        }
+        if let Some(t) = self.trajectory.as_mut() {
+            let [x, y, theta] = sim.pose;
+            TruthRecord {
+                t: sim.time,
+                x,
+                y,
+                theta,
+                v: sim.vel[0],
+                w: sim.vel[1],
+                stall: sim.stall,
+                collisions: sim.collisions,
+                outside: sim.world.is_outside([x, y]),
+                cmd_age: sim.time - self.last_drive,
+                driven: sim.cmd != [0.0, 0.0],
+            }
+            .write(t)?;
+            t.flush()?;
+        }
+        if let Some(path) = &self.state {
+            save_state(path, &sim.physical())?;
+        }
+        Ok(())
+    }
+
+    /// The outbox's bytes, each dropped or corrupted with the given probabilities.
+    fn faulty_output(&mut self, corrupt_rate: f64, drop_rate: f64) -> Vec<u8> {
+        let mut bytes: Vec<u8> = Vec::with_capacity(self.outbox.len());
+        for b in self.outbox.drain(..) {
+            if drop_rate > 0.0 && self.faults.uniform() < drop_rate {
+                continue;
+            }
+            let b = if corrupt_rate > 0.0 && self.faults.uniform() < corrupt_rate {
+                b ^ (1 << (self.faults.uniform() * 8.0) as u32)
+            } else {
+                b
+            };
+            bytes.push(b);
+        }
+        bytes
+    }
 }
 
 fn write_all(fd: &OwnedFd, mut bytes: &[u8]) -> anyhow::Result<()> {

@@ -180,6 +180,9 @@ pub enum Command {
     Period(u16),
     /// Watchdog time, ms: the robot stops when no command came for this long.
     Watchdog(u16),
+    /// Lock-step only: advance this many ms of simulated time, then acknowledge
+    /// ([`Packet::Stepped`]).
+    Step(u16),
 }
 
 fn int_arg(v: i32) -> [u8; 3] {
@@ -206,6 +209,7 @@ impl Command {
             Command::RVel(v) => with(21, i32::from(v)),
             Command::Period(ms) => with(60, i32::from(ms)),
             Command::Watchdog(ms) => with(62, i32::from(ms)),
+            Command::Step(ms) => with(70, i32::from(ms)),
         }
     }
 
@@ -245,6 +249,7 @@ impl Command {
             21 => Command::RVel(sat(arg()?)),
             60 => Command::Period(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
             62 => Command::Watchdog(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
+            70 => Command::Step(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
             code => {
                 return Err(CodecError::Unknown {
                     what: "command",
@@ -298,6 +303,8 @@ pub enum Packet {
     Status(Status),
     /// Barcode sightings.
     Barcodes(Vec<Sighting>),
+    /// Lock-step: a STEP is done; the robot's time now (ms since it started).
+    Stepped(u32),
 }
 
 impl Packet {
@@ -330,6 +337,11 @@ impl Packet {
                     p.extend_from_slice(&s.bearing.to_le_bytes());
                     p.extend_from_slice(&s.range.to_le_bytes());
                 }
+                p
+            }
+            Packet::Stepped(ms) => {
+                let mut p = vec![0x50];
+                p.extend_from_slice(&ms.to_le_bytes());
                 p
             }
         }
@@ -399,6 +411,13 @@ impl Packet {
                         .collect(),
                 ))
             }
+            0x50 if p.len() >= 5 => Ok(Packet::Stepped(u32::from_le_bytes([
+                p[1], p[2], p[3], p[4],
+            ]))),
+            0x50 => Err(CodecError::Short {
+                what: "stepped",
+                len: p.len(),
+            }),
             code => Err(CodecError::Unknown {
                 what: "packet type",
                 code,
@@ -531,7 +550,7 @@ mod tests {
 
         #[test]
         fn commands_round_trip(v in any::<i16>(), ms in any::<u16>(), on in any::<bool>()) {
-            for c in [Command::Vel(v), Command::RVel(v), Command::Period(ms), Command::Watchdog(ms), Command::Enable(on), Command::Sync0] {
+            for c in [Command::Vel(v), Command::RVel(v), Command::Period(ms), Command::Watchdog(ms), Command::Enable(on), Command::Sync0, Command::Step(ms)] {
                 let mut d = Decoder::default();
                 d.push(&c.encode());
                 prop_assert_eq!(Command::decode(&d.next_frame().unwrap().unwrap()).unwrap(), c);

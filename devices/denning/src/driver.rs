@@ -13,7 +13,7 @@ use crate::codec::{Command, DecodeStats, Decoder, Packet, Sighting, Status, wrap
 use crate::transport::{Transport, Writer};
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -59,6 +59,50 @@ struct Shared {
     command: Option<((f64, f64), Instant)>,
     /// The connected port's writing half and what went out on it last.
     link: Option<Link>,
+    /// Set once the fabric runs in lock-step ([`Driver::step`]).
+    steps: Option<Steps>,
+}
+
+/// Lock-step book-keeping. The robot only moves when told to step, so time is the robot's:
+/// a packet is stamped with the robot time of the acknowledgement that ends its step, as an
+/// `Instant` that many milliseconds after `base` — every age the device computes is then a
+/// function of the robot's run, not of how fast the host is.
+struct Steps {
+    /// The instant standing for robot time zero.
+    base: Instant,
+    /// Robot time (ms) of the last acknowledged step.
+    acked_ms: u64,
+    /// When the step in flight was sent.
+    pending: Option<Instant>,
+    /// Packets of the step in flight, applied when its acknowledgement comes.
+    held: Vec<Packet>,
+}
+
+impl Steps {
+    fn now(&self) -> Instant {
+        self.base + Duration::from_millis(self.acked_ms)
+    }
+}
+
+/// Why a lock-step step failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// No connection to the robot within the wait.
+    #[error("the robot is not connected")]
+    NotConnected,
+    /// The step was sent and not acknowledged within the wait.
+    #[error("the robot did not acknowledge a step within {0:?} (is the simulator in --lockstep?)")]
+    NoAck(Duration),
+    /// Writing to the port failed.
+    #[error("writing the step: {0}")]
+    Io(#[from] io::Error),
+}
+
+impl Shared {
+    /// The driver's clock: the host's, or the robot's in lock-step.
+    fn now(&self) -> Instant {
+        self.steps.as_ref().map_or_else(Instant::now, Steps::now)
+    }
 }
 
 struct Link {
@@ -72,6 +116,10 @@ impl Shared {
     /// Sends the drive command if it changed or the keep-alive is due: the fabric's command,
     /// or stop once it is older than [`COMMAND_TIMEOUT`].
     fn send_command(&mut self, now: Instant) -> io::Result<()> {
+        // In lock-step the command goes out with each step.
+        if self.steps.is_some() {
+            return Ok(());
+        }
         let Some(link) = self.link.as_mut() else {
             return Ok(());
         };
@@ -79,10 +127,7 @@ impl Shared {
             Some((vw, at)) if now.duration_since(at) < COMMAND_TIMEOUT => vw,
             _ => (0.0, 0.0),
         };
-        let wire = (
-            (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16,
-            (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16,
-        );
+        let wire = wire(v, w);
         if Some(wire) != link.last_wire || now.duration_since(link.last_sent) >= RESEND {
             link.last_sent = now;
             link.last_wire = Some(wire);
@@ -96,6 +141,8 @@ impl Shared {
 /// The running driver.
 pub struct Driver {
     shared: Arc<Mutex<Shared>>,
+    /// Notified when the link comes up and when a step is acknowledged.
+    stepped: Arc<Condvar>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
@@ -169,6 +216,14 @@ impl Odometer {
     }
 }
 
+/// Velocities (m/s, rad/s) in the protocol's units (mm/s, 0.1 °/s), clamped to its limits.
+fn wire(v: f64, w: f64) -> (i16, i16) {
+    (
+        (v * 1000.0).round().clamp(-1000.0, 1000.0) as i16,
+        (w.to_degrees() * 10.0).round().clamp(-1800.0, 1800.0) as i16,
+    )
+}
+
 fn lock(m: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
     // A poisoned lock only means the driver thread panicked mid-update: the data is still
     // the best there is.
@@ -190,15 +245,18 @@ impl Driver {
             sample: Sample::default(),
             command: None,
             link: None,
+            steps: None,
         }));
+        let stepped = Arc::new(Condvar::new());
         let stop = Arc::new(AtomicBool::new(false));
-        let (s, st) = (shared.clone(), stop.clone());
+        let (s, st, cv) = (shared.clone(), stop.clone(), stepped.clone());
         let thread = std::thread::Builder::new()
             .name("denning-driver".into())
-            .spawn(move || run(&open, &s, &st, &mut odometer))
+            .spawn(move || run(&open, &s, &cv, &st, &mut odometer))
             .ok();
         Driver {
             shared,
+            stepped,
             stop,
             thread,
         }
@@ -207,6 +265,74 @@ impl Driver {
     /// The latest sample.
     pub fn latest(&self) -> Sample {
         lock(&self.shared).sample.clone()
+    }
+
+    /// The driver's clock, the one sample times are on: the host's, or in lock-step the
+    /// robot's (the time of the last acknowledged step).
+    pub fn now(&self) -> Instant {
+        lock(&self.shared).now()
+    }
+
+    /// Lock-step: sends the drive command (m/s, rad/s) and a STEP of `ms` milliseconds, and
+    /// waits until the robot acknowledges it — and every packet of the step has been taken
+    /// into the sample — or `wait` passes. The first call switches the driver to lock-step for
+    /// good (no keep-alive commands; the robot's time stamps packets). Returns the robot's
+    /// time (ms) after the step.
+    pub fn step(
+        &self,
+        translate: f64,
+        rotate: f64,
+        ms: u16,
+        wait: Duration,
+    ) -> Result<u64, StepError> {
+        let deadline = Instant::now() + wait;
+        let mut s = lock(&self.shared);
+        s.steps.get_or_insert_with(|| Steps {
+            base: Instant::now(),
+            acked_ms: 0,
+            pending: None,
+            held: Vec::new(),
+        });
+        while s.link.is_none() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(StepError::NotConnected);
+            }
+            s = self
+                .stepped
+                .wait_timeout(s, left)
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .0;
+        }
+        let now = Instant::now();
+        s.command = Some(((translate, rotate), now));
+        let (v, w) = wire(translate, rotate);
+        if let Some(link) = s.link.as_mut() {
+            let mut bytes = Command::Vel(v).encode();
+            bytes.extend(Command::RVel(w).encode());
+            bytes.extend(Command::Step(ms).encode());
+            link.writer.write_all(&bytes)?;
+            link.last_wire = Some((v, w));
+            link.last_sent = now;
+        }
+        if let Some(st) = s.steps.as_mut() {
+            st.pending = Some(now);
+        }
+        while s.steps.as_ref().is_some_and(|st| st.pending.is_some()) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                if let Some(st) = s.steps.as_mut() {
+                    st.pending = None;
+                }
+                return Err(StepError::NoAck(wait));
+            }
+            s = self
+                .stepped
+                .wait_timeout(s, left)
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .0;
+        }
+        Ok(s.steps.as_ref().map_or(0, |st| st.acked_ms))
     }
 
     /// Sets the drive command (m/s, rad/s).
@@ -230,12 +356,18 @@ impl Drop for Driver {
     }
 }
 
-fn run(open: &Opener, shared: &Mutex<Shared>, stop: &AtomicBool, odometer: &mut Odometer) {
+fn run(
+    open: &Opener,
+    shared: &Mutex<Shared>,
+    stepped: &Condvar,
+    stop: &AtomicBool,
+    odometer: &mut Odometer,
+) {
     let mut total = DecodeStats::default();
     while !stop.load(Ordering::Acquire) {
         match open() {
             Ok(mut t) => {
-                match session(t.as_mut(), shared, stop, &mut total, odometer) {
+                match session(t.as_mut(), shared, stepped, stop, &mut total, odometer) {
                     Ok(()) => {}
                     Err(e) => tracing::warn!(error = %e, "robot link lost; reconnecting"),
                 }
@@ -293,6 +425,7 @@ fn handshake(t: &mut dyn Transport, d: &mut Decoder) -> io::Result<bool> {
 fn session(
     t: &mut dyn Transport,
     shared: &Mutex<Shared>,
+    stepped: &Condvar,
     stop: &AtomicBool,
     total: &mut DecodeStats,
     odometer: &mut Odometer,
@@ -309,15 +442,24 @@ fn session(
         let mut s = lock(shared);
         s.sample.connected = true;
         s.sample.connects += 1;
-        s.sample.received = Some(Instant::now());
+        s.sample.received = Some(s.now());
     }
     let writer = t.writer()?;
-    lock(shared).link = Some(Link {
-        writer,
-        last_wire: None,
-        last_sent: Instant::now() - RESEND,
-    });
-    let result = serve_link(t, d, shared, stop, total, odometer);
+    {
+        let mut s = lock(shared);
+        s.link = Some(Link {
+            writer,
+            last_wire: None,
+            last_sent: Instant::now() - RESEND,
+        });
+        // A step sent on the previous link is lost with it.
+        if let Some(st) = s.steps.as_mut() {
+            st.pending = None;
+            st.held.clear();
+        }
+    }
+    stepped.notify_all();
+    let result = serve_link(t, d, shared, stepped, stop, total, odometer);
     lock(shared).link = None;
     result
 }
@@ -327,6 +469,7 @@ fn serve_link(
     t: &mut dyn Transport,
     mut d: Decoder,
     shared: &Mutex<Shared>,
+    stepped: &Condvar,
     stop: &AtomicBool,
     total: &mut DecodeStats,
     odometer: &mut Odometer,
@@ -340,14 +483,30 @@ fn serve_link(
         if !packets.is_empty() {
             last_packet = now;
         }
-        {
+        let waiting = {
             let mut s = lock(shared);
+            let mut acked = false;
             for p in packets {
-                match p {
-                    Packet::Status(st) => apply_status(&mut s.sample, &st, odometer, now),
-                    Packet::Barcodes(b) => s.sample.barcodes = (b, Some(now)),
-                    Packet::Sync(_) => {}
+                if let Some(st) = s.steps.as_mut() {
+                    // Lock-step: a step's packets wait for its acknowledgement, and take
+                    // the robot time it carries.
+                    let Packet::Stepped(ms) = p else {
+                        st.held.push(p);
+                        continue;
+                    };
+                    st.acked_ms = u64::from(ms);
+                    st.pending = None;
+                    acked = true;
+                    let at = st.now();
+                    for p in std::mem::take(&mut st.held) {
+                        apply(&mut s.sample, p, odometer, at);
+                    }
+                } else {
+                    apply(&mut s.sample, p, odometer, now);
                 }
+            }
+            if acked {
+                stepped.notify_all();
             }
             s.sample.stats = DecodeStats {
                 frames: base.frames + d.stats.frames,
@@ -356,14 +515,30 @@ fn serve_link(
                 bad_count: base.bad_count + d.stats.bad_count,
             };
             *total = s.sample.stats;
-        }
-        if now.duration_since(last_packet) > LINK_TIMEOUT {
+            // In lock-step the robot is silent between steps: only a step that goes
+            // unanswered makes the link look dead.
+            s.steps.as_ref().map(|st| st.pending)
+        };
+        let silent_since = match waiting {
+            None => last_packet,
+            Some(None) => now,
+            Some(Some(sent)) => sent.max(last_packet),
+        };
+        if now.duration_since(silent_since) > LINK_TIMEOUT {
             return Err(io::Error::new(io::ErrorKind::TimedOut, "no packet for 1 s"));
         }
         // The keep-alive, and stop once the fabric's commands are stale.
         lock(shared).send_command(now)?;
     }
     Ok(())
+}
+
+fn apply(s: &mut Sample, p: Packet, odometer: &mut Odometer, at: Instant) {
+    match p {
+        Packet::Status(st) => apply_status(s, &st, odometer, at),
+        Packet::Barcodes(b) => s.barcodes = (b, Some(at)),
+        Packet::Sync(_) | Packet::Stepped(_) => {}
+    }
 }
 
 fn apply_status(s: &mut Sample, st: &Status, odometer: &mut Odometer, now: Instant) {

@@ -67,7 +67,7 @@ impl Manager {
                         self.next_start = now;
                     }
                 }
-                Pace::FreeRun => {
+                Pace::FreeRun | Pace::LockStep(_) => {
                     if self.plan.expected.is_empty() && !self.dirty {
                         if now < self.next_start {
                             return Ok(());
@@ -165,6 +165,11 @@ impl Manager {
         let h = self.board.header();
         run.start_ns = now_ns();
         h.cycle_start_ns.store(run.start_ns, Ordering::Release);
+        let time = match self.config.pace.period() {
+            Some(p) => (p.as_nanos() as u64).saturating_mul(k),
+            None => run.start_ns,
+        };
+        h.cycle_time_ns.store(time, Ordering::Release);
         h.cycle.store(k, Ordering::Release);
         for &s in &self.plan.sources {
             self.board.slot(s).bell.ring();

@@ -61,6 +61,23 @@ pub enum Pace {
     Period(Duration),
     /// The next cycle starts as soon as the previous one finished.
     FreeRun,
+    /// Lock-step: cycles back to back, as free-running, but each cycle stands for one period
+    /// of simulated time (the skills' clock, the simulator's step) and has no deadline short of
+    /// [`LOCKSTEP_DEADLINE`]: a run is a function of its inputs, not of the CPU's speed.
+    LockStep(Duration),
+}
+
+/// The deadline of a lock-step cycle: only a unit that died (or hangs) holds one this long.
+pub const LOCKSTEP_DEADLINE: Duration = Duration::from_secs(10);
+
+impl Pace {
+    /// The nominal period, if there is one.
+    pub fn period(self) -> Option<Duration> {
+        match self {
+            Pace::Period(p) | Pace::LockStep(p) => Some(p),
+            Pace::FreeRun => None,
+        }
+    }
 }
 
 /// Manager settings.
@@ -83,6 +100,9 @@ pub struct ManagerConfig {
     pub wait_timeout: Duration,
     /// The fabric log (parameter changes, I/O samples); `None`: [`default_log_path`].
     pub param_log: Option<PathBuf>,
+    /// The first cycle's number (a replay numbers cycles as the recording did); a manager
+    /// that takes over from a dead one numbers on from it instead.
+    pub first_cycle: u64,
 }
 
 /// Where a manager's fabric log goes by default: `<domain>-<unix seconds>-<pid>.jsonl` in
@@ -126,6 +146,7 @@ impl ManagerConfig {
             wait_for: Vec::new(),
             wait_timeout: Duration::from_secs(30),
             param_log: None,
+            first_cycle: 1,
         }
     }
 
@@ -133,6 +154,7 @@ impl ManagerConfig {
         self.deadline.unwrap_or(match self.pace {
             Pace::Period(p) => p,
             Pace::FreeRun => Duration::from_secs(1),
+            Pace::LockStep(_) => LOCKSTEP_DEADLINE,
         })
     }
 }
@@ -258,6 +280,13 @@ impl Manager {
         // A predecessor that died: its skills are told at once, and cycles number on.
         let previous_cycle = Board::retire_dead(&config.domain.prefix());
         let board = Board::create(&config.domain.prefix())?;
+        let h = board.header();
+        let period = config.pace.period().map_or(0, |p| p.as_nanos() as u64);
+        h.period_ns.store(period, Ordering::Release);
+        h.lockstep.store(
+            u32::from(matches!(config.pace, Pace::LockStep(_))),
+            Ordering::Release,
+        );
         let now = Instant::now();
         let log_path = config
             .param_log
@@ -278,6 +307,7 @@ impl Manager {
             }
         };
         let saved = state::Saved::load(&config.domain);
+        let first_cycle = config.first_cycle;
         let mut manager = Manager {
             paused: config.paused,
             config,
@@ -286,7 +316,7 @@ impl Manager {
             skills: Skills::new(),
             plan: Plan::default(),
             dirty: true,
-            cycle: previous_cycle.unwrap_or(0),
+            cycle: previous_cycle.unwrap_or(first_cycle.saturating_sub(1)),
             running: None,
             next_start: now,
             stop_at: None,
@@ -425,8 +455,8 @@ impl Manager {
             None if self.paused || !self.started => LIVENESS_TICK,
             None => match self.config.pace {
                 Pace::Period(_) => until(self.next_start),
-                Pace::FreeRun if self.plan.expected.is_empty() => IDLE_FREE_RUN,
-                Pace::FreeRun => Duration::ZERO,
+                Pace::FreeRun | Pace::LockStep(_) if self.plan.expected.is_empty() => IDLE_FREE_RUN,
+                Pace::FreeRun | Pace::LockStep(_) => Duration::ZERO,
             },
         };
         t.min(LIVENESS_TICK)

@@ -33,7 +33,7 @@ pub const MAX_CHANNELS: usize = 4;
 pub const PARAM_BYTES: usize = 4096;
 /// Most outputs of one skill (the published mask is a `u64`).
 pub const MAX_OUTPUTS: usize = 64;
-const MAGIC: u64 = 0x5346_424f_4152_4403; // "SFBOARD" + layout version 3
+const MAGIC: u64 = 0x5346_424f_4152_4404; // "SFBOARD" + layout version 4
 
 /// Life of a slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,6 +96,32 @@ impl RunStatus {
     }
 }
 
+/// The time a run belongs to, as the manager set it for the cycle: what a skill reads instead
+/// of the wall clock, so that a run can be replayed (see docs/replay.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Clock {
+    /// The cycle's time since the fabric's time origin: cycle × period when the manager has a
+    /// period (lock-step included), the cycle's start stamp when it free-runs.
+    pub time: std::time::Duration,
+    /// The manager's nominal period; `None` when it free-runs.
+    pub period: Option<std::time::Duration>,
+    /// Whether the manager runs in lock-step: cycles follow each other as fast as the units
+    /// finish them and a simulator advances one period per cycle.
+    pub lockstep: bool,
+}
+
+impl Header {
+    /// The current cycle's clock.
+    pub fn clock(&self) -> Clock {
+        let period = self.period_ns.load(Ordering::Acquire);
+        Clock {
+            time: std::time::Duration::from_nanos(self.cycle_time_ns.load(Ordering::Acquire)),
+            period: (period > 0).then(|| std::time::Duration::from_nanos(period)),
+            lockstep: self.lockstep.load(Ordering::Acquire) == 1,
+        }
+    }
+}
+
 /// Board-wide fields.
 #[repr(C)]
 pub struct Header {
@@ -110,6 +136,13 @@ pub struct Header {
     pub remaining: AtomicU64,
     /// Monotonic clock (ns) when the current cycle started.
     pub cycle_start_ns: AtomicU64,
+    /// The current cycle's time (ns), the clock skills read ([`Clock`]): cycle × period when
+    /// the manager has a period, its start stamp when it free-runs.
+    pub cycle_time_ns: AtomicU64,
+    /// The manager's nominal period (ns); 0: free-running.
+    pub period_ns: AtomicU64,
+    /// 1 when the manager runs in lock-step (cycles back to back, simulated time).
+    pub lockstep: AtomicU32,
     /// The manager's doorbell.
     pub bell: Doorbell,
 }

@@ -48,6 +48,7 @@ impl<D: Device> DeviceUnit<D> {
                 params: &common.params,
                 cycle: k,
                 name: &common.name,
+                clock: link.board.header().clock(),
             };
             let device = &mut self.device;
             guarded(k, || device.sample(&ctx, &mut out))
@@ -77,6 +78,7 @@ impl<D: Device> DeviceUnit<D> {
                         params: &common.params,
                         cycle: k,
                         name: &common.name,
+                        clock: link.board.header().clock(),
                     };
                     let device = &mut self.device;
                     guarded(k, || device.command(&ctx, cmds))

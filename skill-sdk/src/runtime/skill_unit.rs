@@ -224,6 +224,7 @@ pub(crate) fn step_skill<P: Params>(
             params: &common.params,
             cycle: k,
             name: &common.name,
+            clock: link.board.header().clock(),
         };
         run(&src, &mut io.outputs, &ctx)
     };

@@ -6,7 +6,10 @@ use denning::driver::{Driver, Odometer, SONARS};
 use denning::transport::{Serial, Transport};
 use skill_sdk::prelude::*;
 use skillfab_msgs::{Barcodes, Battery, Bumpers, Drive, Link, Odometry, Sonar};
-use std::time::Instant;
+use std::time::{Duration, Instant};
+
+/// How long a lock-step cycle waits for the robot to connect or to acknowledge its step.
+const STEP_WAIT: Duration = Duration::from_secs(5);
 
 // The fabric's sonar message has one reading per sonar of the protocol's ring.
 const _: () = assert!(skillfab_msgs::SONARS == SONARS);
@@ -88,7 +91,8 @@ impl Device for Denning {
         };
         let s = d.latest();
         self.seen = s.received;
-        let now = Instant::now();
+        // The driver's clock: the host's, or the robot's in lock-step.
+        let now = d.now();
         let ms = |t: Instant| now.duration_since(t).as_secs_f64() * 1000.0;
         let sonar = out.sonar.get_mut();
         for i in 0..SONARS {
@@ -141,12 +145,25 @@ impl Device for Denning {
         let Some(d) = &self.driver else {
             return Ok(());
         };
-        let limit = std::time::Duration::from_secs_f64(ctx.params.blind_ms / 1000.0);
-        let seen = self.seen.is_some_and(|t| t.elapsed() < limit);
-        if seen {
-            d.command(c.drive.translate, c.drive.rotate);
+        let limit = Duration::from_secs_f64(ctx.params.blind_ms / 1000.0);
+        let seen = self
+            .seen
+            .is_some_and(|t| d.now().saturating_duration_since(t) < limit);
+        let (v, w) = if seen {
+            (c.drive.translate, c.drive.rotate)
         } else {
-            d.command(0.0, 0.0);
+            (0.0, 0.0)
+        };
+        if ctx.clock.lockstep {
+            // The robot advances one period with this command; the next cycle's sample is
+            // what it saw meanwhile.
+            let period = ctx.clock.period.unwrap_or(Duration::from_millis(10));
+            let ms = u16::try_from(period.as_millis()).unwrap_or(u16::MAX);
+            if let Err(e) = d.step(v, w, ms, STEP_WAIT) {
+                tracing::warn!(cycle = ctx.cycle, error = %e, "lock-step: step failed");
+            }
+        } else {
+            d.command(v, w);
         }
         if seen == self.blind {
             self.blind = !seen;

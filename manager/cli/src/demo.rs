@@ -44,6 +44,9 @@ pub struct DemoOptions {
     pub limit_s: f64,
     /// Faults injected into every run.
     pub faults: Faults,
+    /// Lock-step: the simulator advances one period per cycle and the manager runs cycles
+    /// back to back (`--time-factor` does not apply); the run is a function of world and seed.
+    pub lockstep: bool,
 }
 
 /// One run's outcome.
@@ -55,8 +58,10 @@ pub struct RunOutcome {
     pub world: String,
     /// Left the lab within the limit.
     pub success: bool,
-    /// Simulated time at the end (s).
+    /// Simulated time at the end (s): when the robot was first outside, else the last.
     pub time_s: f64,
+    /// Host time the run took (s), start-up included.
+    pub wall_s: f64,
     /// Collisions the simulator reported.
     pub collisions: u64,
     /// Sequencer steps: (what, cycle, simulated time).
@@ -148,7 +153,9 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         find_program(name, Path::new("."))
             .with_context(|| format!("program '{name}' not found next to skillfab"))
     };
-    let period_ms = 10.0 / opts.time_factor;
+    // In lock-step a cycle is 10 ms of the robot's time however long it takes.
+    let time_factor = if opts.lockstep { 1.0 } else { opts.time_factor };
+    let period_ms = 10.0 / time_factor;
     // Under injected kills every process comes back at once, every time (as on a robot with
     // a supervisor); otherwise the launch file's defaults.
     let killing = opts.faults.kill_every_s.is_some();
@@ -157,7 +164,8 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     let mut launch = LaunchFile {
         manager: ManagerSection {
             period_ms: Some(period_ms),
-            deadline_ms: Some((period_ms * 5.0).max(20.0)),
+            // (Lock-step: the manager's own, 10 s.)
+            deadline_ms: (!opts.lockstep).then_some((period_ms * 5.0).max(20.0)),
         },
         process: vec![
             ProcessEntry {
@@ -172,7 +180,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                     "--seed".into(),
                     seed.to_string(),
                     "--time-factor".into(),
-                    opts.time_factor.to_string(),
+                    time_factor.to_string(),
                     "--trajectory".into(),
                     text(&traj),
                     "--corrupt-rate".into(),
@@ -199,7 +207,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                 // Blind after 500 ms of the robot's time.
                 params: [(
                     "blind_ms".to_string(),
-                    toml::Value::Float(500.0 / opts.time_factor),
+                    toml::Value::Float(500.0 / time_factor),
                 )]
                 .into(),
                 restart: Restart::Always,
@@ -230,6 +238,9 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             ..ProcessEntry::default()
         });
     }
+    if opts.lockstep {
+        launch.process[0].args.push("--lockstep".into());
+    }
     let launch = toml::to_string(&launch).context("writing the launch file")?;
     let path = dir.join("exit-lab.toml");
     std::fs::write(&path, launch)?;
@@ -241,6 +252,13 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         "--domain",
         domain.name(),
     ])
+    // Lock-step: paused until the sequencer has set up, so the run does not depend on when
+    // it connected.
+    .args(if opts.lockstep {
+        &["--lockstep", "--paused"][..]
+    } else {
+        &[]
+    })
     .env_remove("SKILLFAB_DOMAIN")
     .stdin(Stdio::null())
     .stdout(Stdio::null())
@@ -358,6 +376,7 @@ impl Sequencer {
 
 /// One run of the experiment.
 pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOutcome> {
+    let wall = Instant::now();
     let (net, traj) = start(opts, seed, run)?;
     let mut c = connect(&net)?;
     c.subscribe()?;
@@ -370,6 +389,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             .unwrap_or_default(),
         success: false,
         time_s: 0.0,
+        wall_s: 0.0,
         collisions: 0,
         steps: Vec::new(),
         kills: Vec::new(),
@@ -415,6 +435,9 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             opts.faults.seed ^ seed,
         )
     });
+    if opts.lockstep {
+        c.run()?;
+    }
     let started = Instant::now();
     loop {
         if INTERRUPTED.load(Ordering::Acquire) {
@@ -424,10 +447,14 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             bail!("the simulator wrote no ground truth within 30 s (see the log of skillfab up)");
         }
         let ev = c.next_event(Duration::from_millis(100))?;
-        if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind)
-            && let Some(what) = seq.on_monitor(&c, id)?
-        {
-            step(&c, &mut out, &what);
+        if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
+            if let Some(what) = seq.on_monitor(&c, id)? {
+                step(&c, &mut out, &what);
+            }
+            // Lock-step: the manager paused after the cycle the monitor fired in.
+            if opts.lockstep {
+                c.run()?;
+            }
         }
         if let Some(now) = latest(&traj) {
             out.time_s = now.t;
@@ -473,6 +500,12 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         "avoid.safe_distance restored; skills deactivated",
     );
     out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
+    // The robot may have gone on a little while the sequencer looked: the time it first was
+    // outside is the mission's.
+    if let Some(first) = out.trajectory.iter().find(|r| r.outside) {
+        out.time_s = first.t;
+    }
+    out.wall_s = wall.elapsed().as_secs_f64();
     (out.max_command_gap_s, out.max_stale_drive_s) = command_gaps(&out.trajectory);
     drop(c);
     drop(net);
@@ -525,9 +558,10 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         let r = run_once(opts, seed, run)?;
         if opts.verbose {
             println!(
-                "  => {} in {:.1} s simulated, {} collisions",
+                "  => {} in {:.1} s simulated ({:.1} s of host time), {} collisions",
                 if r.success { "SUCCESS" } else { "FAILURE" },
                 r.time_s,
+                r.wall_s,
                 r.collisions
             );
         }

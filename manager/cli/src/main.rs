@@ -106,6 +106,10 @@ enum DemoCmd {
         /// Fault injection: share of the serial bytes dropped (0..1).
         #[arg(long, default_value_t = 0.0)]
         drop_rate: f64,
+        /// Lock-step: the simulator advances 10 ms per cycle and cycles run back to back, as
+        /// fast as the host allows; the same seed gives the same run (--time-factor ignored).
+        #[arg(long)]
+        lockstep: bool,
     },
 }
 
@@ -198,6 +202,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     kill_sim_every,
                     corrupt_rate,
                     drop_rate,
+                    lockstep,
                 },
         } => {
             for (name, k) in [
@@ -212,6 +217,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 if !(0.0..=0.5).contains(&r) {
                     anyhow::bail!("{name} must be in [0, 0.5], got {r}");
                 }
+            }
+            if lockstep && (kill_every.is_some() || kill_sim_every.is_some()) {
+                anyhow::bail!(
+                    "--kill-every and --kill-sim-every time their kills on the host's clock; \
+                     they do not go with --lockstep"
+                );
             }
             if !(time_factor > 0.0 && time_factor <= 50.0) {
                 anyhow::bail!("--time-factor must be in (0, 50], got {time_factor}");
@@ -231,6 +242,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     drop_rate,
                     seed,
                 },
+                lockstep,
             };
             let summary = demo::demo(&opts)?;
             if json {

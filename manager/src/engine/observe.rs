@@ -102,7 +102,9 @@ impl Manager {
         self.outbox.extend(changes);
     }
 
-    /// Evaluates every monitor on the newest samples of the cycle that just finished.
+    /// Evaluates every monitor on the newest samples of the cycle that just finished. In
+    /// lock-step a monitor that fires pauses cycling after this cycle: its owner reacts and
+    /// resumes (`run`), so what a sequencer does in reaction lands in the same cycle every run.
     pub(super) fn evaluate_monitors(&mut self) {
         let topics: HashSet<String> = self
             .monitors
@@ -121,8 +123,10 @@ impl Manager {
             let (bytes, _) = readers.get(&r.topic)?.latest_of(r.slot)?;
             r.field.read(bytes)
         };
+        let mut fired = false;
         for m in &mut self.monitors {
             if let Some(values) = m.step(&read) {
+                fired = true;
                 let stamp_ns = m
                     .paths
                     .iter()
@@ -142,6 +146,9 @@ impl Manager {
                     stamp_ns,
                 });
             }
+        }
+        if fired && matches!(self.config.pace, Pace::LockStep(_)) {
+            self.set_paused(true);
         }
         let before = self.monitors.len();
         self.monitors.retain(|m| !m.spent());

@@ -41,6 +41,14 @@ pub struct PaceArgs {
     /// period per cycle. No overruns short of 10 s.
     #[arg(long, conflicts_with = "free_run")]
     pub lockstep: bool,
+    /// Record every sample of the topics (default: all, see --topics) at full rate, with
+    /// their cycles and stamps, the skills' declarations, activations, parameters, priorities
+    /// and events, into this MCAP file (Foxglove, the `mcap` CLI, `skillfab replay`).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
+    /// With --record: only these topics (comma-separated).
+    #[arg(long, value_delimiter = ',', requires = "record")]
+    pub topics: Vec<String>,
     /// Number the first cycle N (a replay numbers cycles as its recording did).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub first_cycle: u64,
@@ -157,6 +165,10 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
     config.wait_timeout = Duration::from_secs_f64(wait_timeout_s.max(0.0));
     config.param_log = pace.param_log.clone();
     config.first_cycle = pace.first_cycle;
+    config.record = pace.record.clone().map(|path| crate::engine::RecordSpec {
+        path,
+        topics: pace.topics.clone(),
+    });
     let mut manager = Manager::new(config).context("starting the manager")?;
     let report = manager.run(&|_| false);
     manager.shutdown();
@@ -174,6 +186,14 @@ pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
         lockstep: args.pace.lockstep,
         paused: args.paused,
         first_cycle: args.pace.first_cycle,
+        record: args
+            .pace
+            .record
+            .clone()
+            .map(|path| crate::engine::RecordSpec {
+                path,
+                topics: args.pace.topics.clone(),
+            }),
         wait_timeout: Duration::from_secs_f64(args.wait_timeout_s.max(0.0)),
         param_log: args.pace.param_log.clone(),
         json: args.pace.json,

@@ -52,6 +52,9 @@ pub(crate) struct IoSample {
     pub(crate) stamp_ns: u64,
     pub(crate) field: Arc<FieldPath>,
     pub(crate) bytes: Vec<u8>,
+    /// Also keep the bytes themselves (`raw`, hex): a recording replays them exactly (NaN,
+    /// infinities and padding included, which JSON numbers cannot carry).
+    pub(crate) raw: bool,
 }
 
 enum Record {
@@ -157,9 +160,35 @@ fn sample_json(s: &IoSample) -> Json {
         .field
         .read(&s.bytes)
         .map_or(Json::Null, |v| skillfab_proto::json::value_json(&v));
-    json!({"kind": "sample", "cycle": s.cycle, "time_ns": now_ns(), "skill": s.skill,
+    let mut j = json!({"kind": "sample", "cycle": s.cycle, "time_ns": now_ns(), "skill": s.skill,
            "dir": s.dir, "port": s.port, "topic": s.topic, "type": s.type_name,
-           "stamp_ns": s.stamp_ns, "value": value})
+           "stamp_ns": s.stamp_ns, "value": value});
+    if s.raw {
+        j["raw"] = json!(hex(&s.bytes));
+    }
+    j
+}
+
+/// Lower-case hex of `bytes`.
+pub fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write;
+    bytes
+        .iter()
+        .fold(String::with_capacity(bytes.len() * 2), |mut s, b| {
+            let _ = write!(s, "{b:02x}");
+            s
+        })
+}
+
+/// The bytes of lower-case or upper-case hex text; `None` if it is not hex.
+pub fn unhex(text: &str) -> Option<Vec<u8>> {
+    if !text.len().is_multiple_of(2) {
+        return None;
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(text.get(i..i + 2)?, 16).ok())
+        .collect()
 }
 
 /// Whether `path` names an MCAP file (by its extension).
@@ -305,6 +334,7 @@ fn sample_schema(s: &IoSample) -> Json {
             "skill": {"type": "string"}, "dir": {"type": "string"},
             "port": {"type": "string"}, "topic": {"type": "string"},
             "type": {"type": "string"}, "value": value,
+            "raw": {"type": "string", "description": "the sample's bytes, hex"},
         }
     })
 }
@@ -538,6 +568,7 @@ mod tests {
             stamp_ns: now_ns(),
             field: Arc::new(skillfab_proto::value::resolve(&schema, "").unwrap()),
             bytes: value.to_ne_bytes().to_vec(),
+            raw: false,
         }
     }
 

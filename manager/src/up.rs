@@ -47,6 +47,8 @@ pub struct UpOptions {
     pub paused: bool,
     /// The first cycle's number.
     pub first_cycle: u64,
+    /// The full-rate recording.
+    pub record: Option<crate::engine::RecordSpec>,
     /// How long to wait for every skill to register before cycling.
     pub wait_timeout: Duration,
     /// The fabric log file (`None`: the default, see [`crate::engine::default_log_path`]).
@@ -334,19 +336,30 @@ fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
         "--wait-timeout-s".into(),
         opts.wait_timeout.as_secs_f64().to_string(),
     ]);
+    // A restarted manager writes new files next to its predecessor's (an MCAP file cannot
+    // be appended to).
+    let per_restart = |f: &std::path::Path| {
+        if restart == 0 {
+            return f.to_string_lossy().into_owned();
+        }
+        let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned());
+        let ext = f.extension().map(|e| format!(".{}", e.to_string_lossy()));
+        f.with_file_name(format!(
+            "{}-restart{restart}{}",
+            stem.unwrap_or_default(),
+            ext.unwrap_or_default()
+        ))
+        .to_string_lossy()
+        .into_owned()
+    };
     if let Some(f) = &opts.param_log {
-        let f = if restart == 0 {
-            f.clone()
-        } else {
-            let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned());
-            let ext = f.extension().map(|e| format!(".{}", e.to_string_lossy()));
-            f.with_file_name(format!(
-                "{}-restart{restart}{}",
-                stem.unwrap_or_default(),
-                ext.unwrap_or_default()
-            ))
-        };
-        a.extend(["--param-log".into(), f.to_string_lossy().into_owned()]);
+        a.extend(["--param-log".into(), per_restart(f)]);
+    }
+    if let Some(r) = &opts.record {
+        a.extend(["--record".into(), per_restart(&r.path)]);
+        if !r.topics.is_empty() {
+            a.extend(["--topics".into(), r.topics.join(",")]);
+        }
     }
     if opts.json {
         a.push("--json".into());

@@ -102,6 +102,18 @@ pub enum CtlCmd {
     },
     /// Where the manager's fabric log is, and whose samples it logs.
     Logging,
+    /// Record every sample of the topics at full rate, with control changes and events, into
+    /// an MCAP file (`start FILE [--topics a,b]`), or stop (`stop`); see `skillfab replay`.
+    Record {
+        /// start or stop.
+        #[arg(value_parser = ["start", "stop"])]
+        action: String,
+        /// The .mcap file (start).
+        file: Option<std::path::PathBuf>,
+        /// Topics to record (comma-separated; default: all).
+        #[arg(long, value_delimiter = ',')]
+        topics: Vec<String>,
+    },
     /// Apply the parameter and priority changes of a fabric log file again, in order.
     Replay {
         /// The JSON-lines file (`skillfab up/manager --param-log`).
@@ -382,6 +394,22 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
         CtlCmd::Logs { .. } => {}
         CtlCmd::Iolog { skill, state } => {
             c.set_io_log(&skill, state == "on")?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Record {
+            action,
+            file,
+            topics,
+        } => {
+            if action == "stop" {
+                c.record_stop()?;
+            } else {
+                let file = file.context("ctl record start FILE.mcap: the file is missing")?;
+                // The manager may run elsewhere: give it an absolute path.
+                let file = std::path::absolute(&file)?;
+                let topics: Vec<&str> = topics.iter().map(String::as_str).collect();
+                c.record_start(&file.to_string_lossy(), &topics)?;
+            }
             print(String::new(), json!({"ok": true}));
         }
         CtlCmd::Logging => {

@@ -47,6 +47,8 @@ pub struct DemoOptions {
     /// Lock-step: the simulator advances one period per cycle and the manager runs cycles
     /// back to back (`--time-factor` does not apply); the run is a function of world and seed.
     pub lockstep: bool,
+    /// Record the first run here (MCAP, every topic).
+    pub record: Option<PathBuf>,
 }
 
 /// One run's outcome.
@@ -258,11 +260,14 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         &["--lockstep", "--paused"][..]
     } else {
         &[]
-    })
-    .env_remove("SKILLFAB_DOMAIN")
-    .stdin(Stdio::null())
-    .stdout(Stdio::null())
-    .stderr(log);
+    });
+    if let Some(r) = opts.record.as_ref().filter(|_| run == 0) {
+        cmd.arg("--record").arg(r);
+    }
+    cmd.env_remove("SKILLFAB_DOMAIN")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(log);
     // If the demo dies, `up` gets SIGTERM and shuts the network down cleanly.
     // SAFETY: only async-signal-safe system calls between fork and exec.
     unsafe {

@@ -4,6 +4,7 @@
 mod ctl;
 mod demo;
 mod faults;
+mod replay;
 
 use clap::{Parser, Subcommand};
 use skillfab_manager::args::{DomainArg, ManagerArgs, UpArgs, init_tracing};
@@ -56,6 +57,32 @@ enum Cmd {
     Demo {
         #[command(subcommand)]
         which: DemoCmd,
+    },
+    /// Run skills again against a recording (`up --record`): their binaries as built now, in
+    /// a private lock-step domain, fed the recorded samples of what they read, with their
+    /// recorded activations and parameter changes; compares their outputs with the recorded
+    /// ones. Exit status 1 on a divergence (it can gate CI).
+    Replay {
+        /// The recording (.mcap).
+        file: PathBuf,
+        /// Skills to replay (comma-separated instance names).
+        #[arg(long, value_delimiter = ',', required = true)]
+        skills: Vec<String>,
+        /// First cycle (default: the recording's first).
+        #[arg(long, value_name = "CYCLE")]
+        from: Option<u64>,
+        /// Last cycle (default: the recording's last complete cycle).
+        #[arg(long, value_name = "CYCLE")]
+        to: Option<u64>,
+        /// Where the skill binaries are (default: next to skillfab).
+        #[arg(long, value_name = "DIR")]
+        bin_dir: Option<PathBuf>,
+        /// Keep the replay's files (launch file, player script, its recording, log) here.
+        #[arg(long, value_name = "DIR")]
+        keep: Option<PathBuf>,
+        /// Print the report as one JSON object.
+        #[arg(long)]
+        json: bool,
     },
     /// Talk to a running manager: the sequencer's link, from the shell.
     Ctl {
@@ -110,6 +137,9 @@ enum DemoCmd {
         /// fast as the host allows; the same seed gives the same run (--time-factor ignored).
         #[arg(long)]
         lockstep: bool,
+        /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
+        #[arg(long, value_name = "FILE.mcap")]
+        record: Option<PathBuf>,
     },
 }
 
@@ -175,6 +205,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
         Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
+        Cmd::Replay {
+            file,
+            skills,
+            from,
+            to,
+            bin_dir,
+            keep,
+            json,
+        } => replay(
+            &replay::ReplayOptions {
+                file,
+                skills,
+                from,
+                to,
+                bin_dir,
+                keep,
+            },
+            json,
+        ),
         Cmd::Console => skillfab_console::run(&domain),
         Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),
         Cmd::Schema { c, python } => {
@@ -203,6 +252,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     corrupt_rate,
                     drop_rate,
                     lockstep,
+                    record,
                 },
         } => {
             for (name, k) in [
@@ -243,6 +293,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     seed,
                 },
                 lockstep,
+                record: record.map(std::path::absolute).transpose()?,
             };
             let summary = demo::demo(&opts)?;
             if json {
@@ -262,6 +313,41 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+    }
+}
+
+/// `skillfab replay`: prints the report; a divergence is an error (exit status 1).
+fn replay(opts: &replay::ReplayOptions, json: bool) -> anyhow::Result<()> {
+    let r = replay::replay(opts)?;
+    if json {
+        println!("{}", serde_json::to_string(&r)?);
+    } else {
+        println!(
+            "replayed {} over cycles {}..={} in {:.1} s: {} of {} cycles identical ({} samples compared)",
+            r.skills.join(", "),
+            r.from,
+            r.to,
+            r.wall_s,
+            r.identical_cycles,
+            r.cycles,
+            r.samples
+        );
+        match &r.divergence {
+            None => println!("no divergence"),
+            Some(d) => println!(
+                "first divergence: cycle {}, {}.{} field {}: recorded {}, replayed {}",
+                d.cycle, d.skill, d.port, d.field, d.recorded, d.replayed
+            ),
+        }
+    }
+    match &r.divergence {
+        None => Ok(()),
+        Some(d) => anyhow::bail!(
+            "{}.{} diverged from the recording at cycle {}",
+            d.skill,
+            d.port,
+            d.cycle
+        ),
     }
 }
 

@@ -161,7 +161,8 @@ impl ControlPlane {
                         kind,
                     }
                 })
-                .collect();
+                .collect::<Vec<_>>();
+            m.record_events(&events);
             m.events_published = self.seq;
             let _ = self.to_clients.send(Outgoing::Events(events));
             poke = true;
@@ -274,6 +275,7 @@ impl Manager {
             }
             Request::SetIoLog { skill, on } => self.set_io_log(client, &skill, on),
             Request::Logging => Ok(self.logging()),
+            Request::Record { file, topics } => self.record_request(file, topics),
             Request::SetPriority { skill, priority } => self.set_priority(client, skill, priority),
         }
     }

@@ -37,6 +37,10 @@ impl Manager {
             self.skills.keep(&skill).active = Some(active);
             self.dirty = true;
             tracing::info!(%skill, active, "activation changed");
+            self.record_control(
+                if active { "activate" } else { "deactivate" },
+                serde_json::json!({"skill": skill}),
+            );
             self.outbox.push(if active {
                 EventKind::SkillActivated { skill }
             } else {
@@ -129,6 +133,11 @@ impl Manager {
         if let Some(r) = &self.recorder {
             r.param(self.in_progress(), skill, param, old, value, client);
         }
+        self.record_control(
+            "param",
+            serde_json::json!({"skill": skill, "param": param,
+                               "value": skillfab_proto::json::param_json(&value), "by": client}),
+        );
         self.outbox.push(EventKind::ParamChanged {
             skill: skill.to_string(),
             param: param.to_string(),
@@ -189,6 +198,10 @@ impl Manager {
                             serde_json::json!({"skill": skill, "old": old, "new": priority, "by": client}),
                         );
                 }
+                self.record_control(
+                    "priority",
+                    serde_json::json!({"skill": skill, "value": priority, "by": client}),
+                );
                 self.outbox.push(EventKind::PriorityChanged {
                     skill,
                     old,

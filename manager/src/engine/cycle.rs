@@ -137,6 +137,7 @@ impl Manager {
             }
         }
         self.dirty = false;
+        self.update_recording();
     }
 
     pub(super) fn start_cycle(&mut self) {
@@ -261,6 +262,10 @@ impl Manager {
         };
         self.stats.record(latency, round_trip, overrun);
         self.cycle = run.k;
+        // First: the recording takes every new sample before monitors and queries poll.
+        if self.recording.is_some() {
+            self.record_cycle(run.k);
+        }
         if !self.plan.channels.is_empty() {
             self.read_channels(run.k);
         }

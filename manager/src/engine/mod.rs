@@ -15,9 +15,12 @@
 
 mod cycle;
 mod observe;
+mod record;
 mod registry;
 mod skills;
 mod state;
+
+pub use record::RecordSpec;
 
 use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
@@ -100,6 +103,9 @@ pub struct ManagerConfig {
     pub wait_timeout: Duration,
     /// The fabric log (parameter changes, I/O samples); `None`: [`default_log_path`].
     pub param_log: Option<PathBuf>,
+    /// Record every sample of these topics (and the control changes and events) from the
+    /// start.
+    pub record: Option<RecordSpec>,
     /// The first cycle's number (a replay numbers cycles as the recording did); a manager
     /// that takes over from a dead one numbers on from it instead.
     pub first_cycle: u64,
@@ -147,6 +153,7 @@ impl ManagerConfig {
             wait_timeout: Duration::from_secs(30),
             param_log: None,
             first_cycle: 1,
+            record: None,
         }
     }
 
@@ -170,6 +177,12 @@ pub enum ManagerError {
     #[error("manager wait: {detail}")]
     Wait {
         /// iceoryx2's error.
+        detail: String,
+    },
+    /// The recording asked for cannot be written.
+    #[error("recording: {detail}")]
+    Record {
+        /// What failed.
         detail: String,
     },
     /// Skills named in `wait_for` did not register in time.
@@ -240,6 +253,8 @@ pub struct Manager {
     pub(crate) channels: HashMap<String, ChannelView>,
     /// The fabric log's writer (`None` if its file could not be opened).
     pub(crate) recorder: Option<Recorder>,
+    /// The full-rate recording, when one runs.
+    pub(crate) recording: Option<record::Recording>,
     /// Skills whose samples are logged, with their ports.
     pub(crate) io_log: HashMap<String, Vec<IoPort>>,
     /// A request or a registration may have changed what the state file holds.
@@ -328,6 +343,7 @@ impl Manager {
             events_published: 0,
             channels: HashMap::new(),
             recorder,
+            recording: None,
             io_log: HashMap::new(),
             started: false,
             created: now,
@@ -340,6 +356,11 @@ impl Manager {
         };
         if let Some(saved) = saved {
             manager.restore_state(saved);
+        }
+        if let Some(spec) = manager.config.record.clone() {
+            manager
+                .start_recording(spec)
+                .map_err(|detail| ManagerError::Record { detail })?;
         }
         Ok(manager)
     }

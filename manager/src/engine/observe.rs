@@ -37,6 +37,7 @@ impl Manager {
                     stamp_ns: h.stamp_ns,
                     field: p.field.clone(),
                     bytes: bytes.to_vec(),
+                    raw: false,
                 });
             }
         }

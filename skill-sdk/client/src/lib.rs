@@ -484,6 +484,23 @@ impl Client {
         })
     }
 
+    /// Starts recording every sample of `topics` (empty: all), the control changes and the
+    /// events into the MCAP file `file` (replacing a recording in progress).
+    pub fn record_start(&self, file: &str, topics: &[&str]) -> Result<(), ClientError> {
+        self.done(Request::Record {
+            file: Some(file.into()),
+            topics: topics.iter().map(|t| t.to_string()).collect(),
+        })
+    }
+
+    /// Stops the recording in progress (the file is finished and closed).
+    pub fn record_stop(&self) -> Result<(), ClientError> {
+        self.done(Request::Record {
+            file: None,
+            topics: Vec::new(),
+        })
+    }
+
     /// The manager's fabric log file and the skills whose samples it logs.
     pub fn logging(&self) -> Result<(Option<String>, Vec<String>), ClientError> {
         match self.request(&Request::Logging)? {

@@ -283,6 +283,27 @@ impl RawReader {
         }
     }
 
+    /// Takes every sample that arrived, as [`RawReader::poll`], handing each one's bytes and
+    /// header to `each` in the order they were published.
+    pub fn drain(&mut self, each: &mut dyn FnMut(&[u8], SampleHeader)) -> Result<(), Error> {
+        loop {
+            match self.subscriber.receive() {
+                Ok(Some(s)) => {
+                    let ptr = s.payload().as_ptr().cast::<u8>();
+                    // SAFETY: as in `latest`: one value of `size` bytes, mapped while held.
+                    let bytes = unsafe { std::slice::from_raw_parts(ptr, self.size) };
+                    each(bytes, *s.user_header());
+                    if let Some(m) = self.by_slot.as_mut() {
+                        m.insert(s.user_header().slot, (bytes.to_vec(), *s.user_header()));
+                    }
+                    self.latest = Some(s);
+                }
+                Ok(None) => return Ok(()),
+                Err(e) => return Err(Error::transport("untyped receive", e)),
+            }
+        }
+    }
+
     /// The newest sample's bytes and header.
     pub fn latest(&self) -> Option<(&[u8], SampleHeader)> {
         let s = self.latest.as_ref()?;

@@ -107,6 +107,14 @@ pub enum Request {
     },
     /// Where the manager logs, and whose samples.
     Logging,
+    /// Start a full-rate recording into an MCAP file (replacing one in progress), or stop it
+    /// (`file` `None`).
+    Record {
+        /// The `.mcap` file, as the manager sees it (an absolute path is best).
+        file: Option<String>,
+        /// Topics to record; empty: every topic.
+        topics: Vec<String>,
+    },
 }
 
 /// Encodes a request.

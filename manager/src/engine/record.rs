@@ -1,0 +1,302 @@
+//! The full-rate recording (`skillfab up --record FILE.mcap`, `ctl record start|stop`): every
+//! sample of the chosen topics (default: all) with its cycle, producer and stamp, the skills'
+//! declarations, the control changes (activations, parameters, priorities) with the cycle they
+//! take effect from, the events, and a marker after each cycle's samples. `skillfab replay`
+//! reads it back (docs/replay.md).
+//!
+//! Samples are read from shared memory at the end of each cycle, before anything else reads
+//! them, copied out (a sample must be released to its publisher) and handed to the recorder's
+//! writer thread, which decodes, encodes and writes them: the cycle's own path only pays the
+//! copy. A sample the writer thread has not taken yet waits in its queue, so nothing is dropped
+//! for a slow disk; what a subscriber's buffer could not hold (more than
+//! `SUBSCRIBER_BUFFER` samples of one topic in one cycle) is counted in the cycle markers.
+
+use super::*;
+use serde_json::json;
+use skillfab_proto::schema::MessageSchema;
+use skillfab_proto::value;
+
+/// What and where to record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordSpec {
+    /// The MCAP file.
+    pub path: PathBuf,
+    /// Topics to record; empty: every topic.
+    pub topics: Vec<String>,
+}
+
+/// A recording in progress.
+pub(crate) struct Recording {
+    rec: Recorder,
+    spec: RecordSpec,
+    /// Per recorded topic: how to decode it and who produces it.
+    topics: HashMap<String, RecTopic>,
+    /// Skill instances whose declaration is in the file: (name, pid).
+    declared: HashSet<(String, u32)>,
+    /// Samples recorded so far.
+    pub(crate) samples: u64,
+    /// Samples seen out of order or twice (a publisher's cycle that went backwards).
+    pub(crate) out_of_order: u64,
+}
+
+struct RecTopic {
+    type_name: String,
+    field: Arc<FieldPath>,
+    /// Producers by board slot: (skill, port, `out` or `cmd`).
+    producers: HashMap<u32, (String, String, &'static str)>,
+    /// Newest cycle recorded, per producer.
+    last: HashMap<String, u64>,
+}
+
+impl Recording {
+    /// Starts writing `spec.path` (which must name an `.mcap` file).
+    pub(crate) fn start(spec: RecordSpec, manager: &Manager) -> Result<Recording, String> {
+        if !crate::recorder::is_mcap(&spec.path) {
+            return Err(format!(
+                "a recording is an MCAP file: {} does not end in .mcap",
+                spec.path.display()
+            ));
+        }
+        let cannot = |e: std::io::Error| format!("cannot record to {}: {e}", spec.path.display());
+        if let Some(dir) = spec.path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(cannot)?;
+        }
+        std::fs::File::create(&spec.path).map_err(cannot)?;
+        let rec = Recorder::open(&spec.path).map_err(cannot)?;
+        let clock = manager.board.header().clock();
+        rec.line(
+            "start",
+            Some(manager.cycle),
+            json!({
+                "domain": manager.config.domain.name(), "pid": std::process::id(),
+                "recording": true, "topics": spec.topics,
+                "period_ns": clock.period.map(|p| p.as_nanos() as u64),
+                "lockstep": clock.lockstep,
+            }),
+        );
+        Ok(Recording {
+            rec,
+            spec,
+            topics: HashMap::new(),
+            declared: HashSet::new(),
+            samples: 0,
+            out_of_order: 0,
+        })
+    }
+
+    /// Where it goes.
+    pub(crate) fn path(&self) -> &std::path::Path {
+        &self.spec.path
+    }
+
+    fn wanted(&self, topic: &str) -> bool {
+        self.spec.topics.is_empty() || self.spec.topics.iter().any(|t| t == topic)
+    }
+
+    /// A control change that takes effect from cycle `from`.
+    pub(crate) fn control(&self, from: u64, what: &str, fields: serde_json::Value) {
+        let mut j = json!({"what": what, "from": from});
+        if let (Some(o), serde_json::Value::Object(f)) = (j.as_object_mut(), fields) {
+            o.extend(f);
+        }
+        self.rec.line("control", Some(from.saturating_sub(1)), j);
+    }
+}
+
+impl Manager {
+    /// Starts recording (replacing a recording in progress).
+    pub(crate) fn start_recording(&mut self, spec: RecordSpec) -> Result<(), String> {
+        self.recording = None;
+        let r = Recording::start(spec, self)?;
+        tracing::info!(file = %r.path().display(), "recording");
+        self.recording = Some(r);
+        self.update_recording();
+        Ok(())
+    }
+
+    /// `ctl record start|stop`.
+    pub(crate) fn record_request(
+        &mut self,
+        file: Option<String>,
+        topics: Vec<String>,
+    ) -> skillfab_proto::control::Response {
+        use skillfab_proto::control::{ControlError, Reply};
+        match file {
+            None if self.recording.is_none() => {
+                Err(ControlError::Refused("no recording in progress".into()))
+            }
+            None => {
+                if let Some(r) = self.recording.take() {
+                    tracing::info!(file = %r.path().display(), samples = r.samples, "recording stopped");
+                }
+                Ok(Reply::Done)
+            }
+            Some(f) => self
+                .start_recording(RecordSpec {
+                    path: PathBuf::from(f),
+                    topics,
+                })
+                .map(|()| Reply::Done)
+                .map_err(ControlError::Refused),
+        }
+    }
+
+    /// Records a control change that takes effect from the next cycle to start.
+    pub(crate) fn record_control(&self, what: &str, fields: serde_json::Value) {
+        if let Some(r) = &self.recording {
+            r.control(self.in_progress() + 1, what, fields);
+        }
+    }
+
+    /// After a (re)plan: declarations of new skill instances, and the topics to read.
+    pub(super) fn update_recording(&mut self) {
+        let Some(rec) = self.recording.as_mut() else {
+            return;
+        };
+        let mut wanted: Vec<(String, MessageSchema, u32, String, String, &'static str)> =
+            Vec::new();
+        for (s, e) in self.skills.in_order() {
+            if !e.ready {
+                continue;
+            }
+            let d = &e.decl;
+            if rec.declared.insert((d.name.clone(), d.pid)) {
+                let port = |p: &skillfab_proto::decl::PortDecl| {
+                    json!({"port": p.port, "topic": p.topic, "type": p.schema.type_name,
+                           "kind": format!("{:?}", p.kind)})
+                };
+                let params: serde_json::Map<String, serde_json::Value> = d
+                    .param_values
+                    .iter()
+                    .map(|(n, v)| (n.clone(), skillfab_proto::json::param_json(v)))
+                    .collect();
+                let defaults: serde_json::Map<String, serde_json::Value> = d
+                    .params
+                    .iter()
+                    .map(|p| (p.name.clone(), skillfab_proto::json::param_json(&p.default)))
+                    .collect();
+                rec.rec.line(
+                    "decl",
+                    Some(self.cycle),
+                    json!({"skill": d.name, "kind_of": d.kind, "mode": format!("{:?}", d.mode),
+                           "priority": d.priority, "active": e.active, "pid": d.pid,
+                           "from": self.cycle + 1,
+                           "inputs": d.inputs.iter().map(port).collect::<Vec<_>>(),
+                           "outputs": d.outputs.iter().map(port).collect::<Vec<_>>(),
+                           "params": params, "defaults": defaults}),
+                );
+            }
+            for p in &d.outputs {
+                wanted.push((
+                    p.topic.clone(),
+                    p.schema.clone(),
+                    s as u32,
+                    d.name.clone(),
+                    p.port.clone(),
+                    "out",
+                ));
+            }
+            for p in &d.inputs {
+                if matches!(p.kind, skillfab_proto::decl::PortKind::Channel(_)) {
+                    wanted.push((
+                        names::command_topic(p.topic.strip_prefix("channel/").unwrap_or(&p.topic)),
+                        p.schema.clone(),
+                        s as u32,
+                        d.name.clone(),
+                        p.port.clone(),
+                        "cmd",
+                    ));
+                }
+            }
+        }
+        for (topic, schema, slot, skill, port, dir) in wanted {
+            if !rec.wanted(&topic) {
+                continue;
+            }
+            if !self.readers.contains_key(&topic) {
+                match RawReader::open(&self.node, &topic, &schema) {
+                    Ok(r) => {
+                        self.readers.insert(topic.clone(), r);
+                    }
+                    Err(e) => {
+                        tracing::warn!(%topic, error = %e, "cannot record topic");
+                        continue;
+                    }
+                }
+            }
+            let Ok(field) = value::resolve(&schema, "") else {
+                continue;
+            };
+            let t = rec.topics.entry(topic).or_insert_with(|| RecTopic {
+                type_name: schema.type_name.clone(),
+                field: Arc::new(field),
+                producers: HashMap::new(),
+                last: HashMap::new(),
+            });
+            t.producers.insert(slot, (skill, port, dir));
+        }
+    }
+
+    /// End of cycle `k`: every new sample of the recorded topics, then the cycle's marker.
+    pub(super) fn record_cycle(&mut self, k: u64) {
+        let Some(rec) = self.recording.as_mut() else {
+            return;
+        };
+        let mut n = 0u64;
+        for (topic, t) in &mut rec.topics {
+            let Some(reader) = self.readers.get_mut(topic) else {
+                continue;
+            };
+            let mut taken = Vec::new();
+            let drained = reader.drain(&mut |bytes, h| taken.push((bytes.to_vec(), h)));
+            if let Err(e) = drained {
+                tracing::warn!(%topic, error = %e, "recording read failed");
+            }
+            for (bytes, h) in taken {
+                // A command's header names the proposal that won, not the device.
+                let (skill, port, dir) = t
+                    .producers
+                    .get(&h.slot)
+                    .or_else(|| t.producers.values().find(|p| p.2 == "cmd"))
+                    .cloned()
+                    .unwrap_or_else(|| (format!("slot{}", h.slot), topic.clone(), "out"));
+                let last = t.last.entry(skill.clone()).or_insert(0);
+                if h.cycle <= *last && *last > 0 {
+                    rec.out_of_order += 1;
+                }
+                *last = h.cycle;
+                n += 1;
+                rec.rec.sample(IoSample {
+                    cycle: h.cycle,
+                    skill,
+                    dir,
+                    port,
+                    topic: topic.clone(),
+                    type_name: t.type_name.clone(),
+                    stamp_ns: h.stamp_ns,
+                    field: t.field.clone(),
+                    bytes,
+                    raw: true,
+                });
+            }
+        }
+        rec.samples += n;
+        let clock = self.board.header().clock();
+        rec.rec.line(
+            "cycle",
+            Some(k),
+            json!({"clock_ns": clock.time.as_nanos() as u64, "samples": n,
+                   "out_of_order": rec.out_of_order}),
+        );
+    }
+
+    /// Events go into the recording as they are published.
+    pub(crate) fn record_events(&self, events: &[skillfab_proto::control::Event]) {
+        if let Some(r) = &self.recording {
+            for e in events {
+                r.rec
+                    .line("event", Some(e.cycle), skillfab_proto::json::event_json(e));
+            }
+        }
+    }
+}

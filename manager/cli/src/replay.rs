@@ -304,16 +304,15 @@ fn launch_file(
     decls: &[&Json],
     script: &Path,
 ) -> anyhow::Result<LaunchFile> {
-    let here = std::env::current_exe()?;
-    let bin_dir = opts
-        .bin_dir
-        .clone()
-        .or_else(|| here.parent().map(Path::to_path_buf))
-        .unwrap_or_default();
-    let program = |name: &str| {
-        find_program(name, &bin_dir)
-            .or_else(|| Some(bin_dir.join(name)).filter(|p| p.is_file()))
-            .with_context(|| format!("program '{name}' not found in {}", bin_dir.display()))
+    // The player is skillfab's own; the skills come from --bin-dir if given.
+    let tool = |name: &str| {
+        find_program(name, Path::new(".")).with_context(|| format!("program '{name}' not found"))
+    };
+    let program = |name: &str| match &opts.bin_dir {
+        Some(dir) => Some(dir.join(name))
+            .filter(|p| p.is_file())
+            .with_context(|| format!("program '{name}' not found in {}", dir.display())),
+        None => tool(name),
     };
     let text = |p: PathBuf| p.to_string_lossy().into_owned();
     let mut launch = LaunchFile {
@@ -323,7 +322,7 @@ fn launch_file(
         },
         process: vec![ProcessEntry {
             name: "player".into(),
-            bin: text(program("skillfab-player")?),
+            bin: text(tool("skillfab-player")?),
             args: vec!["--script".into(), text(script.to_path_buf())],
             ..ProcessEntry::default()
         }],

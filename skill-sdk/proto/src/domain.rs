@@ -93,8 +93,11 @@ impl Domain {
         }
         let root = self.root_path();
         let shown = root.display().to_string();
+        // Created or not, its mode is checked below: iceoryx2 changes the process umask for a
+        // moment while it creates a listener, and a directory made by another thread then may
+        // lack its owner's bits.
         match std::fs::DirBuilder::new().mode(0o700).create(&root) {
-            Ok(()) => return Ok(()),
+            Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
             Err(e) => return Err(err(&shown, e.to_string())),
         }
@@ -111,7 +114,7 @@ impl Domain {
                 ),
             ));
         }
-        if meta.mode() & 0o077 != 0 {
+        if meta.mode() & 0o777 != 0o700 {
             std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o700))
                 .map_err(|e| err(&shown, e.to_string()))?;
         }

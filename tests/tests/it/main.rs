@@ -13,3 +13,4 @@ mod fabric;
 mod fabric_log;
 mod faults;
 mod polyglot;
+mod replay;

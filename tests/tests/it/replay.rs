@@ -1,0 +1,256 @@
+//! Deterministic runs: the lock-step simulator (`denning-sim --lockstep`, `up --lockstep`),
+//! full-rate recording (`--record`, `ctl record`) and `skillfab replay`.
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use nix::sys::signal::Signal;
+use serde_json::Value as Json;
+use skillfab_client::Client;
+use skillfab_tests::{TestDomain, bin};
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::sync::atomic::Ordering;
+
+/// A 7 m × 5 m room with a door in the east wall and the barcode north of it.
+const ROOM: &str = r#"
+name = "test-doorway"
+start = [3.0, 3.2, 0.0]
+outside = { min = [7.5, -10.0], max = [20.0, 15.0] }
+[[wall]]
+from = [0.0, 0.0]
+to = [7.0, 0.0]
+[[wall]]
+from = [7.0, 0.0]
+to = [7.0, 1.8]
+[[wall]]
+from = [7.0, 3.0]
+to = [7.0, 5.0]
+[[wall]]
+from = [7.0, 5.0]
+to = [0.0, 5.0]
+[[wall]]
+from = [0.0, 5.0]
+to = [0.0, 0.0]
+[[door]]
+from = [7.0, 1.8]
+to = [7.0, 3.0]
+[[barcode]]
+id = 7
+at = [6.95, 3.7]
+"#;
+
+fn world(t: &TestDomain) -> PathBuf {
+    let path = t.dir.join("doorway.toml");
+    std::fs::write(&path, ROOM).unwrap();
+    path
+}
+
+/// The robot wandering with avoid in the room, in lock-step, its ground truth in `traj`.
+fn wandering(t: &TestDomain, seed: u64, traj: &Path) -> String {
+    format!(
+        "[manager]\nperiod_ms = 10\n\
+         [[process]]\nname = \"denning-sim\"\nbin = \"{{bin:denning-sim}}\"\nregisters = false\n\
+         args = [\"--world\", \"{}\", \"--link\", \"{}\", \"--seed\", \"{seed}\", \"--lockstep\", \"--trajectory\", \"{}\"]\n\
+         [[process]]\nname = \"denning\"\nbin = \"{{bin:denning}}\"\nargs = [\"--port\", \"{}\"]\n\
+         [[process]]\nname = \"avoid\"\nbin = \"{{bin:avoid}}\"\n\
+         [[process]]\nname = \"wander\"\nbin = \"{{bin:wander}}\"\nparams = {{ seed = {seed} }}\n",
+        world(t).display(),
+        t.dir.join("robot").display(),
+        traj.display(),
+        t.dir.join("robot").display(),
+    )
+}
+
+#[test]
+fn two_lockstep_runs_with_the_same_seed_give_identical_trajectories() {
+    let run = |seed: u64, n: u32| {
+        let t = TestDomain::new(&format!("lockstep{seed}{n}"));
+        let traj = t.dir.join("truth.csv");
+        let report = t.up_json(
+            &wandering(&t, seed, &traj),
+            &["--lockstep", "--cycles", "1500"],
+        );
+        assert_eq!(report["overruns"], 0, "{report}");
+        std::fs::read_to_string(&traj).unwrap()
+    };
+    let (a, b, c) = (run(4, 0), run(4, 1), run(5, 0));
+    // 15 s of robot time, one ground-truth row per 100 ms status period.
+    assert!(a.lines().count() > 140, "{a}");
+    let moved = a
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(4)?.parse::<f64>().ok())
+        .any(|v| v > 0.1);
+    assert!(moved, "the robot drove: {a}");
+    assert_eq!(a, b, "the same seed gives the same trajectory");
+    assert_ne!(a, c, "another seed another");
+}
+
+/// Runs `skillfab replay` with `args`; returns its JSON report and exit status.
+fn replay(t: &TestDomain, file: &Path, args: &[&str]) -> (Json, Output) {
+    let out = t.run(
+        "skillfab",
+        &[&["replay", file.to_str().unwrap(), "--json"], args].concat(),
+    );
+    let report = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "replay report is not JSON ({e}): {} / {}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (report, out)
+}
+
+/// Every JSON record of an MCAP recording, in order.
+fn records(file: &Path) -> Vec<Json> {
+    let bytes = std::fs::read(file).unwrap();
+    mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+        .unwrap()
+        .map_while(Result::ok)
+        .map(|m| serde_json::from_slice(&m.data).unwrap())
+        .collect()
+}
+
+#[test]
+fn a_recorded_lockstep_mission_replays_identically_and_a_changed_default_is_named() {
+    let t = TestDomain::new("replaymission");
+    let rec = t.dir.join("mission.mcap");
+    let out = t.run(
+        "skillfab",
+        &[
+            "demo",
+            "exit-lab",
+            "--world",
+            world(&t).to_str().unwrap(),
+            "--lockstep",
+            "--record",
+            rec.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let skills = ["--skills", "avoid,wander,barcode_track,home"];
+    let (r, out) = replay(&t, &rec, &skills);
+    assert!(out.status.success(), "{r}");
+    assert_eq!(r["divergence"], Json::Null, "{r}");
+    assert_eq!(r["identical_cycles"], r["cycles"], "{r}");
+    assert!(r["cycles"].as_u64().unwrap() > 1000, "{r}");
+    assert!(
+        r["samples"].as_u64().unwrap() > 1000,
+        "outputs compared: {r}"
+    );
+
+    // home as if rebuilt with another default speed (0.3 m/s instead of 0.35): a wrapper
+    // that passes it, in a directory of its own.
+    let bins = t.dir.join("rebuilt");
+    std::fs::create_dir_all(&bins).unwrap();
+    for b in ["avoid", "wander", "barcode_track"] {
+        std::os::unix::fs::symlink(bin(b), bins.join(b)).unwrap();
+    }
+    let wrapper = bins.join("home");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\nexec {} \"$@\" --param speed=0.3\n",
+            bin("home").display()
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(
+        &wrapper,
+        std::os::unix::fs::PermissionsExt::from_mode(0o755),
+    )
+    .unwrap();
+    let (r, out) = replay(
+        &t,
+        &rec,
+        &[&skills[..], &["--bin-dir", bins.to_str().unwrap()]].concat(),
+    );
+    assert!(!out.status.success(), "a divergence fails the replay: {r}");
+    let d = &r["divergence"];
+    // The first cycle whose recorded proposal of home drives forward: the speed's first use.
+    let first_use = records(&rec)
+        .into_iter()
+        .find(|j| {
+            j["kind"] == "sample"
+                && j["skill"] == "home"
+                && j["port"] == "drive"
+                && j["value"]["translate"].as_f64().unwrap_or(0.0) != 0.0
+        })
+        .expect("home drove");
+    assert_eq!(d["cycle"], first_use["cycle"], "{r}");
+    assert_eq!(
+        (d["skill"].as_str(), d["port"].as_str()),
+        (Some("home"), Some("drive"))
+    );
+    assert_eq!(d["field"], "translate", "{r}");
+    let ratio = d["replayed"].as_f64().unwrap() / d["recorded"].as_f64().unwrap();
+    assert!(
+        (ratio - 0.3 / 0.35).abs() < 1e-6,
+        "scaled by the speed: {r}"
+    );
+}
+
+#[test]
+fn a_recording_cut_short_by_kill_9_replays_up_to_its_last_complete_cycle() {
+    let mut t = TestDomain::new("replaykill");
+    let traj = t.dir.join("truth.csv");
+    let launch = t.launch_file(&wandering(&t, 2, &traj));
+    t.spawn(
+        "skillfab",
+        &["up", launch.to_str().unwrap(), "--lockstep", "--paused"],
+    );
+    let board = t.board();
+    let c = Client::connect(&t.domain).unwrap();
+    t.wait_until("the network cycles", || {
+        c.list().is_ok_and(|l| l.len() == 3)
+    });
+    let rec = t.dir.join("cut.mcap");
+    let out = t.run(
+        "skillfab",
+        &["ctl", "record", "start", rec.to_str().unwrap()],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(t.run("skillfab", &["ctl", "run"]).status.success());
+    let start = 0;
+    t.wait_until("recorded cycles", || {
+        c.stats().is_ok_and(|s| s.cycles > start + 800)
+    });
+    let pid = board.header().manager_pid.load(Ordering::Acquire);
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
+    let recorded: Vec<Json> = records(&rec);
+    let last = recorded
+        .iter()
+        .filter(|j| j["kind"] == "cycle")
+        .filter_map(|j| j["cycle"].as_u64())
+        .max()
+        .expect("complete cycles");
+    assert!(
+        last > start + 500,
+        "cycles recorded before the kill: {last}"
+    );
+    // From the first cycle on, so wander's memory is replayed too.
+    let (r, out) = replay(&t, &rec, &["--skills", "avoid,wander"]);
+    assert!(
+        out.status.success(),
+        "{r} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(r["to"], last, "up to the last complete cycle: {r}");
+    assert_eq!(r["divergence"], Json::Null, "{r}");
+    assert_eq!(r["identical_cycles"], r["cycles"], "{r}");
+    assert!(
+        r["samples"].as_u64().unwrap() > 500,
+        "proposals compared: {r}"
+    );
+}

@@ -94,6 +94,7 @@ fn arg_world() -> Result<PathBuf, String> {
 fn inspect(path: &Path) -> Result<Value, String> {
     let text = skillfab_manager::recorder::read_records(path).map_err(because("recording"))?;
     let mut cycles = std::collections::BTreeMap::<u64, u64>::new();
+    let mut overruns = std::collections::BTreeSet::new();
     let (mut samples, mut out_of_order, mut sonar) =
         (0u64, 0u64, std::collections::BTreeSet::new());
     for line in text.lines() {
@@ -106,6 +107,9 @@ fn inspect(path: &Path) -> Result<Value, String> {
                 );
                 out_of_order = j["out_of_order"].as_u64().unwrap_or(0);
             }
+            Some("event") if j["event"] == "cycle_overrun" => {
+                overruns.extend(j["cycle"].as_u64());
+            }
             Some("sample") => {
                 samples += 1;
                 if j["skill"] == "denning" && j["port"] == "sonar" {
@@ -115,16 +119,20 @@ fn inspect(path: &Path) -> Result<Value, String> {
             _ => {}
         }
     }
-    // The device publishes its sample in every cycle it is connected in: once the link is
-    // up, a cycle without its sonar sample is a lost one.
+    // The device publishes its sample at the start of every cycle it runs in: a cycle without
+    // its sonar sample is one the device missed (an overrun closed the cycle before it ran)
+    // or one the recording lost.
     let first = sonar.first().copied().unwrap_or(0);
-    let missing = cycles
+    let (in_overruns, otherwise): (Vec<u64>, Vec<u64>) = cycles
         .keys()
         .filter(|k| **k >= first && !sonar.contains(k))
-        .count();
+        .partition(|k| overruns.contains(k));
+    let missing = in_overruns.len() + otherwise.len();
     let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
     Ok(json!({
         "cycles": cycles.len(), "samples": samples, "device_cycles_missing": missing,
+        "missing_in_overrun_cycles": in_overruns.len(), "missing_otherwise": otherwise.len(),
+        "overruns": overruns.len(),
         "out_of_order": out_of_order, "bytes_per_cycle": bytes / (cycles.len().max(1) as u64),
     }))
 }
@@ -222,10 +230,12 @@ fn report() -> Result<(), String> {
     );
     for f in files {
         println!(
-            "  file: {} cycles, {} samples, {} device cycles missing, {} out of order, {} bytes/cycle",
+            "  file: {} cycles, {} samples, {} overruns, {} device cycles missing ({} in overrun cycles), {} out of order, {} bytes/cycle",
             f["cycles"],
             f["samples"],
+            f["overruns"],
             f["device_cycles_missing"],
+            f["missing_in_overrun_cycles"],
             f["out_of_order"],
             f["bytes_per_cycle"]
         );

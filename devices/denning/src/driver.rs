@@ -286,13 +286,8 @@ impl Driver {
         wait: Duration,
     ) -> Result<u64, StepError> {
         let deadline = Instant::now() + wait;
+        self.enter_lockstep();
         let mut s = lock(&self.shared);
-        s.steps.get_or_insert_with(|| Steps {
-            base: Instant::now(),
-            acked_ms: 0,
-            pending: None,
-            held: Vec::new(),
-        });
         while s.link.is_none() {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
@@ -333,6 +328,43 @@ impl Driver {
                 .0;
         }
         Ok(s.steps.as_ref().map_or(0, |st| st.acked_ms))
+    }
+
+    /// Switches to lock-step for good (idempotent; [`Driver::step`] does it too): from now on
+    /// the robot's time stamps packets. Whatever was stamped on the host's clock before (the
+    /// connection itself) is put at robot time zero, so no age depends on how long the host
+    /// took to get here.
+    pub fn enter_lockstep(&self) {
+        let mut s = lock(&self.shared);
+        if s.steps.is_none() {
+            let base = Instant::now();
+            s.steps = Some(Steps {
+                base,
+                acked_ms: 0,
+                pending: None,
+                held: Vec::new(),
+            });
+            s.sample.received = s.sample.received.map(|_| base);
+        }
+    }
+
+    /// Waits until the robot is connected, at most `wait`; whether it is. (In lock-step the
+    /// first cycle's sample must not depend on whether the handshake beat it.)
+    pub fn wait_connected(&self, wait: Duration) -> bool {
+        let deadline = Instant::now() + wait;
+        let mut s = lock(&self.shared);
+        while s.link.is_none() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            s = self
+                .stepped
+                .wait_timeout(s, left)
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .0;
+        }
+        true
     }
 
     /// Sets the drive command (m/s, rad/s).

@@ -85,10 +85,18 @@ impl Device for Denning {
         Ok(())
     }
 
-    fn sample(&mut self, _: &Ctx<DenningParams>, out: &mut Sensors) -> SkillResult {
+    fn sample(&mut self, ctx: &Ctx<DenningParams>, out: &mut Sensors) -> SkillResult {
         let Some(d) = &self.driver else {
             return Ok(());
         };
+        // Lock-step: what the first cycles see must not depend on how fast the handshake was
+        // or how long ago it was.
+        if ctx.clock.lockstep {
+            d.enter_lockstep();
+            if !d.wait_connected(STEP_WAIT) {
+                tracing::warn!(cycle = ctx.cycle, "lock-step: the robot is not connected");
+            }
+        }
         let s = d.latest();
         self.seen = s.received;
         // The driver's clock: the host's, or the robot's in lock-step.

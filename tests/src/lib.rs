@@ -369,3 +369,41 @@ pub fn skill<'a>(report: &'a serde_json::Value, name: &str) -> &'a serde_json::V
         .and_then(|a| a.iter().find(|s| s["name"] == name))
         .unwrap_or_else(|| panic!("no skill '{name}' in report {report}"))
 }
+
+/// A 7 m × 5 m room with a 1.2 m door in the east wall and the barcode 0.7 m north of it;
+/// the robot starts 4 m away, facing the barcode's wall.
+pub const DOORWAY: &str = r#"
+name = "test-doorway"
+start = [3.0, 3.2, 0.0]
+outside = { min = [7.5, -10.0], max = [20.0, 15.0] }
+[[wall]]
+from = [0.0, 0.0]
+to = [7.0, 0.0]
+[[wall]]
+from = [7.0, 0.0]
+to = [7.0, 1.8]
+[[wall]]
+from = [7.0, 3.0]
+to = [7.0, 5.0]
+[[wall]]
+from = [7.0, 5.0]
+to = [0.0, 5.0]
+[[wall]]
+from = [0.0, 5.0]
+to = [0.0, 0.0]
+[[door]]
+from = [7.0, 1.8]
+to = [7.0, 3.0]
+[[barcode]]
+id = 7
+at = [6.95, 3.7]
+"#;
+
+impl TestDomain {
+    /// Writes [`DOORWAY`] into the scratch directory; returns its path.
+    pub fn doorway(&self) -> PathBuf {
+        let path = self.dir.join("doorway.toml");
+        std::fs::write(&path, DOORWAY).expect("write the world");
+        path
+    }
+}

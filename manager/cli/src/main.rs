@@ -63,23 +63,8 @@ enum Cmd {
     /// recorded activations and parameter changes; compares their outputs with the recorded
     /// ones. Exit status 1 on a divergence (it can gate CI).
     Replay {
-        /// The recording (.mcap).
-        file: PathBuf,
-        /// Skills to replay (comma-separated instance names).
-        #[arg(long, value_delimiter = ',', required = true)]
-        skills: Vec<String>,
-        /// First cycle (default: the recording's first).
-        #[arg(long, value_name = "CYCLE")]
-        from: Option<u64>,
-        /// Last cycle (default: the recording's last complete cycle).
-        #[arg(long, value_name = "CYCLE")]
-        to: Option<u64>,
-        /// Where the skill binaries are (default: next to skillfab).
-        #[arg(long, value_name = "DIR")]
-        bin_dir: Option<PathBuf>,
-        /// Keep the replay's files (launch file, player script, its recording, log) here.
-        #[arg(long, value_name = "DIR")]
-        keep: Option<PathBuf>,
+        #[command(flatten)]
+        opts: replay::ReplayOptions,
         /// Print the report as one JSON object.
         #[arg(long)]
         json: bool,
@@ -205,25 +190,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
         Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
-        Cmd::Replay {
-            file,
-            skills,
-            from,
-            to,
-            bin_dir,
-            keep,
-            json,
-        } => replay(
-            &replay::ReplayOptions {
-                file,
-                skills,
-                from,
-                to,
-                bin_dir,
-                keep,
-            },
-            json,
-        ),
+        Cmd::Replay { opts, json } => replay(&opts, json),
         Cmd::Console => skillfab_console::run(&domain),
         Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),
         Cmd::Schema { c, python } => {

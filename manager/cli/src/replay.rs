@@ -26,19 +26,24 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Options of `skillfab replay`.
-#[derive(Debug, Clone)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct ReplayOptions {
-    /// The recording.
+    /// The recording (.mcap).
     pub file: PathBuf,
-    /// Skills to replay (instance names in the recording).
+    /// Skills to replay (comma-separated instance names).
+    #[arg(long, value_delimiter = ',', required = true)]
     pub skills: Vec<String>,
     /// First cycle (default: the recording's first).
+    #[arg(long, value_name = "CYCLE")]
     pub from: Option<u64>,
-    /// Last cycle (default: the recording's last complete one).
+    /// Last cycle (default: the recording's last complete cycle).
+    #[arg(long, value_name = "CYCLE")]
     pub to: Option<u64>,
     /// Where the skill binaries are (default: next to skillfab).
+    #[arg(long, value_name = "DIR")]
     pub bin_dir: Option<PathBuf>,
-    /// Keep the replay's files (launch file, player script, recording, log) here.
+    /// Keep the replay's files (launch file, player script, its recording, log) here.
+    #[arg(long, value_name = "DIR")]
     pub keep: Option<PathBuf>,
 }
 

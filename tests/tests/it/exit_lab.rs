@@ -13,39 +13,8 @@ use std::path::PathBuf;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-/// A 7 m × 5 m room with a 1.2 m door in the east wall and the barcode 0.7 m north of it;
-/// the robot starts 4 m away, facing the barcode's wall.
-const ROOM: &str = r#"
-name = "test-doorway"
-start = [3.0, 3.2, 0.0]
-outside = { min = [7.5, -10.0], max = [20.0, 15.0] }
-[[wall]]
-from = [0.0, 0.0]
-to = [7.0, 0.0]
-[[wall]]
-from = [7.0, 0.0]
-to = [7.0, 1.8]
-[[wall]]
-from = [7.0, 3.0]
-to = [7.0, 5.0]
-[[wall]]
-from = [7.0, 5.0]
-to = [0.0, 5.0]
-[[wall]]
-from = [0.0, 5.0]
-to = [0.0, 0.0]
-[[door]]
-from = [7.0, 1.8]
-to = [7.0, 3.0]
-[[barcode]]
-id = 7
-at = [6.95, 3.7]
-"#;
-
 fn world(t: &TestDomain) -> PathBuf {
-    let path = t.dir.join("doorway.toml");
-    std::fs::write(&path, ROOM).unwrap();
-    path
+    t.doorway()
 }
 
 fn demo(t: &TestDomain, args: &[&str]) -> Child {

@@ -7,12 +7,90 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-/** A cycle tick (the hello network's `ticker`). */
-typedef struct sf_Tick {
-    uint64_t value;
-} sf_Tick;
-#define SF_TICK_TYPE_NAME "skillfab.Tick"
-#define SF_TICK_SIZE 8
+/** Barcode sightings of the latest camera frame. */
+typedef struct sf_Barcodes {
+    uint32_t count;
+    uint32_t id[8];
+    double bearing[8];
+    double range[8];
+    double age_ms;
+} sf_Barcodes;
+#define SF_BARCODES_TYPE_NAME "skillfab.Barcodes"
+#define SF_BARCODES_SIZE 176
+
+/** Battery voltage. */
+typedef struct sf_Battery {
+    double volts;
+} sf_Battery;
+#define SF_BATTERY_TYPE_NAME "skillfab.Battery"
+#define SF_BATTERY_SIZE 8
+
+/** A large block of bytes, for zero-copy payload tests and benchmarks. */
+typedef struct sf_Blob64K {
+    uint64_t len;
+    uint8_t data[65536];
+} sf_Blob64K;
+#define SF_BLOB64K_TYPE_NAME "skillfab.Blob64K"
+#define SF_BLOB64K_SIZE 65544
+
+/** Contact sensing. */
+typedef struct sf_Bumpers {
+    uint32_t hit;
+    bool stall;
+} sf_Bumpers;
+#define SF_BUMPERS_TYPE_NAME "skillfab.Bumpers"
+#define SF_BUMPERS_SIZE 8
+
+/** A located door opening, in the odometry frame. */
+typedef struct sf_Door {
+    bool found;
+    double x;
+    double y;
+    double heading;
+    double width;
+} sf_Door;
+#define SF_DOOR_TYPE_NAME "skillfab.Door"
+#define SF_DOOR_SIZE 40
+
+/** A synchro-drive command: the `drive` actuator channel. */
+typedef struct sf_Drive {
+    double translate;
+    double rotate;
+} sf_Drive;
+#define SF_DRIVE_TYPE_NAME "skillfab.Drive"
+#define SF_DRIVE_SIZE 16
+
+/** The state of a device's link to its hardware. */
+typedef struct sf_Link {
+    bool connected;
+    double age_ms;
+    uint64_t frames;
+    uint64_t bad_frames;
+    uint64_t garbage;
+    uint64_t connects;
+} sf_Link;
+#define SF_LINK_TYPE_NAME "skillfab.Link"
+#define SF_LINK_SIZE 48
+
+/** Dead-reckoned pose and velocities. */
+typedef struct sf_Odometry {
+    double x;
+    double y;
+    double theta;
+    double v;
+    double w;
+} sf_Odometry;
+#define SF_ODOMETRY_TYPE_NAME "skillfab.Odometry"
+#define SF_ODOMETRY_SIZE 40
+
+/** A generic scalar, for test and example networks. */
+typedef struct sf_Scalar {
+    double value;
+    uint64_t start_ns;
+    uint64_t end_ns;
+} sf_Scalar;
+#define SF_SCALAR_TYPE_NAME "skillfab.Scalar"
+#define SF_SCALAR_SIZE 24
 
 /** A scaled value (the hello network's `scale`). */
 typedef struct sf_Scaled {
@@ -29,31 +107,6 @@ typedef struct sf_Smoothed {
 #define SF_SMOOTHED_TYPE_NAME "skillfab.Smoothed"
 #define SF_SMOOTHED_SIZE 16
 
-/** A generic scalar, for test and example networks. */
-typedef struct sf_Scalar {
-    double value;
-    uint64_t start_ns;
-    uint64_t end_ns;
-} sf_Scalar;
-#define SF_SCALAR_TYPE_NAME "skillfab.Scalar"
-#define SF_SCALAR_SIZE 24
-
-/** A large block of bytes, for zero-copy payload tests and benchmarks. */
-typedef struct sf_Blob64K {
-    uint64_t len;
-    uint8_t data[65536];
-} sf_Blob64K;
-#define SF_BLOB64K_TYPE_NAME "skillfab.Blob64K"
-#define SF_BLOB64K_SIZE 65544
-
-/** A synchro-drive command: the `drive` actuator channel. */
-typedef struct sf_Drive {
-    double translate;
-    double rotate;
-} sf_Drive;
-#define SF_DRIVE_TYPE_NAME "skillfab.Drive"
-#define SF_DRIVE_SIZE 16
-
 /** The sonar ring: 24 sonars 15° apart, sonar 0 facing forward, counter-clockwise. */
 typedef struct sf_Sonar {
     double range[24];
@@ -61,55 +114,6 @@ typedef struct sf_Sonar {
 } sf_Sonar;
 #define SF_SONAR_TYPE_NAME "skillfab.Sonar"
 #define SF_SONAR_SIZE 384
-
-/** Dead-reckoned pose and velocities. */
-typedef struct sf_Odometry {
-    double x;
-    double y;
-    double theta;
-    double v;
-    double w;
-} sf_Odometry;
-#define SF_ODOMETRY_TYPE_NAME "skillfab.Odometry"
-#define SF_ODOMETRY_SIZE 40
-
-/** Contact sensing. */
-typedef struct sf_Bumpers {
-    uint32_t hit;
-    bool stall;
-} sf_Bumpers;
-#define SF_BUMPERS_TYPE_NAME "skillfab.Bumpers"
-#define SF_BUMPERS_SIZE 8
-
-/** Battery voltage. */
-typedef struct sf_Battery {
-    double volts;
-} sf_Battery;
-#define SF_BATTERY_TYPE_NAME "skillfab.Battery"
-#define SF_BATTERY_SIZE 8
-
-/** Barcode sightings of the latest camera frame. */
-typedef struct sf_Barcodes {
-    uint32_t count;
-    uint32_t id[8];
-    double bearing[8];
-    double range[8];
-    double age_ms;
-} sf_Barcodes;
-#define SF_BARCODES_TYPE_NAME "skillfab.Barcodes"
-#define SF_BARCODES_SIZE 176
-
-/** The state of a device's link to its hardware. */
-typedef struct sf_Link {
-    bool connected;
-    double age_ms;
-    uint64_t frames;
-    uint64_t bad_frames;
-    uint64_t garbage;
-    uint64_t connects;
-} sf_Link;
-#define SF_LINK_TYPE_NAME "skillfab.Link"
-#define SF_LINK_SIZE 48
 
 /** A tracked barcode, in the odometry frame. */
 typedef struct sf_Target {
@@ -124,15 +128,11 @@ typedef struct sf_Target {
 #define SF_TARGET_TYPE_NAME "skillfab.Target"
 #define SF_TARGET_SIZE 40
 
-/** A located door opening, in the odometry frame. */
-typedef struct sf_Door {
-    bool found;
-    double x;
-    double y;
-    double heading;
-    double width;
-} sf_Door;
-#define SF_DOOR_TYPE_NAME "skillfab.Door"
-#define SF_DOOR_SIZE 40
+/** A cycle tick (the hello network's `ticker`). */
+typedef struct sf_Tick {
+    uint64_t value;
+} sf_Tick;
+#define SF_TICK_TYPE_NAME "skillfab.Tick"
+#define SF_TICK_SIZE 8
 
 #endif /* SKILLFAB_MSGS_H */

@@ -34,14 +34,27 @@ enum Cmd {
     Up(UpArgs),
     /// The debugging interface: a terminal UI over a running fabric.
     Console,
-    /// The shared message types: their schemas as JSON, or as C or Python declarations.
+    /// Every known message type with its size and the file it is declared in — the shipped
+    /// catalog and the packages on SKILLFAB_MSG_PATH or --msg-path —; or one package's types as
+    /// JSON schemas, a C header or a Python module.
     Schema {
-        /// Print the C header (skill-sdk/capi/include/skillfab_msgs.h).
-        #[arg(long, conflicts_with = "python")]
+        /// Print the package's C header (for skillfab: skill-sdk/capi/include/skillfab_msgs.h).
+        #[arg(long, conflicts_with_all = ["python", "json"])]
         c: bool,
-        /// Print the Python ctypes module (python/skillfab/msgs.py).
-        #[arg(long)]
+        /// Print the package's Python ctypes module (for skillfab: python/skillfab/msgs.py).
+        #[arg(long, conflicts_with = "json")]
         python: bool,
+        /// Print the package's schemas as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Message package directories (a package, or a directory of packages), before those
+        /// of SKILLFAB_MSG_PATH.
+        #[arg(long, value_name = "DIR")]
+        msg_path: Vec<PathBuf>,
+        /// The package --c, --python and --json print (default: the only package of
+        /// --msg-path, else skillfab).
+        #[arg(long)]
+        package: Option<String>,
     },
     /// Remove what fabrics left on this machine: with processes of the domain alive, only the
     /// resources of its dead iceoryx2 nodes; with none, every file of the domain.
@@ -193,17 +206,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Cmd::Replay { opts, json } => replay(&opts, json),
         Cmd::Console => skillfab_console::run(&domain),
         Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),
-        Cmd::Schema { c, python } => {
-            let schemas = skillfab_codegen::shared_schemas();
-            if c {
-                print!("{}", skillfab_codegen::c_header(&schemas));
-            } else if python {
-                print!("{}", skillfab_codegen::python_module(&schemas));
-            } else {
-                println!("{}", serde_json::to_string_pretty(&schemas)?);
-            }
-            Ok(())
-        }
+        Cmd::Schema {
+            c,
+            python,
+            json,
+            msg_path,
+            package,
+        } => schema(&msg_path, package, c, python, json),
         Cmd::Demo {
             which:
                 DemoCmd::ExitLab {
@@ -281,6 +290,61 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// `skillfab schema`.
+fn schema(
+    msg_path: &[PathBuf],
+    package: Option<String>,
+    c: bool,
+    python: bool,
+    json: bool,
+) -> anyhow::Result<()> {
+    use skillfab_msgs::dynamic;
+    let mut dirs = msg_path.to_vec();
+    dirs.extend(dynamic::msg_path());
+    let (catalog, packages) = dynamic::catalog(&dirs)?;
+    let package =
+        package.unwrap_or_else(|| match skillfab_msggen::load_path(msg_path).as_deref() {
+            Ok([only]) => only.name.clone(),
+            _ => "skillfab".into(),
+        });
+    if !packages.iter().any(|p| p.name == package) {
+        anyhow::bail!(
+            "no message package '{package}' (known: {})",
+            packages
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let schemas: Vec<_> = catalog
+        .types
+        .iter()
+        .map(|t| dynamic::schema(&catalog, t))
+        .collect();
+    if c {
+        print!("{}", skillfab_codegen::c_header_for(&schemas, &package));
+    } else if python {
+        print!(
+            "{}",
+            skillfab_codegen::python_module_for(&schemas, &package)
+        );
+    } else if json {
+        let prefix = format!("{package}.");
+        let ours: Vec<_> = schemas
+            .iter()
+            .filter(|s| s.type_name.starts_with(&prefix))
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&ours)?);
+    } else {
+        println!("{:<28} {:>7}  declared in", "type", "bytes");
+        for (t, s) in catalog.types.iter().zip(&schemas) {
+            println!("{:<28} {:>7}  {}", s.type_name, s.size, t.file.display());
+        }
+    }
+    Ok(())
 }
 
 /// `skillfab replay`: prints the report; a divergence is an error (exit status 1).

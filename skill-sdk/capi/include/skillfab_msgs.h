@@ -1,6 +1,7 @@
-/* The shared message types of skillfab, generated from their Rust definitions
- * (skill-sdk/src/msg.rs) by `skillfab schema --c`. Do not edit: a test checks this
- * file is what the generator writes, and that every size and offset matches Rust. */
+/* The shared message types of skillfab, generated from their message files
+ * (skill-sdk/msgs/msg/skillfab/*.msg) by `skillfab schema --c`. Do not edit: a test
+ * checks this file is what the generator writes, and that every size and offset
+ * matches Rust. */
 #ifndef SKILLFAB_MSGS_H
 #define SKILLFAB_MSGS_H
 

@@ -2,7 +2,7 @@
 
 use crate::error::*;
 use crate::*;
-use skill_sdk::foreign::{ForeignRun, ForeignSkill};
+use skill_sdk::foreign::{DeclError, ForeignRun, ForeignSkill};
 use skill_sdk::params::{ParamKind, ParamSpec, ParamValue};
 use skill_sdk::skill::SkillError;
 use skillfab_proto::decl::Mode;
@@ -57,6 +57,32 @@ pub unsafe extern "C" fn sf_skill_free(skill: *mut sf_skill) {
 ///
 /// # Safety
 /// `skill` is NULL or a live `sf_skill`; `a` and `b` NULL or NUL-terminated strings.
+/// Declares a port of `type_name`: a type of the shared catalog, else one of a message package
+/// on `SKILLFAB_MSG_PATH` (its layout from the message file).
+fn declare(
+    s: &mut ForeignSkill,
+    port: &str,
+    type_name: &str,
+    output: bool,
+) -> Result<usize, DeclError> {
+    let known = if output {
+        s.output(port, type_name)
+    } else {
+        s.input(port, type_name)
+    };
+    let Err(DeclError::UnknownType { .. }) = known else {
+        return known;
+    };
+    match skillfab_msgs::dynamic::find_schema(type_name) {
+        Ok(Some(schema)) if output => s.output_schema(port, schema),
+        Ok(Some(schema)) => s.input_schema(port, schema),
+        Ok(None) => known,
+        Err(e) => Err(DeclError::MessageFile {
+            reason: e.to_string(),
+        }),
+    }
+}
+
 unsafe fn with_skill(
     skill: *mut sf_skill,
     a: (*const c_char, &str),
@@ -94,7 +120,7 @@ pub unsafe extern "C" fn sf_skill_input(
             skill,
             (port, "port"),
             (type_name, "type name"),
-            |s, p, t| index_result(s.input(p, t)),
+            |s, p, t| index_result(declare(s, p, t, false)),
         )
     }
 }
@@ -115,7 +141,7 @@ pub unsafe extern "C" fn sf_skill_output(
             skill,
             (port, "port"),
             (type_name, "type name"),
-            |s, p, t| index_result(s.output(p, t)),
+            |s, p, t| index_result(declare(s, p, t, true)),
         )
     }
 }

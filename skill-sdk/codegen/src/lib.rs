@@ -15,12 +15,13 @@ pub fn c_name(type_name: &str) -> String {
     }
 }
 
-/// The Python class name of a message type: `skillfab.Tick` → `Tick`.
+/// The Python class name of a message type: `skillfab.Tick` → `Tick`, `my_robot.Pose` →
+/// `Pose` (each package is a module of its own).
 pub fn py_name(type_name: &str) -> String {
     type_name
-        .strip_prefix("skillfab.")
-        .unwrap_or(type_name)
-        .replace('.', "_")
+        .rsplit_once('.')
+        .map_or(type_name, |(_, name)| name)
+        .to_string()
 }
 
 fn c_prim(p: Prim) -> &'static str {
@@ -118,17 +119,48 @@ pub fn shared_schemas() -> Vec<MessageSchema> {
         .collect()
 }
 
+/// The types of `package` among `schemas` and what they contain, in dependency order.
+fn of_package(schemas: &[MessageSchema], package: &str) -> Vec<MessageSchema> {
+    let prefix = format!("{package}.");
+    in_dependency_order(schemas)
+        .into_iter()
+        .filter(|s| s.type_name.starts_with(&prefix))
+        .collect()
+}
+
 /// A C header declaring `schemas` as structs with the Rust layout.
 pub fn c_header(schemas: &[MessageSchema]) -> String {
+    c_header_for(schemas, "skillfab")
+}
+
+/// A C header declaring the types of message package `package` among `schemas` (another
+/// package's types they contain come from that package's header: `skillfab_msgs.h` for the
+/// shipped catalog).
+pub fn c_header_for(schemas: &[MessageSchema], package: &str) -> String {
     let mut h = String::new();
-    h.push_str(
-        "/* The shared message types of skillfab, generated from their Rust definitions\n \
-         * (skill-sdk/src/msg.rs) by `skillfab schema --c`. Do not edit: a test checks this\n \
-         * file is what the generator writes, and that every size and offset matches Rust. */\n\
-         #ifndef SKILLFAB_MSGS_H\n#define SKILLFAB_MSGS_H\n\n\
-         #include <stdbool.h>\n#include <stdint.h>\n\n",
+    let guard = format!("{}_MSGS_H", package.to_uppercase());
+    if package == "skillfab" {
+        h.push_str(
+            "/* The shared message types of skillfab, generated from their message files\n \
+             * (skill-sdk/msgs/msg/skillfab/*.msg) by `skillfab schema --c`. Do not edit: a test\n \
+             * checks this file is what the generator writes, and that every size and offset\n \
+             * matches Rust. */\n",
+        );
+    } else {
+        let _ = writeln!(
+            h,
+            "/* The message types of package {package}, generated from its message files by\n \
+             * `skillfab schema --c --msg-path DIR --package {package}`. Do not edit. */"
+        );
+    }
+    let _ = write!(
+        h,
+        "#ifndef {guard}\n#define {guard}\n\n#include <stdbool.h>\n#include <stdint.h>\n\n"
     );
-    for s in in_dependency_order(schemas) {
+    if package != "skillfab" {
+        h.push_str("#include \"skillfab_msgs.h\"\n\n");
+    }
+    for s in of_package(schemas, package) {
         let name = c_name(&s.type_name);
         let upper = name.to_uppercase();
         let _ = writeln!(h, "/** {} */", comment_lines(&s.doc));
@@ -140,7 +172,7 @@ pub fn c_header(schemas: &[MessageSchema]) -> String {
         let _ = writeln!(h, "#define {upper}_TYPE_NAME \"{}\"", s.type_name);
         let _ = writeln!(h, "#define {upper}_SIZE {}\n", s.size);
     }
-    h.push_str("#endif /* SKILLFAB_MSGS_H */\n");
+    let _ = writeln!(h, "#endif /* {guard} */");
     h
 }
 
@@ -174,14 +206,29 @@ pub fn c_layout_probe(schemas: &[MessageSchema]) -> String {
 
 /// A Python module declaring `schemas` as `ctypes.Structure` classes with the Rust layout.
 pub fn python_module(schemas: &[MessageSchema]) -> String {
-    let mut p = String::from(
-        "\"\"\"The shared message types of skillfab as ctypes structures.\n\n\
-         Generated from their Rust definitions (skill-sdk/src/msg.rs) by\n\
-         `skillfab schema --python`. Do not edit: a test checks this file is what the\n\
-         generator writes, and that every size and offset matches Rust.\n\"\"\"\n\n\
-         import ctypes\n\n",
-    );
-    let ordered = in_dependency_order(schemas);
+    python_module_for(schemas, "skillfab")
+}
+
+/// A Python module declaring the types of message package `package` among `schemas` (the
+/// shipped types they contain are imported from `skillfab.msgs`).
+pub fn python_module_for(schemas: &[MessageSchema], package: &str) -> String {
+    let mut p = if package == "skillfab" {
+        String::from(
+            "\"\"\"The shared message types of skillfab as ctypes structures.\n\n\
+             Generated from their message files (skill-sdk/msgs/msg/skillfab/*.msg) by\n\
+             `skillfab schema --python`. Do not edit: a test checks this file is what the\n\
+             generator writes, and that every size and offset matches Rust.\n\"\"\"\n\n\
+             import ctypes\n\n",
+        )
+    } else {
+        format!(
+            "\"\"\"The message types of package {package} as ctypes structures.\n\n\
+             Generated from its message files by\n\
+             `skillfab schema --python --msg-path DIR --package {package}`. Do not edit.\n\"\"\"\n\n\
+             import ctypes\n\nfrom skillfab.msgs import *  # noqa: F401,F403 (types they contain)\n\n"
+        )
+    };
+    let ordered = of_package(schemas, package);
     for s in &ordered {
         let name = py_name(&s.type_name);
         let _ = writeln!(p, "\nclass {name}(ctypes.Structure):");
@@ -219,6 +266,7 @@ mod tests {
         assert_eq!(c_name("skillfab.Tick"), "sf_Tick");
         assert_eq!(c_name("acme.arm.Joint"), "sf_acme_arm_Joint");
         assert_eq!(py_name("skillfab.Sonar"), "Sonar");
+        assert_eq!(py_name("my_robot.Pose"), "Pose");
         let k = FieldKind::Array {
             elem: Box::new(FieldKind::Array {
                 elem: Box::new(FieldKind::Prim(Prim::F32)),

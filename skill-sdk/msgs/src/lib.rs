@@ -4,6 +4,8 @@
 
 use skill_sdk::foreign::MessageType;
 
+pub mod dynamic;
+
 include!(concat!(env!("OUT_DIR"), "/skillfab.rs"));
 
 /// Number of sonars on the Denning ring (the length of [`Sonar`]'s arrays).

@@ -32,10 +32,10 @@ pub const SUBSCRIBER_BORROWED: usize = 2;
 pub const EVENT_MAX_PORTS: usize = 32;
 
 /// The fabric's sizes of a topic service: every opener (typed or not) asks for the same.
-fn topic_qos<P: std::fmt::Debug + IceoryxSend + ?Sized>(
-    builder: iceoryx2::service::builder::publish_subscribe::Builder<P, SampleHeader, ipc::Service>,
+fn topic_qos<P: std::fmt::Debug + IceoryxSend + ?Sized, H: std::fmt::Debug + ZeroCopySend>(
+    builder: iceoryx2::service::builder::publish_subscribe::Builder<P, H, ipc::Service>,
     topic: &str,
-) -> iceoryx2::service::builder::publish_subscribe::Builder<P, SampleHeader, ipc::Service> {
+) -> iceoryx2::service::builder::publish_subscribe::Builder<P, H, ipc::Service> {
     let (publishers, buffer) = topic_sizes(topic);
     builder
         .max_publishers(publishers)
@@ -76,6 +76,114 @@ fn pubsub<T: Message>(
     topic_qos(builder, topic)
         .open_or_create()
         .map_err(|e| Error::transport(&format!("open topic '{topic}' ({})", T::TYPE_NAME), e))
+}
+
+/// The payload type details of a message known only by its schema (a type declared in a
+/// message file at run time): its name, size and alignment, as a Rust type would give them.
+fn payload_details(schema: &crate::schema::MessageSchema) -> Result<TypeDetail, Error> {
+    TypeDetail::__internal_new_from_parts(
+        TypeVariant::FixedSize,
+        &schema.type_name,
+        schema.size as usize,
+        schema.align as usize,
+    )
+    .map_err(|e| Error::transport(&format!("type name '{}'", schema.type_name), e))
+}
+
+/// A publisher of `topic` for messages known only by their schema: the same service a typed
+/// publisher of that type opens (iceoryx2's type-details override, as its own gateways and
+/// language bindings use it). Samples are `schema.size` bytes, loaned with
+/// `loan_custom_payload(1)`; the user header is a [`SampleHeader`] behind
+/// [`CustomHeaderMarker`](iceoryx2::service::marker::CustomHeaderMarker).
+pub fn raw_publisher(
+    node: &Node<ipc::Service>,
+    topic: &str,
+    schema: &crate::schema::MessageSchema,
+) -> Result<
+    Publisher<ipc::Service, [CustomPayloadMarker], iceoryx2::service::marker::CustomHeaderMarker>,
+    Error,
+> {
+    let name = crate::names::topic(topic);
+    let payload = payload_details(schema)?;
+    let header = TypeDetail::__internal_new_from_parts(
+        TypeVariant::FixedSize,
+        SampleHeader::TYPE_NAME,
+        std::mem::size_of::<SampleHeader>(),
+        std::mem::align_of::<SampleHeader>(),
+    )
+    .map_err(|e| Error::transport("the sample header's type name", e))?;
+    // SAFETY: the details are those of the type the schema describes (its size and
+    // alignment, from the same message file every language is generated from) and of
+    // `SampleHeader`; samples are written only as `size` bytes of that layout and a
+    // `SampleHeader`.
+    let builder = unsafe {
+        node.service_builder(&service_name(&name)?)
+            .publish_subscribe::<[CustomPayloadMarker]>()
+            .user_header::<iceoryx2::service::marker::CustomHeaderMarker>()
+            .__internal_set_payload_type_details(&payload)
+            .__internal_set_user_header_type_details(&header)
+    };
+    let factory = topic_qos(builder, topic);
+    let factory = iceoryx2::service::builder::publish_subscribe::Builder::<
+        [CustomPayloadMarker],
+        _,
+        _,
+    >::open_or_create(factory)
+    .map_err(|e| {
+        Error::transport(
+            &format!("open topic '{topic}' ({}) untyped", schema.type_name),
+            e,
+        )
+    })?;
+    factory
+        .publisher_builder()
+        .max_loaned_samples(2)
+        .create()
+        .map_err(|e| Error::transport(&format!("untyped publisher on '{topic}'"), e))
+}
+
+/// A subscriber of `topic` for messages known only by their schema (see [`raw_publisher`]).
+pub fn raw_subscriber(
+    node: &Node<ipc::Service>,
+    topic: &str,
+    schema: &crate::schema::MessageSchema,
+) -> Result<Subscriber<ipc::Service, [CustomPayloadMarker], SampleHeader>, Error> {
+    raw_factory(node, topic, schema)?
+        .subscriber_builder()
+        .buffer_size(SUBSCRIBER_BUFFER)
+        .history_request(1)
+        .create()
+        .map_err(|e| Error::transport(&format!("untyped subscriber on '{topic}'"), e))
+}
+
+fn raw_factory(
+    node: &Node<ipc::Service>,
+    topic: &str,
+    schema: &crate::schema::MessageSchema,
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc::Service,
+        [CustomPayloadMarker],
+        SampleHeader,
+    >,
+    Error,
+> {
+    let name = crate::names::topic(topic);
+    let details = payload_details(schema)?;
+    // SAFETY: the details are those of the producer's type (same schema), so the segment
+    // holds `size` bytes of that layout per sample; it is only ever read as bytes.
+    let builder = unsafe {
+        node.service_builder(&service_name(&name)?)
+            .publish_subscribe::<[CustomPayloadMarker]>()
+            .user_header::<SampleHeader>()
+            .__internal_set_payload_type_details(&details)
+    };
+    topic_qos(builder, topic).open_or_create().map_err(|e| {
+        Error::transport(
+            &format!("open topic '{topic}' ({}) untyped", schema.type_name),
+            e,
+        )
+    })
 }
 
 /// The publisher of `topic`.
@@ -228,28 +336,7 @@ impl RawReader {
         topic: &str,
         schema: &crate::schema::MessageSchema,
     ) -> Result<RawReader, Error> {
-        let name = crate::names::topic(topic);
-        let details = TypeDetail::__internal_new_from_parts(
-            TypeVariant::FixedSize,
-            &schema.type_name,
-            schema.size as usize,
-            schema.align as usize,
-        )
-        .map_err(|e| Error::transport(&format!("type name '{}'", schema.type_name), e))?;
-        // SAFETY: the details are those of the producer's type (same schema), so the segment
-        // holds `size` bytes of that layout per sample; we only ever read them as bytes.
-        let builder = unsafe {
-            node.service_builder(&service_name(&name)?)
-                .publish_subscribe::<[CustomPayloadMarker]>()
-                .user_header::<SampleHeader>()
-                .__internal_set_payload_type_details(&details)
-        };
-        let factory = topic_qos(builder, topic).open_or_create().map_err(|e| {
-            Error::transport(
-                &format!("open topic '{topic}' ({}) untyped", schema.type_name),
-                e,
-            )
-        })?;
+        let factory = raw_factory(node, topic, schema)?;
         let subscriber = factory
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER)

@@ -12,6 +12,7 @@
 //! same start-up path as a Rust skill; a process runs one skill, so [`run`] may be called once
 //! per process.
 
+mod raw;
 mod sanitize;
 
 use sanitize::contains_bool;
@@ -59,6 +60,27 @@ impl MessageType {
     }
 }
 
+/// The entry of every type known only by its schema (declared with
+/// [`ForeignSkill::input_schema`] / [`ForeignSkill::output_schema`]): its ports take the schema
+/// from their declaration.
+static RAW: MessageType = MessageType {
+    type_name: "",
+    schema: no_schema,
+    input: raw::make_input,
+    output: raw::make_output,
+    bytes: raw::view_bytes,
+};
+
+fn no_schema() -> MessageSchema {
+    MessageSchema {
+        type_name: String::new(),
+        doc: String::new(),
+        size: 0,
+        align: 1,
+        fields: Vec::new(),
+    }
+}
+
 fn bytes_of<T: crate::Message>(any: &dyn std::any::Any) -> Option<&[u8]> {
     let value = any.downcast_ref::<T>()?;
     // SAFETY: a Message is plain old data; the slice covers exactly the borrowed value.
@@ -74,8 +96,16 @@ pub type Body = Box<dyn FnMut(&mut ForeignRun<'_>) -> SkillResult + Send>;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum DeclError {
+    /// A message file on `SKILLFAB_MSG_PATH` is wrong.
+    #[error("message file: {reason}")]
+    MessageFile {
+        /// Its path, line and what is wrong.
+        reason: String,
+    },
     /// No shared message type of that name.
-    #[error("unknown message type '{type_name}' (not in the message registry)")]
+    #[error(
+        "unknown message type '{type_name}' (neither in the shared catalog nor in a message package on SKILLFAB_MSG_PATH)"
+    )]
     UnknownType {
         /// The name given.
         type_name: String,
@@ -196,6 +226,39 @@ impl ForeignSkill {
             kind: PortKind::Data,
         });
         Ok(self.inputs.len() - 1)
+    }
+
+    /// Declares input `port` of a message type known by its schema alone (a type of a
+    /// message file that is not in the registry, e.g. from `SKILLFAB_MSG_PATH`); returns its
+    /// index.
+    pub fn input_schema(&mut self, port: &str, schema: MessageSchema) -> Result<usize, DeclError> {
+        check_port_name("input", port, &self.inputs)?;
+        if self.inputs.len() >= 64 {
+            return Err(DeclError::TooMany { what: "inputs" });
+        }
+        self.inputs.push(PortDecl {
+            port: port.to_string(),
+            topic: port.to_string(),
+            schema,
+            kind: PortKind::Data,
+        });
+        Ok(self.inputs.len() - 1)
+    }
+
+    /// Declares output `port` of a message type known by its schema alone (see
+    /// [`ForeignSkill::input_schema`]); returns its index.
+    pub fn output_schema(&mut self, port: &str, schema: MessageSchema) -> Result<usize, DeclError> {
+        check_port_name("output", port, &self.outputs)?;
+        if self.outputs.len() >= 64 {
+            return Err(DeclError::TooMany { what: "outputs" });
+        }
+        self.outputs.push(PortDecl {
+            port: port.to_string(),
+            topic: port.to_string(),
+            schema,
+            kind: PortKind::Data,
+        });
+        Ok(self.outputs.len() - 1)
     }
 
     /// Declares output `port` of message type `type_name`; returns its index.
@@ -426,7 +489,7 @@ impl ForeignUnit {
         let types = |ports: &[PortDecl]| {
             ports
                 .iter()
-                .filter_map(|p| message_type(skill.registry, &p.schema.type_name).ok())
+                .map(|p| message_type(skill.registry, &p.schema.type_name).unwrap_or(&RAW))
                 .collect::<Vec<_>>()
         };
         ForeignUnit {

@@ -1,6 +1,6 @@
 """The shared message types of skillfab as ctypes structures.
 
-Generated from their message files (skill-sdk/msgs/msg/skillfab/*.msg) by
+Generated from their message files (skill-sdk/msgs/msg/skillfab/) by
 `skillfab schema --python`. Do not edit: a test checks this file is what the
 generator writes, and that every size and offset matches Rust.
 """

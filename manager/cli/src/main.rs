@@ -4,6 +4,7 @@
 mod ctl;
 mod demo;
 mod faults;
+mod new;
 mod replay;
 
 use clap::{Parser, Subcommand};
@@ -82,6 +83,12 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// A new skill, ready to build, test and run outside this repository, or a new message
+    /// file in a package of one's own.
+    New {
+        #[command(subcommand)]
+        what: NewCmd,
+    },
     /// Talk to a running manager: the sequencer's link, from the shell.
     Ctl {
         /// Print JSON instead of text.
@@ -138,6 +145,32 @@ enum DemoCmd {
         /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum NewCmd {
+    /// A skill that reads the sonar ring and proposes on `drive`, with a launch file that runs
+    /// it in the exit-lab network and a test: DIR/NAME/.
+    Skill {
+        /// Its name (lower case, digits, _).
+        name: String,
+        /// Its language.
+        #[arg(long, value_enum, default_value = "rust")]
+        lang: new::Lang,
+        /// Where to create it.
+        #[arg(long, default_value = ".")]
+        dir: PathBuf,
+    },
+    /// A message file, DIR/PACKAGE/NAME.msg (see `skillfab schema --msg-path DIR`).
+    Msg {
+        /// The package (lower case, digits, _).
+        package: String,
+        /// The type's name (an upper-case letter first).
+        name: String,
+        /// The directory of packages.
+        #[arg(long, default_value = ".")]
+        dir: PathBuf,
     },
 }
 
@@ -203,6 +236,30 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
         Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
+        Cmd::New {
+            what: NewCmd::Skill { name, lang, dir },
+        } => {
+            let out = new::new_skill(&name, lang, &dir)?;
+            println!("{}", std::fs::read_to_string(out.join("README.md"))?);
+            println!("created {}", out.display());
+            Ok(())
+        }
+        Cmd::New {
+            what: NewCmd::Msg { package, name, dir },
+        } => {
+            let file = new::new_msg(&package, &name, &dir)?;
+            println!(
+                "created {}
+  list it:  skillfab schema --msg-path {}
+  C header: skillfab schema --c --msg-path {0} --package {package}
+  Python:   skillfab schema --python --msg-path {0} --package {package}
+  at run time (C, C++, Python skills): SKILLFAB_MSG_PATH={0}
+  Rust: a build script calling skillfab_msggen::build (docs/messages.md)",
+                file.display(),
+                dir.display()
+            );
+            Ok(())
+        }
         Cmd::Replay { opts, json } => replay(&opts, json),
         Cmd::Console => skillfab_console::run(&domain),
         Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),

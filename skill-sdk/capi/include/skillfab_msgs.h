@@ -1,5 +1,5 @@
 /* The shared message types of skillfab, generated from their message files
- * (skill-sdk/msgs/msg/skillfab/*.msg) by `skillfab schema --c`. Do not edit: a test
+ * (skill-sdk/msgs/msg/skillfab/) by `skillfab schema --c`. Do not edit: a test
  * checks this file is what the generator writes, and that every size and offset
  * matches Rust. */
 #ifndef SKILLFAB_MSGS_H

@@ -142,7 +142,7 @@ pub fn c_header_for(schemas: &[MessageSchema], package: &str) -> String {
     if package == "skillfab" {
         h.push_str(
             "/* The shared message types of skillfab, generated from their message files\n \
-             * (skill-sdk/msgs/msg/skillfab/*.msg) by `skillfab schema --c`. Do not edit: a test\n \
+             * (skill-sdk/msgs/msg/skillfab/) by `skillfab schema --c`. Do not edit: a test\n \
              * checks this file is what the generator writes, and that every size and offset\n \
              * matches Rust. */\n",
         );
@@ -215,7 +215,7 @@ pub fn python_module_for(schemas: &[MessageSchema], package: &str) -> String {
     let mut p = if package == "skillfab" {
         String::from(
             "\"\"\"The shared message types of skillfab as ctypes structures.\n\n\
-             Generated from their message files (skill-sdk/msgs/msg/skillfab/*.msg) by\n\
+             Generated from their message files (skill-sdk/msgs/msg/skillfab/) by\n\
              `skillfab schema --python`. Do not edit: a test checks this file is what the\n\
              generator writes, and that every size and offset matches Rust.\n\"\"\"\n\n\
              import ctypes\n\n",

@@ -12,5 +12,6 @@ mod exit_lab;
 mod fabric;
 mod fabric_log;
 mod faults;
+mod newcomer;
 mod polyglot;
 mod replay;

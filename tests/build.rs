@@ -1,0 +1,11 @@
+//! Generates the Rust types of the test message package `tests/msg/test_pkg` as a skill's
+//! own build script would (docs/messages.md): the shipped catalog's files and one's own.
+
+fn main() {
+    let here = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let dirs = [here.join("../skill-sdk/msgs/msg"), here.join("msg")];
+    if let Err(e) = skillfab_msggen::build(&dirs, "test_pkg") {
+        eprintln!("error: {e}");
+        std::process::exit(1);
+    }
+}

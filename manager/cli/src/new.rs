@@ -178,10 +178,13 @@ pub fn new_skill(name: &str, lang: Lang, dir: &Path) -> anyhow::Result<PathBuf> 
                 ),
                 false,
             )?;
+            // The profile skillfab itself was built with, so nothing is built twice.
+            let release = sdk.bin.ends_with("release");
+            let flag = if release { " --release" } else { "" };
             (
-                sdk.root.join("target/debug").join(name),
-                "cargo build".to_string(),
-                "cargo test".to_string(),
+                sdk.bin.join(name),
+                format!("cargo build{flag}"),
+                format!("cargo test{flag}"),
             )
         }
         Lang::C | Lang::Cpp => {
@@ -264,6 +267,8 @@ fn cargo_toml(sdk: &Sdk, name: &str) -> String {
          # As skillfab's own workspace builds them, so its build is shared (.cargo/config.toml).\n\
          [profile.dev]\ndebug = \"line-tables-only\"\n\n\
          [profile.dev.package.\"*\"]\ndebug = false\nopt-level = 2\n\n\
+         [profile.release]\ndebug = \"line-tables-only\"\n\n\
+         [profile.release.package.\"*\"]\ndebug = false\n\n\
          [workspace]\n",
         sdk = sdk.root.join("skill-sdk").display(),
         msgs = sdk.root.join("skill-sdk/msgs").display(),

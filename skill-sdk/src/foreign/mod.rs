@@ -215,17 +215,7 @@ impl ForeignSkill {
     /// Declares input `port` of message type `type_name`; returns its index.
     pub fn input(&mut self, port: &str, type_name: &str) -> Result<usize, DeclError> {
         let t = message_type(self.registry, type_name)?;
-        check_port_name("input", port, &self.inputs)?;
-        if self.inputs.len() >= 64 {
-            return Err(DeclError::TooMany { what: "inputs" });
-        }
-        self.inputs.push(PortDecl {
-            port: port.to_string(),
-            topic: port.to_string(),
-            schema: (t.schema)(),
-            kind: PortKind::Data,
-        });
-        Ok(self.inputs.len() - 1)
+        self.input_schema(port, (t.schema)())
     }
 
     /// Declares input `port` of a message type known by its schema alone (a type of a
@@ -245,39 +235,30 @@ impl ForeignSkill {
         Ok(self.inputs.len() - 1)
     }
 
+    /// Declares output `port` of message type `type_name`; returns its index.
+    pub fn output(&mut self, port: &str, type_name: &str) -> Result<usize, DeclError> {
+        let t = message_type(self.registry, type_name)?;
+        self.add_output(port, (t.schema)(), PortKind::Data)
+    }
+
     /// Declares output `port` of a message type known by its schema alone (see
     /// [`ForeignSkill::input_schema`]); returns its index.
     pub fn output_schema(&mut self, port: &str, schema: MessageSchema) -> Result<usize, DeclError> {
-        check_port_name("output", port, &self.outputs)?;
-        if self.outputs.len() >= 64 {
-            return Err(DeclError::TooMany { what: "outputs" });
-        }
-        self.outputs.push(PortDecl {
-            port: port.to_string(),
-            topic: port.to_string(),
-            schema,
-            kind: PortKind::Data,
-        });
-        Ok(self.outputs.len() - 1)
-    }
-
-    /// Declares output `port` of message type `type_name`; returns its index.
-    pub fn output(&mut self, port: &str, type_name: &str) -> Result<usize, DeclError> {
-        self.add_output(port, type_name, PortKind::Data)
+        self.add_output(port, schema, PortKind::Data)
     }
 
     /// Declares a proposal on actuator channel `channel`; returns its output index.
     pub fn proposal(&mut self, channel: &str, type_name: &str) -> Result<usize, DeclError> {
-        self.add_output(channel, type_name, PortKind::Proposal)
+        let t = message_type(self.registry, type_name)?;
+        self.add_output(channel, (t.schema)(), PortKind::Proposal)
     }
 
     fn add_output(
         &mut self,
         port: &str,
-        type_name: &str,
+        schema: MessageSchema,
         kind: PortKind,
     ) -> Result<usize, DeclError> {
-        let t = message_type(self.registry, type_name)?;
         check_port_name("output", port, &self.outputs)?;
         if self.outputs.len() >= 64 {
             return Err(DeclError::TooMany { what: "outputs" });
@@ -289,7 +270,7 @@ impl ForeignSkill {
         self.outputs.push(PortDecl {
             port: port.to_string(),
             topic,
-            schema: (t.schema)(),
+            schema,
             kind,
         });
         Ok(self.outputs.len() - 1)

@@ -18,7 +18,23 @@ pub fn param_json(v: &ParamValue) -> Json {
 
 /// A decoded value as JSON.
 pub fn value_json(v: &Value) -> Json {
-    serde_json::from_str(&v.to_string()).unwrap_or(Json::Null)
+    // Built directly (it was a round trip through text: the recorder calls this for every
+    // sample of every recorded topic).
+    match v {
+        Value::Bool(b) => Json::Bool(*b),
+        Value::Int(i) => json!(i),
+        Value::UInt(u) => json!(u),
+        Value::Float(x) if x.is_finite() => json!(x),
+        Value::Float(_) | Value::Null => Json::Null,
+        Value::Text(t) => Json::String(t.clone()),
+        Value::Array(a) => Json::Array(a.iter().map(value_json).collect()),
+        Value::Struct(fields) => Json::Object(
+            fields
+                .iter()
+                .map(|(k, x)| (k.clone(), value_json(x)))
+                .collect(),
+        ),
+    }
 }
 
 /// An event as one JSON object: `{"seq", "cycle", "time_ns", "event": "<kind>", ...fields}`.
@@ -156,4 +172,32 @@ pub fn stats_json(s: &Stats) -> Json {
            "deaths": s.deaths, "events": s.events,
            "channels": s.channels.iter().map(|c| json!({"channel": c.channel, "winner": c.winner,
                "cycle": c.cycle})).collect::<Vec<_>>()})
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_become_json_as_their_text_reads() {
+        let v = Value::Struct(vec![
+            ("x".into(), Value::Float(0.1 + 0.2)),
+            (
+                "r".into(),
+                Value::Array(vec![
+                    Value::Float(f64::NAN),
+                    Value::Float(f64::INFINITY),
+                    Value::Float(-0.0),
+                    Value::Float(1e300),
+                ]),
+            ),
+            ("n".into(), Value::Int(-3)),
+            ("u".into(), Value::UInt(u64::MAX)),
+            ("b".into(), Value::Bool(true)),
+            ("t".into(), Value::Text("… 3 more".into())),
+        ]);
+        let through_text: Json = serde_json::from_str(&v.to_string()).unwrap();
+        assert_eq!(value_json(&v), through_text);
+        assert_eq!(value_json(&v)["r"][0], Json::Null, "non-finite: null");
+    }
 }

@@ -95,6 +95,9 @@ for _name, _res, _args in [
     ("sf_param_int", _c.c_int64, [_P, _c.c_int32]),
     ("sf_param_bool", _c.c_bool, [_P, _c.c_int32]),
     ("sf_run_cycle", _c.c_uint64, [_P]),
+    ("sf_run_time_ns", _c.c_uint64, [_P]),
+    ("sf_run_period_ns", _c.c_uint64, [_P]),
+    ("sf_run_lockstep", _c.c_bool, [_P]),
     ("sf_run_fail", _c.c_int32, [_P, _S]),
     ("sf_log", _c.c_int32, [_c.c_int32, _S]),
     ("sf_client_connect", _P, [_S]),
@@ -147,11 +150,27 @@ class _Namespace:
 
 
 class Run:
-    """What `compute` gets besides inputs and outputs: the cycle and the parameters."""
+    """What `compute` gets besides inputs and outputs: the cycle, its time (`time_ns`: cycle ×
+    period, or the cycle's start stamp when free-running; read it instead of a clock so a
+    recorded run replays, docs/replay.md), the manager's `period_ns` (0: free-running),
+    `lockstep`, a `random` generator seeded by the instance name and the cycle, and the
+    parameters."""
 
-    def __init__(self, cycle, params):
+    def __init__(self, cycle, params, time_ns=0, period_ns=0, lockstep=False, name=""):
         self.cycle = cycle
         self.params = params
+        self.time_ns = time_ns
+        self.period_ns = period_ns
+        self.lockstep = lockstep
+        self._seed = (name, cycle)
+
+    @property
+    def random(self):
+        """A `random.Random` seeded by the instance name and the cycle: the same numbers in a
+        replay and after a restart."""
+        import random
+
+        return random.Random(f"{self._seed[0]}:{self._seed[1]}")
 
 
 class Skill:
@@ -242,6 +261,8 @@ def main(cls, argv=None):
         print(f"{cls.__name__}: {e}", file=sys.stderr)
         sys.exit(1)
     skill = cls()
+    # The instance name seeds `Run.random` (as the runtime names the instance).
+    instance = argv[argv.index("--name") + 1] if "--name" in argv[:-1] else cls.__name__
 
     def body(raw, _user):
         try:
@@ -254,7 +275,15 @@ def main(cls, argv=None):
             values = _Namespace()
             for name, (idx, getter) in params.items():
                 setattr(values, name, getter(raw, idx))
-            skill.compute(Run(lib.sf_run_cycle(raw), values), i, _Outputs(raw, outs))
+            run = Run(
+                lib.sf_run_cycle(raw),
+                values,
+                lib.sf_run_time_ns(raw),
+                lib.sf_run_period_ns(raw),
+                lib.sf_run_lockstep(raw),
+                instance,
+            )
+            skill.compute(run, i, _Outputs(raw, outs))
             return 0
         except Exception as e:  # a failed run, not a dead skill
             lib.sf_run_fail(raw, _b(f"{type(e).__name__}: {e}"))

@@ -321,6 +321,32 @@ bool sf_param_bool(const sf_run *run, int32_t idx);
 uint64_t sf_run_cycle(const sf_run *run);
 
 /**
+ * The time of this run's cycle (ns): cycle × period when the manager has a period (lock-step
+ * included), the cycle's start stamp when it free-runs; 0 if `run` is NULL. A skill reads
+ * this, not a clock, so that a recorded run replays (docs/replay.md).
+ *
+ * # Safety
+ * As `sf_input`.
+ */
+uint64_t sf_run_time_ns(const sf_run *run);
+
+/**
+ * The manager's period (ns); 0 when it free-runs or `run` is NULL.
+ *
+ * # Safety
+ * As `sf_input`.
+ */
+uint64_t sf_run_period_ns(const sf_run *run);
+
+/**
+ * Whether the manager runs in lock-step (cycles back to back, simulated time).
+ *
+ * # Safety
+ * As `sf_input`.
+ */
+bool sf_run_lockstep(const sf_run *run);
+
+/**
  * Fails this run with `reason` (logged; its outputs are not sent), whatever the callback
  * returns.
  *

@@ -183,6 +183,40 @@ pub unsafe extern "C" fn sf_run_cycle(run: *const sf_run) -> u64 {
     unsafe { run_ref(run) }.map_or(0, |r| r.cycle)
 }
 
+/// The time of this run's cycle (ns): cycle × period when the manager has a period (lock-step
+/// included), the cycle's start stamp when it free-runs; 0 if `run` is NULL. A skill reads
+/// this, not a clock, so that a recorded run replays (docs/replay.md).
+///
+/// # Safety
+/// As `sf_input`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn sf_run_time_ns(run: *const sf_run) -> u64 {
+    // SAFETY: forwarded caller contract.
+    unsafe { run_ref(run) }.map_or(0, |r| r.clock.time.as_nanos() as u64)
+}
+
+/// The manager's period (ns); 0 when it free-runs or `run` is NULL.
+///
+/// # Safety
+/// As `sf_input`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn sf_run_period_ns(run: *const sf_run) -> u64 {
+    // SAFETY: forwarded caller contract.
+    unsafe { run_ref(run) }
+        .and_then(|r| r.clock.period)
+        .map_or(0, |p| p.as_nanos() as u64)
+}
+
+/// Whether the manager runs in lock-step (cycles back to back, simulated time).
+///
+/// # Safety
+/// As `sf_input`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn sf_run_lockstep(run: *const sf_run) -> bool {
+    // SAFETY: forwarded caller contract.
+    unsafe { run_ref(run) }.is_some_and(|r| r.clock.lockstep)
+}
+
 /// Fails this run with `reason` (logged; its outputs are not sent), whatever the callback
 /// returns.
 ///

@@ -414,6 +414,8 @@ impl Params for ForeignParams {
 pub struct ForeignRun<'a> {
     /// The cycle of this run.
     pub cycle: u64,
+    /// The cycle's time, period and mode (read it instead of a clock: docs/replay.md).
+    pub clock: crate::skill::Clock,
     /// The instance name.
     pub name: &'a str,
     params: &'a ForeignParams,
@@ -539,6 +541,7 @@ impl Unit for ForeignUnit {
                 guarded(ctx.cycle, || {
                     let mut run = ForeignRun {
                         cycle: ctx.cycle,
+                        clock: ctx.clock,
                         name: ctx.name,
                         params: ctx.params,
                         input_types,

@@ -65,6 +65,9 @@ class Producer(skillfab.Skill):
     outputs = {"grasp": Grasp}
 
     def compute(self, run, i, o):
+        # The cycle's clock: cycle x the 5 ms period.
+        if run.time_ns != run.cycle * 5_000_000 or run.period_ns != 5_000_000:
+            raise ValueError(f"clock {run.time_ns} in cycle {run.cycle}")
         o.grasp.x = float(run.cycle)
         o.grasp.ids[0] = 7
 
@@ -80,9 +83,12 @@ const CONSUMER: &str = r#"
 
 static int IN, OUT;
 
-/* Fails the run unless the grasp is the producer's of this cycle. */
+/* Fails the run unless the grasp is the producer's of this cycle and the clock is the
+ * cycle's (cycle x the 5 ms period). */
 static int32_t compute(sf_run *run, void *user) {
     (void)user;
+    if (sf_run_time_ns(run) != sf_run_cycle(run) * 5000000u || sf_run_period_ns(run) != 5000000u)
+        return 1;
     const sf_my_robot_Grasp *g = sf_input(run, IN, sizeof *g);
     if (!g || g->ids[0] != 7 || g->x != (double)sf_input_cycle(run, IN)) return 1;
     sf_Scalar *s = sf_output(run, OUT, sizeof *s);
@@ -261,6 +267,8 @@ fn a_package_of_ones_own_has_one_layout_in_rust_c_python_and_at_run_time() {
     assert!(py.contains("(\"at\", Odometry),"), "{py}");
     std::fs::write(t.dir.join("test_pkg_msgs.py"), py).unwrap();
     let printed = ok(Command::new("python3")
+        // The library of this build (importing skillfab loads it).
+        .env("SKILLFAB_LIB", bin("skillfab").with_file_name("libskillfab.so"))
         .env(
             "PYTHONPATH",
             format!(

@@ -103,11 +103,13 @@ pub struct PortMaker<'n> {
 }
 
 impl PortMaker<'_> {
+    /// The declaration of port `idx`.
+    pub(crate) fn port(&self, idx: usize) -> Result<&PortDecl, crate::SdkError> {
+        self.ports.get(idx).ok_or(crate::SdkError::NoNode)
+    }
+
     fn topic(&self, idx: usize) -> Result<String, crate::SdkError> {
-        self.ports
-            .get(idx)
-            .map(|p| p.topic.clone())
-            .ok_or(crate::SdkError::NoNode)
+        self.port(idx).map(|p| p.topic.clone())
     }
 }
 

@@ -353,25 +353,11 @@ impl RawReader {
 
     /// Takes every sample that arrived, keeping the newest (and each proposer's newest).
     pub fn poll(&mut self) -> Result<(), Error> {
-        loop {
-            match self.subscriber.receive() {
-                Ok(Some(s)) => {
-                    if let Some(m) = self.by_slot.as_mut() {
-                        let ptr = s.payload().as_ptr().cast::<u8>();
-                        // SAFETY: as in `latest`: one value of `size` bytes, mapped while held.
-                        let bytes = unsafe { std::slice::from_raw_parts(ptr, self.size) };
-                        m.insert(s.user_header().slot, (bytes.to_vec(), *s.user_header()));
-                    }
-                    self.latest = Some(s);
-                }
-                Ok(None) => return Ok(()),
-                Err(e) => return Err(Error::transport("untyped receive", e)),
-            }
-        }
+        self.drain(&mut |_, _| {})
     }
 
-    /// Takes every sample that arrived, as [`RawReader::poll`], handing each one's bytes and
-    /// header to `each` in the order they were published.
+    /// Takes every sample that arrived (keeping the newest, and each proposer's newest),
+    /// handing each one's bytes and header to `each` in the order they were published.
     pub fn drain(&mut self, each: &mut dyn FnMut(&[u8], SampleHeader)) -> Result<(), Error> {
         loop {
             match self.subscriber.receive() {

@@ -5,7 +5,6 @@
 
 use crate::header::SampleHeader;
 use crate::ports::{ErasedInput, ErasedOutputCell, PortMaker};
-use crate::schema::MessageSchema;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::ipc;
@@ -31,25 +30,6 @@ pub(crate) fn view_bytes(any: &dyn Any) -> Option<&[u8]> {
     Some(unsafe { std::slice::from_raw_parts(v.ptr, v.len) })
 }
 
-fn schema_of<'m>(
-    maker: &'m PortMaker<'_>,
-    idx: usize,
-) -> Result<&'m MessageSchema, crate::SdkError> {
-    maker
-        .ports
-        .get(idx)
-        .map(|p| &p.schema)
-        .ok_or(crate::SdkError::NoNode)
-}
-
-fn topic_of(maker: &PortMaker<'_>, idx: usize) -> Result<String, crate::SdkError> {
-    maker
-        .ports
-        .get(idx)
-        .map(|p| p.topic.clone())
-        .ok_or(crate::SdkError::NoNode)
-}
-
 /// An input of a schema-only type.
 pub(crate) struct RawInput {
     subscriber: Subscriber<ipc::Service, [CustomPayloadMarker], SampleHeader>,
@@ -65,10 +45,10 @@ pub(crate) fn make_input(
     idx: usize,
 ) -> Result<Box<dyn ErasedInput>, crate::SdkError> {
     let node = maker.node.ok_or(crate::SdkError::NoNode)?;
-    let schema = schema_of(maker, idx)?;
-    let topic = topic_of(maker, idx)?;
+    let port = maker.port(idx)?;
+    let schema = &port.schema;
     Ok(Box::new(RawInput {
-        subscriber: crate::services::raw_subscriber(node, &topic, schema)?,
+        subscriber: crate::services::raw_subscriber(node, &port.topic, schema)?,
         latest: None,
         view: None,
         size: schema.size as usize,
@@ -127,11 +107,11 @@ pub(crate) fn make_output(
     idx: usize,
 ) -> Result<crate::ports::ErasedOutput, crate::SdkError> {
     let node = maker.node.ok_or(crate::SdkError::NoNode)?;
-    let schema = schema_of(maker, idx)?;
-    let topic = topic_of(maker, idx)?;
+    let port = maker.port(idx)?;
+    let schema = &port.schema;
     Ok(Box::new(RawOutput {
-        publisher: crate::services::raw_publisher(node, &topic, schema)?,
-        notifier: crate::services::notifier(node, &crate::names::topic(&topic))?,
+        publisher: crate::services::raw_publisher(node, &port.topic, schema)?,
+        notifier: crate::services::notifier(node, &crate::names::topic(&port.topic))?,
         pending: None,
         size: schema.size as usize,
         type_name: schema.type_name.clone(),

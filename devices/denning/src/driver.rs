@@ -287,17 +287,9 @@ impl Driver {
     ) -> Result<u64, StepError> {
         let deadline = Instant::now() + wait;
         self.enter_lockstep();
-        let mut s = lock(&self.shared);
-        while s.link.is_none() {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Err(StepError::NotConnected);
-            }
-            s = self
-                .stepped
-                .wait_timeout(s, left)
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .0;
+        let (mut s, connected) = self.wait_while(deadline, |s| s.link.is_none());
+        if !connected {
+            return Err(StepError::NotConnected);
         }
         let now = Instant::now();
         s.command = Some(((translate, rotate), now));
@@ -313,13 +305,30 @@ impl Driver {
         if let Some(st) = s.steps.as_mut() {
             st.pending = Some(now);
         }
-        while s.steps.as_ref().is_some_and(|st| st.pending.is_some()) {
+        drop(s);
+        let pending = |s: &Shared| s.steps.as_ref().is_some_and(|st| st.pending.is_some());
+        let (mut s, acked) = self.wait_while(deadline, pending);
+        if !acked {
+            if let Some(st) = s.steps.as_mut() {
+                st.pending = None;
+            }
+            return Err(StepError::NoAck(wait));
+        }
+        Ok(s.steps.as_ref().map_or(0, |st| st.acked_ms))
+    }
+
+    /// Waits for the driver thread's news (a connection, an acknowledgement) while `waiting`
+    /// holds, until `deadline`; returns the lock and whether the wait ended before it.
+    fn wait_while(
+        &self,
+        deadline: Instant,
+        waiting: impl Fn(&Shared) -> bool,
+    ) -> (MutexGuard<'_, Shared>, bool) {
+        let mut s = lock(&self.shared);
+        while waiting(&s) {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
-                if let Some(st) = s.steps.as_mut() {
-                    st.pending = None;
-                }
-                return Err(StepError::NoAck(wait));
+                return (s, false);
             }
             s = self
                 .stepped
@@ -327,7 +336,7 @@ impl Driver {
                 .unwrap_or_else(std::sync::PoisonError::into_inner)
                 .0;
         }
-        Ok(s.steps.as_ref().map_or(0, |st| st.acked_ms))
+        (s, true)
     }
 
     /// Switches to lock-step for good (idempotent; [`Driver::step`] does it too): from now on
@@ -351,20 +360,7 @@ impl Driver {
     /// Waits until the robot is connected, at most `wait`; whether it is. (In lock-step the
     /// first cycle's sample must not depend on whether the handshake beat it.)
     pub fn wait_connected(&self, wait: Duration) -> bool {
-        let deadline = Instant::now() + wait;
-        let mut s = lock(&self.shared);
-        while s.link.is_none() {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return false;
-            }
-            s = self
-                .stepped
-                .wait_timeout(s, left)
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .0;
-        }
-        true
+        self.wait_while(Instant::now() + wait, |s| s.link.is_none()).1
     }
 
     /// Sets the drive command (m/s, rad/s).

@@ -361,11 +361,18 @@ fn schema(
     let mut dirs = msg_path.to_vec();
     dirs.extend(dynamic::msg_path());
     let (catalog, packages) = dynamic::catalog(&dirs)?;
-    let package =
-        package.unwrap_or_else(|| match skillfab_msggen::load_path(msg_path).as_deref() {
-            Ok([only]) => only.name.clone(),
+    // Default: the only package loaded from --msg-path (already read with the rest).
+    let package = package.unwrap_or_else(|| {
+        let given: Vec<&str> = packages
+            .iter()
+            .filter(|p| msg_path.iter().any(|d| p.dir.starts_with(d)))
+            .map(|p| p.name.as_str())
+            .collect();
+        match given[..] {
+            [only] => only.to_string(),
             _ => "skillfab".into(),
-        });
+        }
+    });
     if !packages.iter().any(|p| p.name == package) {
         anyhow::bail!(
             "no message package '{package}' (known: {})",

@@ -262,7 +262,8 @@ pub fn replay(opts: &ReplayOptions) -> anyhow::Result<Report> {
     let c = connect(&domain, opts.skills.len() + 1, &work)?;
     drive(&c, &rec, &opts.skills, &decls, from, to)?;
     drop(c);
-    net.stop();
+    // Stops the replay's network: its manager finishes the recording read next.
+    drop(net);
     let replayed = Recording::read(&out).context("reading the replay's own recording")?;
     let mut report = compare(&rec, &replayed, &opts.skills, from, to);
     report.wall_s = started.elapsed().as_secs_f64();
@@ -356,10 +357,6 @@ fn launch_file(
 
 /// The replay's `skillfab up`, stopped (SIGTERM, then waited for) when dropped.
 struct Net(std::process::Child);
-
-impl Net {
-    fn stop(self) {}
-}
 
 impl Drop for Net {
     fn drop(&mut self) {

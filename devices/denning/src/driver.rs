@@ -360,7 +360,8 @@ impl Driver {
     /// Waits until the robot is connected, at most `wait`; whether it is. (In lock-step the
     /// first cycle's sample must not depend on whether the handshake beat it.)
     pub fn wait_connected(&self, wait: Duration) -> bool {
-        self.wait_while(Instant::now() + wait, |s| s.link.is_none()).1
+        self.wait_while(Instant::now() + wait, |s| s.link.is_none())
+            .1
     }
 
     /// Sets the drive command (m/s, rad/s).

@@ -49,7 +49,7 @@ pub mod skill;
 // The wire types the SDK is built on, under the names its modules use.
 pub(crate) use skillfab_proto::{board, decl, domain, header, names, schema, services, value};
 
-pub use runtime::{DeviceArgs, SkillArgs, device_main, init_tracing, main};
+pub use runtime::{DeviceArgs, SkillArgs, Waker, device_main, init_tracing, main};
 pub use skillfab_proto::Message;
 
 /// Errors of the SDK: a skill's start-up, declaration and ports.

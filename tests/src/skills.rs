@@ -1,7 +1,7 @@
 //! Skills made for tests.
 
 use skill_sdk::prelude::*;
-use skillfab_msgs::{Scalar, Scaled, Tick};
+use skillfab_msgs::{Scalar, Scaled, Sonar, Tick};
 use skillfab_proto::header::now_ns;
 
 /// Parameters of [`Work`] and [`WorkAsync`].
@@ -153,6 +153,84 @@ impl Skill for Sink {
         if i.input.cycle() != ctx.cycle {
             return Err(SkillError::msg("stale input"));
         }
+        Ok(())
+    }
+}
+
+/// Input of [`Nearest`].
+#[derive(Inputs)]
+pub struct NearestIn<'a> {
+    /// The sonar ring.
+    pub sonar: Input<'a, Sonar>,
+}
+
+/// Output of [`Nearest`].
+#[derive(Outputs)]
+pub struct NearestOut<'a> {
+    /// The shortest finite range (m).
+    pub nearest: Output<'a, Scalar>,
+}
+
+/// Async: the shortest range of the sonar ring (the remote skill of the bridge tests).
+#[derive(Default)]
+pub struct Nearest;
+
+impl Skill for Nearest {
+    type Params = NoParams;
+    type Inputs<'a> = NearestIn<'a>;
+    type Outputs<'a> = NearestOut<'a>;
+    const MODE: Mode = Mode::Async;
+    fn compute(&mut self, _: &Ctx<NoParams>, i: NearestIn, o: &mut NearestOut) -> SkillResult {
+        let nearest = i
+            .sonar
+            .range
+            .iter()
+            .copied()
+            .filter(|r| r.is_finite())
+            .fold(f64::INFINITY, f64::min);
+        o.nearest.set(Scalar {
+            value: nearest,
+            ..Scalar::default()
+        });
+        Ok(())
+    }
+}
+
+/// Parameters of [`Guard`].
+#[derive(Params, Debug, Clone)]
+pub struct GuardParams {
+    /// guard = gain × nearest.
+    #[param(default = 1.0, min = -1e6, max = 1e6)]
+    pub gain: f64,
+}
+
+/// Input of [`Guard`].
+#[derive(Inputs)]
+pub struct GuardIn<'a> {
+    /// The latest shortest range.
+    pub nearest: Input<'a, Scalar>,
+}
+
+/// Output of [`Guard`].
+#[derive(Outputs)]
+pub struct GuardOut<'a> {
+    /// gain × nearest.
+    pub guard: Output<'a, Scalar>,
+}
+
+/// Sync: uses the latest `nearest` (from an async producer, here or remote) every cycle.
+#[derive(Default)]
+pub struct Guard;
+
+impl Skill for Guard {
+    type Params = GuardParams;
+    type Inputs<'a> = GuardIn<'a>;
+    type Outputs<'a> = GuardOut<'a>;
+    fn compute(&mut self, ctx: &Ctx<GuardParams>, i: GuardIn, o: &mut GuardOut) -> SkillResult {
+        o.guard.set(Scalar {
+            value: ctx.params.gain * i.nearest.value,
+            ..Scalar::default()
+        });
         Ok(())
     }
 }

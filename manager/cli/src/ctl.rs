@@ -6,7 +6,7 @@
 use anyhow::{Context, bail};
 use clap::Subcommand;
 use serde_json::{Value as Json, json};
-use skillfab_client::Client;
+use skillfab_client::{Client, ZenohOptions};
 use skillfab_proto::control::{EventKind, MonitorMode};
 use skillfab_proto::domain::Domain;
 pub use skillfab_proto::json::{event_json, param_json, skill_json, stats_json, value_json};
@@ -154,25 +154,72 @@ fn logs(domain: &Domain, json_out: bool, skill: Option<&str>, level: &str) -> an
     let level = parse_level(level)?;
     let reader = LogReader::open(domain, &format!("ctl-logs-{}", std::process::id()))?;
     loop {
-        for l in reader.poll()? {
-            if l.level > level || skill.is_some_and(|s| s != l.skill) {
-                continue;
-            }
-            if json_out {
-                println!(
-                    "{}",
-                    json!({"skill": l.skill, "pid": l.pid, "level": l.level.to_string(),
-                           "target": l.target, "message": l.message, "time_ns": l.time_ns,
-                           "dropped": l.dropped})
-                );
-            } else {
-                println!("{l}");
-            }
-        }
+        print_lines(reader.poll()?, json_out, skill, level);
         if !reader.wait(Duration::from_millis(50)) {
             return Ok(());
         }
     }
+}
+
+/// `ctl --remote … logs`: the lines the domain's bridge forwards, until interrupted.
+fn remote_logs(
+    mut client: Client,
+    json_out: bool,
+    skill: Option<&str>,
+    level: &str,
+) -> anyhow::Result<()> {
+    let level = parse_level(level)?;
+    loop {
+        print_lines(client.log_lines()?, json_out, skill, level);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn print_lines(
+    lines: Vec<skillfab_proto::log::LogLine>,
+    json_out: bool,
+    skill: Option<&str>,
+    level: skillfab_proto::log::Level,
+) {
+    for l in lines {
+        if l.level > level || skill.is_some_and(|s| s != l.skill) {
+            continue;
+        }
+        if json_out {
+            println!(
+                "{}",
+                json!({"skill": l.skill, "pid": l.pid, "level": l.level.to_string(),
+                       "target": l.target, "message": l.message, "time_ns": l.time_ns,
+                       "dropped": l.dropped})
+            );
+        } else {
+            println!("{l}");
+        }
+    }
+}
+
+/// A bridge's lines in `ctl stats`.
+fn bridge_lines(b: &skillfab_proto::bridge::BridgeStats) -> String {
+    let mut out = format!(
+        "\n  bridge {}: {} link(s), {} reconnect(s), {} remote request(s)",
+        b.name, b.links, b.reconnects, b.requests
+    );
+    for t in &b.exports {
+        out.push_str(&format!(
+            "\n    export {:<16} {} samples",
+            t.topic, t.samples
+        ));
+    }
+    for t in &b.imports {
+        out.push_str(&format!(
+            "\n    import {:<16} from {}: {} samples, {} lost, {} refused, one-way p50 {:.0} µs p99 {:.0} µs",
+            t.topic, t.remote, t.samples, t.lost, t.refused, t.latency_us.p50, t.latency_us.p99
+        ));
+    }
+    for e in &b.errors {
+        out.push_str(&format!("\n    refused: {e}"));
+    }
+    out
 }
 
 /// One change read back from a fabric log.
@@ -222,11 +269,25 @@ fn changes(text: &str, only: Option<&str>) -> anyhow::Result<Vec<Change>> {
 }
 
 /// Runs one `ctl` command.
-pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
+/// Carries out `cmd` on the manager of `domain`: on this host, or through the domain's bridge
+/// when `remote` says where it is.
+pub fn run(
+    domain: &Domain,
+    remote: Option<ZenohOptions>,
+    json_out: bool,
+    cmd: CtlCmd,
+) -> anyhow::Result<()> {
+    let connect = || match &remote {
+        Some(o) => Client::connect_remote(domain.name(), o),
+        None => Client::connect(domain),
+    };
     if let CtlCmd::Logs { skill, level } = &cmd {
-        return logs(domain, json_out, skill.as_deref(), level);
+        return match &remote {
+            Some(_) => remote_logs(connect()?, json_out, skill.as_deref(), level),
+            None => logs(domain, json_out, skill.as_deref(), level),
+        };
     }
-    let mut c = Client::connect(domain)?;
+    let mut c = connect()?;
     let print = |human: String, j: Json| {
         if json_out {
             println!("{j}");
@@ -373,6 +434,9 @@ pub fn run(domain: &Domain, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
                     "\n  {:<16} runs {:>8} skips {:>6} failures {:>6} compute {:.1} µs",
                     k.name, f.runs, f.skips, f.failures, f.compute_us_mean
                 ));
+            }
+            for b in &s.bridges {
+                human.push_str(&bridge_lines(b));
             }
             print(human, stats_json(&s));
         }

@@ -26,6 +26,31 @@ struct Cli {
     command: Cmd,
 }
 
+/// Reaching a domain on another host through its bridge.
+#[derive(clap::Args, Debug, Clone)]
+struct RemoteArg {
+    /// The Zenoh endpoint of the domain's bridge, e.g. `tcp/10.0.0.2:7447` (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    remote: Vec<String>,
+    /// A Zenoh configuration file for the remote link (TLS, user/password).
+    #[arg(long, value_name = "FILE")]
+    zenoh_config: Option<PathBuf>,
+}
+
+impl RemoteArg {
+    /// The Zenoh options, if the domain is remote.
+    fn options(&self) -> Option<skillfab_client::ZenohOptions> {
+        (!self.remote.is_empty() || self.zenoh_config.is_some()).then(|| {
+            skillfab_client::ZenohOptions {
+                mode: skillfab_client::ZenohMode::Client,
+                connect: self.remote.clone(),
+                listen: Vec::new(),
+                config_file: self.zenoh_config.clone(),
+            }
+        })
+    }
+}
+
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Run the skill manager of a domain (the skillfab-manager binary).
@@ -34,7 +59,13 @@ enum Cmd {
     /// skillfab-manager binary).
     Up(UpArgs),
     /// The debugging interface: a terminal UI over a running fabric.
-    Console,
+    Console {
+        #[command(flatten)]
+        remote: RemoteArg,
+    },
+    /// Carry topics, the control plane, events and logs between this domain and other hosts
+    /// over Zenoh (docs/bridge.md). Remote producers feed local skills as async producers do.
+    Bridge(skillfab_bridge::BridgeArgs),
     /// Every known message type with its size and the file it is declared in — the shipped
     /// catalog and the packages on SKILLFAB_MSG_PATH or --msg-path —; or one package's types as
     /// JSON schemas, a C header or a Python module.
@@ -94,6 +125,8 @@ enum Cmd {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        remote: RemoteArg,
         #[command(subcommand)]
         cmd: ctl::CtlCmd,
     },
@@ -235,7 +268,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let domain = Domain::new(&cli.domain.domain)?;
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
-        Cmd::Ctl { json, cmd } => ctl::run(&domain, json, cmd),
+        Cmd::Ctl { json, remote, cmd } => ctl::run(&domain, remote.options(), json, cmd),
+        Cmd::Bridge(args) => Ok(skillfab_bridge::run(&domain, &args)?),
         Cmd::New {
             what: NewCmd::Skill { name, lang, dir },
         } => {
@@ -261,7 +295,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Cmd::Replay { opts, json } => replay(&opts, json),
-        Cmd::Console => skillfab_console::run(&domain),
+        Cmd::Console { remote } => skillfab_console::run(&domain, remote.options()),
         Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),
         Cmd::Schema {
             c,
@@ -449,7 +483,7 @@ fn replay(opts: &replay::ReplayOptions, json: bool) -> anyhow::Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // The console owns the terminal: log lines on stderr would scribble over it.
-    if !matches!(cli.command, Cmd::Console) {
+    if !matches!(cli.command, Cmd::Console { .. }) {
         init_tracing();
     }
     match run(cli) {

@@ -21,7 +21,7 @@ pub use view::render;
 use anyhow::Context;
 use app::{Dir, PortView, Snapshot};
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
-use skillfab_client::{Client, ClientError};
+use skillfab_client::{Client, ClientError, ZenohOptions};
 use skillfab_proto::control::{PortInfo, SkillInfo};
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::LogReader;
@@ -37,14 +37,15 @@ const REQUEST_TIMEOUT: Duration = Duration::from_secs(2);
 /// Cycle latencies shown (the sparkline is as wide as the terminal, at most this).
 const HISTORY: u32 = 400;
 
-/// Runs the console on the current terminal until `q` (or SIGINT/SIGTERM).
-pub fn run(domain: &Domain) -> anyhow::Result<()> {
+/// Runs the console on the current terminal until `q` (or SIGINT/SIGTERM), on the domain
+/// of this host, or of another through its bridge when `remote` says where.
+pub fn run(domain: &Domain, remote: Option<ZenohOptions>) -> anyhow::Result<()> {
     let (cmd_tx, cmd_rx) = channel();
     let (up_tx, up_rx) = channel();
     let d = domain.clone();
     let worker = std::thread::Builder::new()
         .name("console-worker".into())
-        .spawn(move || Worker::new(d, up_tx).run(&cmd_rx))
+        .spawn(move || Worker::new(d, remote, up_tx).run(&cmd_rx))
         .context("starting the console's worker thread")?;
     // ratatui's init puts the terminal back on a panic too.
     let mut terminal = ratatui::try_init().context("setting up the terminal")?;
@@ -85,8 +86,11 @@ fn ui_loop(
 /// The console's control client, on its own thread.
 struct Worker {
     domain: Domain,
+    /// Where the domain's bridge is, for a domain on another host.
+    remote: Option<ZenohOptions>,
     updates: Sender<Update>,
     client: Option<Client>,
+    /// The local log stream (a remote domain's lines come through the client).
     logs: Option<LogReader>,
     selected: Option<String>,
     last_down: Option<String>,
@@ -97,14 +101,18 @@ fn describe(e: &ClientError) -> String {
 }
 
 impl Worker {
-    fn new(domain: Domain, updates: Sender<Update>) -> Worker {
-        let logs = LogReader::open(&domain, &format!("console-{}", std::process::id()))
-            .map_err(|e| {
-                let _ = updates.send(Update::Failed(format!("no log stream: {e}")));
-            })
-            .ok();
+    fn new(domain: Domain, remote: Option<ZenohOptions>, updates: Sender<Update>) -> Worker {
+        let logs = match remote {
+            Some(_) => None,
+            None => LogReader::open(&domain, &format!("console-{}", std::process::id()))
+                .map_err(|e| {
+                    let _ = updates.send(Update::Failed(format!("no log stream: {e}")));
+                })
+                .ok(),
+        };
         Worker {
             domain,
+            remote,
             updates,
             client: None,
             logs,
@@ -145,6 +153,12 @@ impl Worker {
                     return;
                 }
             } else {
+                if let Some(c) = self.client.as_mut()
+                    && let Ok(lines) = c.log_lines()
+                    && !lines.is_empty()
+                {
+                    let _ = self.updates.send(Update::Logs(lines));
+                }
                 std::thread::sleep(Duration::from_millis(20));
             }
         }
@@ -161,7 +175,11 @@ impl Worker {
     /// The client, connecting if needed.
     fn client(&mut self) -> Option<&Client> {
         if self.client.is_none() {
-            match Client::connect(&self.domain) {
+            let connected = match &self.remote {
+                Some(o) => Client::connect_remote(self.domain.name(), o),
+                None => Client::connect(&self.domain),
+            };
+            match connected {
                 Ok(mut c) => {
                     c.set_timeout(REQUEST_TIMEOUT);
                     self.client = Some(c);

@@ -84,6 +84,7 @@ fn hello() -> Snapshot {
                 winner: "avoid".into(),
                 cycle: 1234,
             }],
+            bridges: Vec::new(),
         },
         latencies: (0..300)
             .map(|i| {

@@ -3,6 +3,9 @@
 use super::*;
 use skillfab_proto::control::{ChannelStat, PortInfo, SkillInfo, SkillStat, SkillState, Stats};
 
+/// How long a bridge's last report counts: it reports about once a second.
+const BRIDGE_FRESH: std::time::Duration = std::time::Duration::from_secs(3);
+
 impl Manager {
     /// Every registered skill, in registration order.
     pub(super) fn list(&self) -> Vec<SkillInfo> {
@@ -77,6 +80,13 @@ impl Manager {
                 v.sort_by(|a, b| a.channel.cmp(&b.channel));
                 v
             },
+            // A bridge reports about once a second; one silent for longer is gone.
+            bridges: self
+                .bridges
+                .values()
+                .filter(|(_, at)| at.elapsed() < BRIDGE_FRESH)
+                .map(|(b, _)| b.clone())
+                .collect(),
         }
     }
 }

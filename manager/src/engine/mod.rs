@@ -249,6 +249,11 @@ pub struct Manager {
     control: Option<ControlPlane>,
     /// Events published so far.
     pub(crate) events_published: u64,
+    /// The last report of each bridge of the domain, and when it came.
+    pub(crate) bridges: std::collections::BTreeMap<
+        String,
+        (skillfab_proto::bridge::BridgeStats, std::time::Instant),
+    >,
     /// Last arbitration seen per channel.
     pub(crate) channels: HashMap<String, ChannelView>,
     /// The fabric log's writer (`None` if its file could not be opened).
@@ -341,6 +346,7 @@ impl Manager {
             readers: HashMap::new(),
             control: Some(control),
             events_published: 0,
+            bridges: std::collections::BTreeMap::new(),
             channels: HashMap::new(),
             recorder,
             recording: None,

@@ -20,6 +20,10 @@
 
 pub use skillfab_proto::json;
 
+mod remote;
+
+pub use remote::{ZenohMode, ZenohOptions, open as open_zenoh, zenoh_config};
+
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -30,6 +34,7 @@ use skillfab_proto::control::{
     self, ControlError, Event, MonitorInfo, MonitorMode, ParamArg, Reply, Request, SkillInfo, Stats,
 };
 use skillfab_proto::domain::Domain;
+use skillfab_proto::log::{LogLine, LogReader};
 use skillfab_proto::param::ParamValue;
 use skillfab_proto::value::Value;
 use skillfab_proto::{names, services};
@@ -65,6 +70,9 @@ pub enum ClientError {
     /// An answer of the wrong kind for the request.
     #[error("unexpected answer: {0}")]
     Unexpected(String),
+    /// The link to a remote domain (Zenoh, its bridge) failed.
+    #[error("remote: {0}")]
+    Remote(String),
 }
 
 fn sdk(what: &str, e: impl std::fmt::Debug) -> ClientError {
@@ -122,15 +130,32 @@ fn control_port(node: &Node<ipc::Service>, deadline: Instant) -> Result<ControlP
     }
 }
 
-/// A connection to a domain's manager.
+/// A connection to a domain's manager: on this host through shared memory, or on another
+/// through that domain's bridge ([`Client::connect_remote`]). Both behave the same.
 pub struct Client {
     id: String,
-    domain: Domain,
-    /// Renewed when an answer is overdue (see [`Client::request`]); `None` between dropping
-    /// the old one and getting a new one.
-    port: Mutex<Option<ControlPort>>,
+    /// The domain's name.
+    domain: String,
+    link: Link,
     /// The number of the last request sent.
     seq: AtomicU64,
+    last_seq: u64,
+    lost: u64,
+    timeout: Duration,
+}
+
+/// How requests reach the manager.
+enum Link {
+    Local(Box<Local>),
+    Remote(Box<Mutex<remote::Remote>>),
+}
+
+/// The shared-memory link of a client on the manager's host.
+struct Local {
+    domain: Domain,
+    /// Renewed when an answer is overdue (see [`Local::request`]); `None` between dropping
+    /// the old one and getting a new one.
+    port: Mutex<Option<ControlPort>>,
     /// Held for the whole of a request: the port has room for one at a time.
     turn: Mutex<()>,
     wake: Notifier<ipc::Service>,
@@ -138,21 +163,24 @@ pub struct Client {
     node: Node<ipc::Service>,
     /// Subscribed on first use: a client that never reads events costs the manager nothing.
     events: Option<EventsPort>,
-    last_seq: u64,
-    lost: u64,
-    timeout: Duration,
+    /// Opened on first use ([`Client::log_lines`]).
+    logs: Option<LogReader>,
+}
+
+fn next_id() -> String {
+    static N: AtomicU32 = AtomicU32::new(0);
+    format!(
+        "{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
 }
 
 impl Client {
     /// Connects to the manager of `domain` (which must be running). Events published from
     /// now on reach [`Client::next_event`].
     pub fn connect(domain: &Domain) -> Result<Client, ClientError> {
-        static N: AtomicU32 = AtomicU32::new(0);
-        let id = format!(
-            "{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        );
+        let id = next_id();
         match Board::open(&domain.prefix()) {
             Ok(b) if b.manager_alive() => {}
             // Another user's domain: say so rather than "no manager".
@@ -173,18 +201,54 @@ impl Client {
         let wake = services::notifier(&node, &names::control())?;
         Ok(Client {
             id,
-            domain: domain.clone(),
-            port: Mutex::new(Some(port)),
+            domain: domain.name().to_string(),
+            link: Link::Local(Box::new(Local {
+                domain: domain.clone(),
+                port: Mutex::new(Some(port)),
+                turn: Mutex::new(()),
+                node,
+                wake,
+                answers,
+                events: None,
+                logs: None,
+            })),
             seq: AtomicU64::new(0),
-            turn: Mutex::new(()),
-            node,
-            wake,
-            answers,
-            events: None,
             last_seq: 0,
             lost: 0,
             timeout: Duration::from_secs(10),
         })
+    }
+
+    /// Connects to the manager of `domain` on another host through that domain's bridge
+    /// (`skillfab bridge`), over the Zenoh session `options` open (usually
+    /// `connect: ["tcp/HOST:PORT"]` in client mode). Requests, answers, errors and events are
+    /// those of a local client; a monitor belongs to this client as locally. The first
+    /// request tells whether the bridge and its manager are there.
+    pub fn connect_remote(domain: &str, options: &ZenohOptions) -> Result<Client, ClientError> {
+        names::check_name("domain", domain, false)?;
+        let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .map(|h| h.trim().to_string())
+            .unwrap_or_default();
+        let client = Client {
+            id: format!("{host}-{}", next_id()),
+            domain: domain.to_string(),
+            link: Link::Remote(Box::new(Mutex::new(remote::Remote::open(domain, options)?))),
+            seq: AtomicU64::new(0),
+            last_seq: 0,
+            lost: 0,
+            timeout: Duration::from_secs(10),
+        };
+        Ok(client)
+    }
+
+    /// Whether this client reaches its domain through a bridge.
+    pub fn is_remote(&self) -> bool {
+        matches!(self.link, Link::Remote(_))
+    }
+
+    /// The domain's name.
+    pub fn domain(&self) -> &str {
+        &self.domain
     }
 
     /// This client's id (monitors belong to it).
@@ -210,11 +274,6 @@ impl Client {
     /// out is carried out once more — to the same effect, except `monitor`, which then installs
     /// a second monitor.
     pub fn request(&self, request: &Request) -> Result<Reply, ClientError> {
-        // One request at a time on the port (threads sharing a client take turns).
-        let _turn = self
-            .turn
-            .lock()
-            .map_err(|_| ClientError::Unexpected("client poisoned".into()))?;
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
         let bytes = control::encode_request(&self.id, seq, request)
             .map_err(|e| ClientError::Decode(e.to_string()))?;
@@ -226,9 +285,40 @@ impl Client {
                 control::MAX_REQUEST_BYTES
             ))));
         }
-        let mut serving = self.manager_pid();
-        let mut pending = Some(self.send(&bytes)?);
         let patient = matches!(request, Request::Step(_));
+        match &self.link {
+            Link::Local(l) => l.request(&bytes, patient, self.timeout),
+            Link::Remote(r) => {
+                // `step` waits as long as the manager lives: an hour stands for that here.
+                let timeout = if patient {
+                    Duration::from_secs(3600)
+                } else {
+                    self.timeout
+                };
+                // The session is shared; requests of threads sharing the client take turns.
+                r.lock()
+                    .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
+                    .request(bytes, timeout)
+            }
+        }
+    }
+}
+
+impl Local {
+    /// See [`Client::request`].
+    fn request(
+        &self,
+        bytes: &[u8],
+        patient: bool,
+        timeout: Duration,
+    ) -> Result<Reply, ClientError> {
+        // One request at a time on the port (threads sharing a client take turns).
+        let _turn = self
+            .turn
+            .lock()
+            .map_err(|_| ClientError::Unexpected("client poisoned".into()))?;
+        let mut serving = self.manager_pid();
+        let mut pending = Some(self.send(bytes, timeout)?);
         let start = Instant::now();
         let (mut retry, mut retry_at) = (RETRY_AFTER, start + RETRY_AFTER);
         // Poll often at first: the answer usually comes within a cycle, and the manager
@@ -242,8 +332,8 @@ impl Client {
                     .map_err(|e| ClientError::Decode(e.to_string()))?;
                 return Ok(response?);
             }
-            if !patient && start.elapsed() > self.timeout {
-                return Err(ClientError::Timeout(self.timeout));
+            if !patient && start.elapsed() > timeout {
+                return Err(ClientError::Timeout(timeout));
             }
             let _ = self.answers.timed_wait(|_| {}, nap);
             nap = (nap * 2).min(Duration::from_millis(100));
@@ -251,8 +341,8 @@ impl Client {
             if now >= retry_at {
                 // The pending answer holds the old port's place: it goes first.
                 drop(pending.take());
-                self.renew_port()?;
-                pending = Some(self.send(&bytes)?);
+                self.renew_port(timeout)?;
+                pending = Some(self.send(bytes, timeout)?);
                 retry = (retry * 2).min(RETRY_MAX);
                 retry_at = now + retry;
                 continue;
@@ -265,8 +355,8 @@ impl Client {
                 Some(pid) if Some(pid) != serving => {
                     serving = Some(pid);
                     drop(pending.take());
-                    self.renew_port()?;
-                    pending = Some(self.send(&bytes)?);
+                    self.renew_port(timeout)?;
+                    pending = Some(self.send(bytes, timeout)?);
                 }
                 None if start.elapsed() > Duration::from_secs(1) => {
                     return Err(ClientError::NoManager(self.domain.name().to_string()));
@@ -277,13 +367,13 @@ impl Client {
     }
 
     /// Sends an encoded request and wakes the control plane.
-    fn send(&self, bytes: &[u8]) -> Result<Pending, ClientError> {
+    fn send(&self, bytes: &[u8], timeout: Duration) -> Result<Pending, ClientError> {
         let mut port = self
             .port
             .lock()
             .map_err(|_| ClientError::Unexpected("control port poisoned".into()))?;
         if port.is_none() {
-            *port = Some(control_port(&self.node, Instant::now() + self.timeout)?);
+            *port = Some(control_port(&self.node, Instant::now() + timeout)?);
         }
         let Some(port) = port.as_ref() else {
             return Err(ClientError::Unexpected("no control port".into()));
@@ -301,14 +391,14 @@ impl Client {
     }
 
     /// Replaces the control port by a new one (the manager's server connects to it anew).
-    fn renew_port(&self) -> Result<(), ClientError> {
+    fn renew_port(&self, timeout: Duration) -> Result<(), ClientError> {
         let mut port = self
             .port
             .lock()
             .map_err(|_| ClientError::Unexpected("control port poisoned".into()))?;
         // The old one goes first: a client holds one of the control plane's places.
         drop(port.take());
-        *port = Some(control_port(&self.node, Instant::now() + self.timeout)?);
+        *port = Some(control_port(&self.node, Instant::now() + timeout)?);
         Ok(())
     }
 
@@ -320,6 +410,41 @@ impl Client {
             .map(|b| b.header().manager_pid.load(Ordering::Acquire))
     }
 
+    /// Subscribes to the events stream.
+    fn subscribe(&mut self) -> Result<(), ClientError> {
+        if self.events.is_none() {
+            let listener = services::listener(&self.node, &names::events())?;
+            let sub = services::events_service(&self.node)?
+                .subscriber_builder()
+                .buffer_size(services::EVENT_BUFFER)
+                .create()
+                .map_err(|e| sdk("events subscriber", e))?;
+            self.events = Some((sub, listener));
+        }
+        Ok(())
+    }
+
+    /// The next encoded event, waiting at most `timeout`.
+    fn next_event(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, ClientError> {
+        self.subscribe()?;
+        let Some((events, listener)) = self.events.as_ref() else {
+            return Ok(None);
+        };
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(sample) = events.receive().map_err(|e| sdk("receive event", e))? {
+                return Ok(Some(sample.payload().to_vec()));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            let _ = listener.timed_wait(|_| {}, (deadline - now).min(Duration::from_millis(200)));
+        }
+    }
+}
+
+impl Client {
     fn done(&self, request: Request) -> Result<(), ClientError> {
         match self.request(&request)? {
             Reply::Done => Ok(()),
@@ -512,40 +637,52 @@ impl Client {
     /// Subscribes to the events stream (done by the first [`Client::next_event`] too): every
     /// event published from now on can be read.
     pub fn subscribe(&mut self) -> Result<(), ClientError> {
-        if self.events.is_none() {
-            let listener = services::listener(&self.node, &names::events())?;
-            let sub = services::events_service(&self.node)?
-                .subscriber_builder()
-                .buffer_size(services::EVENT_BUFFER)
-                .create()
-                .map_err(|e| sdk("events subscriber", e))?;
-            self.events = Some((sub, listener));
+        match &mut self.link {
+            Link::Local(l) => l.subscribe(),
+            Link::Remote(r) => r
+                .get_mut()
+                .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
+                .subscribe(),
         }
-        Ok(())
     }
 
     /// The next event, waiting at most `timeout`; `None` if none came.
     pub fn next_event(&mut self, timeout: Duration) -> Result<Option<Event>, ClientError> {
-        self.subscribe()?;
-        let Some((events, listener)) = self.events.as_ref() else {
+        let bytes = match &mut self.link {
+            Link::Local(l) => l.next_event(timeout)?,
+            Link::Remote(r) => r
+                .get_mut()
+                .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
+                .next_event(timeout)?,
+        };
+        let Some(bytes) = bytes else {
             return Ok(None);
         };
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(sample) = events.receive().map_err(|e| sdk("receive event", e))? {
-                let ev = control::decode_event(sample.payload())
-                    .map_err(|e| ClientError::Decode(e.to_string()))?;
-                if self.last_seq != 0 && ev.seq > self.last_seq + 1 {
-                    self.lost += ev.seq - self.last_seq - 1;
+        let ev = control::decode_event(&bytes).map_err(|e| ClientError::Decode(e.to_string()))?;
+        if self.last_seq != 0 && ev.seq > self.last_seq + 1 {
+            self.lost += ev.seq - self.last_seq - 1;
+        }
+        self.last_seq = ev.seq;
+        Ok(Some(ev))
+    }
+
+    /// The skills' log lines that arrived since the last call (the first call subscribes to
+    /// the domain's log stream and may bring the most recent lines from before).
+    pub fn log_lines(&mut self) -> Result<Vec<LogLine>, ClientError> {
+        match &mut self.link {
+            Link::Local(l) => {
+                if l.logs.is_none() {
+                    l.logs = Some(LogReader::open(&l.domain, &format!("logs-{}", self.id))?);
                 }
-                self.last_seq = ev.seq;
-                return Ok(Some(ev));
+                match &l.logs {
+                    Some(r) => Ok(r.poll()?),
+                    None => Ok(Vec::new()),
+                }
             }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(None);
-            }
-            let _ = listener.timed_wait(|_| {}, (deadline - now).min(Duration::from_millis(200)));
+            Link::Remote(r) => r
+                .get_mut()
+                .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
+                .log_lines(),
         }
     }
 

@@ -171,7 +171,8 @@ pub fn stats_json(s: &Stats) -> Json {
                "compute_us_mean": k.figures.compute_us_mean})).collect::<Vec<_>>(),
            "deaths": s.deaths, "events": s.events,
            "channels": s.channels.iter().map(|c| json!({"channel": c.channel, "winner": c.winner,
-               "cycle": c.cycle})).collect::<Vec<_>>()})
+               "cycle": c.cycle})).collect::<Vec<_>>(),
+           "bridges": serde_json::to_value(&s.bridges).unwrap_or_default()})
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@
 extern crate self as skillfab_proto;
 
 pub mod board;
+pub mod bridge;
 pub mod clean;
 pub mod control;
 pub mod decl;

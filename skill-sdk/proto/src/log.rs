@@ -13,6 +13,11 @@ use std::time::Duration;
 
 /// Longest message forwarded (bytes); longer ones are cut at a character boundary.
 pub const MAX_MESSAGE: usize = 400;
+
+/// The tracing filter when `RUST_LOG` is not set: `info`, but Zenoh's own crates (the
+/// bridge's transport) only from warnings up — their `info` lines are session chatter.
+pub const DEFAULT_FILTER: &str = "info,zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn,\
+                                  zenoh_link_tls=warn,zenoh_config=warn,zenoh_runtime=warn";
 /// Largest encoded line (the publisher's slice size).
 pub const MAX_LINE: usize = 640;
 /// Lines each publisher keeps for late subscribers (a console opened later sees them).

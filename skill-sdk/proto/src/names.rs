@@ -43,6 +43,33 @@ pub fn logs() -> String {
     "skillfab/logs".to_string()
 }
 
+/// Zenoh key expression under which a bridge of `domain` publishes the samples of `topic`
+/// (payload = the message's bytes, attachment = [`crate::bridge::SampleMeta`]).
+pub fn remote_topic(domain: &str, topic: &str) -> String {
+    format!("skillfab/{domain}/topic/{topic}")
+}
+
+/// Zenoh queryable answering the [`crate::schema::MessageSchema`] of an exported `topic`.
+pub fn remote_schema(domain: &str, topic: &str) -> String {
+    format!("skillfab/{domain}/schema/{topic}")
+}
+
+/// Zenoh queryable carrying control requests to the manager of `domain` (query payload = an
+/// encoded request, reply = the encoded response).
+pub fn remote_control(domain: &str) -> String {
+    format!("skillfab/{domain}/control")
+}
+
+/// Zenoh key expression of the events stream of `domain` (payload = an encoded event).
+pub fn remote_events(domain: &str) -> String {
+    format!("skillfab/{domain}/events")
+}
+
+/// Zenoh key expression of the log stream of `domain` (payload = an encoded log line).
+pub fn remote_logs(domain: &str) -> String {
+    format!("skillfab/{domain}/logs")
+}
+
 /// POSIX shared-memory name (for `shm_open`) of the domain's cycle board.
 pub fn board(prefix: &str) -> String {
     format!("/{prefix}board")

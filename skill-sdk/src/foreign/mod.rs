@@ -148,6 +148,8 @@ pub struct ForeignSkill {
     body: Option<Body>,
     /// The message types ports may be declared with, by type name.
     registry: &'static [MessageType],
+    /// Handed out by [`ForeignSkill::waker`].
+    waker: Option<crate::runtime::Waker>,
 }
 
 impl std::fmt::Debug for ForeignSkill {
@@ -209,6 +211,7 @@ impl ForeignSkill {
             params: Vec::new(),
             body: None,
             registry,
+            waker: None,
         })
     }
 
@@ -320,6 +323,13 @@ impl ForeignSkill {
     /// The declared outputs.
     pub fn outputs(&self) -> &[PortDecl] {
         &self.outputs
+    }
+
+    /// A handle with which other threads make this skill run at once: an async skill then
+    /// runs on the next wake-up even with no fresh input (a gateway that receives samples on
+    /// its own threads publishes them as they come, not at the next cycle).
+    pub fn waker(&mut self) -> crate::runtime::Waker {
+        self.waker.get_or_insert_with(Default::default).clone()
     }
 }
 
@@ -464,6 +474,7 @@ struct ForeignUnit {
     /// Which outputs' types have a bool anywhere (only those are normalised after a run).
     output_bools: Vec<bool>,
     body: Body,
+    waker: Option<crate::runtime::Waker>,
 }
 
 impl ForeignUnit {
@@ -489,12 +500,16 @@ impl ForeignUnit {
             outputs: skill.outputs,
             params: skill.params.into(),
             body,
+            waker: skill.waker,
         }
     }
 }
 
 impl Unit for ForeignUnit {
     type Params = ForeignParams;
+    fn waker(&self) -> Option<crate::runtime::Waker> {
+        self.waker.clone()
+    }
     fn mode(&self) -> Mode {
         self.mode
     }

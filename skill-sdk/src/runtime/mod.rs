@@ -29,6 +29,9 @@ mod arbiter;
 mod device_unit;
 mod serve;
 mod skill_unit;
+mod waker;
+
+pub use waker::Waker;
 
 pub(crate) use skill_unit::{guarded, step_skill};
 
@@ -169,8 +172,9 @@ pub fn init_tracing() {
     use std::io::IsTerminal;
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        tracing_subscriber::EnvFilter::new(skillfab_proto::log::DEFAULT_FILTER)
+    });
     let _ = tracing_subscriber::registry()
         .with(filter)
         .with(
@@ -214,6 +218,10 @@ pub(crate) trait Unit: 'static {
     }
     /// Takes back what an earlier instance kept.
     fn restore(&mut self, _snapshot: &[u8]) {}
+    /// What other threads wake the unit with, if they may.
+    fn waker(&self) -> Option<Waker> {
+        None
+    }
 }
 
 /// Where a unit's snapshot is kept: `<domain root>/skills/<name>/snapshot` (the root is the
@@ -279,6 +287,8 @@ pub(crate) struct Common<P> {
     name: String,
     /// The unit's snapshot across restarts.
     snapshots: Snapshots,
+    /// Wakes from other threads (a gateway's).
+    waker: Option<Waker>,
 }
 
 /// A unit's runtime ports.
@@ -391,12 +401,14 @@ fn run<U: Unit>(
         last_cycle: 0,
         name: decl.name.clone(),
         snapshots,
+        waker: unit.waker(),
     };
     let mut decl = decl;
     loop {
         let Some(board) = wait_for_board(&node, &domain)? else {
             return Ok(());
         };
+        let board = std::sync::Arc::new(board);
         // A new manager learns the values the previous one set.
         decl.param_values = common.params.values();
         let encoded = postcard::to_allocvec(&decl).map_err(skillfab_proto::Error::from)?;
@@ -437,8 +449,15 @@ fn run<U: Unit>(
         board.ring_manager();
         common.last_cycle = 0;
         common.param_gen = 0;
+        if let Some(w) = &common.waker {
+            w.attach(Some((board.clone(), idx)));
+        }
         let link = Link { board: &board, idx };
-        match serve(&link, io, &mut unit, &mut common)? {
+        let end = serve(&link, io, &mut unit, &mut common);
+        if let Some(w) = &common.waker {
+            w.attach(None);
+        }
+        match end? {
             End::Terminated => {
                 let slot = board.slot(idx);
                 if slot.pid.load(Ordering::Acquire) == std::process::id() {

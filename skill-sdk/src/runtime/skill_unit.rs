@@ -210,6 +210,8 @@ pub(crate) fn step_skill<P: Params>(
                     fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
                 })
         }
+        // A wake from another thread (a gateway's) makes a run due as well.
+        Mode::Async if common.waker.as_ref().is_some_and(super::Waker::take) => true,
         Mode::Async if inputs.is_empty() => k > common.last_cycle,
         Mode::Async => inputs.iter().any(|p| p.is_fresh()),
     };

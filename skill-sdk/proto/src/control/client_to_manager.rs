@@ -115,6 +115,9 @@ pub enum Request {
         /// Topics to record; empty: every topic.
         topics: Vec<String>,
     },
+    /// A bridge's figures (sent by `skillfab bridge` about once a second; shown in stats
+    /// while they are fresh).
+    BridgeReport(crate::bridge::BridgeStats),
 }
 
 /// Encodes a request.

@@ -162,6 +162,8 @@ pub struct Stats {
     pub events: u64,
     /// Per actuator channel.
     pub channels: Vec<ChannelStat>,
+    /// The domain's bridges (their last report, if fresh).
+    pub bridges: Vec<crate::bridge::BridgeStats>,
 }
 
 /// What the manager answers.

@@ -1,0 +1,219 @@
+//! The client's link to a domain on another host: a Zenoh session to that domain's bridge
+//! (`skillfab bridge`), which carries requests to its manager and forwards the events and
+//! log lines. Also the one place where a Zenoh configuration is made from skillfab's options
+//! (the bridge uses it too).
+
+use crate::ClientError;
+use skillfab_proto::bridge::RemoteFailure;
+use skillfab_proto::control::{self, Reply};
+use skillfab_proto::log::LogLine;
+use skillfab_proto::names;
+use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::time::Duration;
+use zenoh::Wait;
+
+/// How a Zenoh session joins the others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ZenohMode {
+    /// Talks to other peers directly (a bridge's default).
+    #[default]
+    Peer,
+    /// Talks through one peer or router it connects to (a remote `ctl`'s default).
+    Client,
+}
+
+/// Where and how to open a Zenoh session.
+#[derive(Debug, Clone, Default)]
+pub struct ZenohOptions {
+    /// Peer or client.
+    pub mode: ZenohMode,
+    /// Endpoints to connect to (`tcp/HOST:PORT`, `tls/HOST:PORT`); a peer retries them
+    /// for ever, so a link that drops comes back.
+    pub connect: Vec<String>,
+    /// Endpoints to listen on (none unless asked).
+    pub listen: Vec<String>,
+    /// A Zenoh configuration file (TLS certificates, user/password, scouting); the options
+    /// above are applied on top of it.
+    pub config_file: Option<PathBuf>,
+}
+
+/// Why a Zenoh session could not be opened.
+fn zenoh_error(what: &str, e: impl std::fmt::Display) -> ClientError {
+    ClientError::Remote(format!("{what}: {e}"))
+}
+
+/// The Zenoh configuration for `o`: multicast scouting off and no listener unless asked
+/// (a bridge is reached where it is told to be), then `o`'s mode and endpoints.
+pub fn zenoh_config(o: &ZenohOptions) -> Result<zenoh::Config, ClientError> {
+    let mut config = match &o.config_file {
+        Some(path) => zenoh::Config::from_file(path)
+            .map_err(|e| zenoh_error(&format!("Zenoh configuration {}", path.display()), e))?,
+        None => {
+            let mut c = zenoh::Config::default();
+            set(&mut c, "scouting/multicast/enabled", "false")?;
+            set(&mut c, "listen/endpoints", "[]")?;
+            c
+        }
+    };
+    let mode = match o.mode {
+        ZenohMode::Peer => "\"peer\"",
+        ZenohMode::Client => "\"client\"",
+    };
+    set(&mut config, "mode", mode)?;
+    let list = |v: &[String]| serde_json_list(v);
+    if !o.connect.is_empty() {
+        set(&mut config, "connect/endpoints", &list(&o.connect))?;
+    }
+    if !o.listen.is_empty() {
+        set(&mut config, "listen/endpoints", &list(&o.listen))?;
+    }
+    Ok(config)
+}
+
+fn serde_json_list(v: &[String]) -> String {
+    serde_json::to_string(v).unwrap_or_else(|_| "[]".into())
+}
+
+fn set(c: &mut zenoh::Config, key: &str, json5: &str) -> Result<(), ClientError> {
+    c.insert_json5(key, json5)
+        .map_err(|e| zenoh_error(&format!("Zenoh option {key} = {json5}"), e))
+}
+
+/// Opens a session.
+pub fn open(o: &ZenohOptions) -> Result<zenoh::Session, ClientError> {
+    let where_ = if o.connect.is_empty() {
+        "Zenoh".to_string()
+    } else {
+        o.connect.join(", ")
+    };
+    zenoh::open(zenoh_config(o)?)
+        .wait()
+        .map_err(|e| zenoh_error(&format!("cannot open a session to {where_}"), e))
+}
+
+/// Samples a subscriber keeps for a client that does not read them (then newer ones are
+/// dropped and counted as lost by their sequence numbers, as locally).
+const REMOTE_BUFFER: usize = 2048;
+
+/// A remote domain, seen through its bridge.
+pub(crate) struct Remote {
+    session: zenoh::Session,
+    /// The remote domain's name.
+    domain: String,
+    /// The endpoints, for messages.
+    endpoint: String,
+    events: Option<Feed>,
+    logs: Option<Feed>,
+}
+
+/// A subscription whose samples' payloads queue up for the client's thread.
+struct Feed {
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    rx: Receiver<Vec<u8>>,
+}
+
+impl Remote {
+    /// A session to the bridge of `domain` (the bridge must answer a request to count as
+    /// reached: see [`Remote::request`]).
+    pub(crate) fn open(domain: &str, o: &ZenohOptions) -> Result<Remote, ClientError> {
+        Ok(Remote {
+            session: open(o)?,
+            domain: domain.to_string(),
+            endpoint: o.connect.join(", "),
+            events: None,
+            logs: None,
+        })
+    }
+
+    /// Sends an encoded request to the domain's bridge and waits for its manager's answer.
+    pub(crate) fn request(&self, bytes: Vec<u8>, timeout: Duration) -> Result<Reply, ClientError> {
+        let replies = self
+            .session
+            .get(names::remote_control(&self.domain))
+            .payload(bytes)
+            .timeout(timeout)
+            .wait()
+            .map_err(|e| zenoh_error("remote request", e))?;
+        let Ok(reply) = replies.recv() else {
+            return Err(ClientError::Remote(format!(
+                "no bridge of domain '{}' answered through {} within {timeout:?}",
+                self.domain, self.endpoint
+            )));
+        };
+        match reply.result() {
+            Ok(sample) => {
+                let response = control::decode_response(&sample.payload().to_bytes())
+                    .map_err(|e| ClientError::Decode(e.to_string()))?;
+                Ok(response?)
+            }
+            Err(e) => Err(
+                match postcard::from_bytes::<RemoteFailure>(&e.payload().to_bytes()) {
+                    Ok(RemoteFailure::NoManager(d)) => ClientError::NoManager(d),
+                    Ok(RemoteFailure::Timeout(ms)) => {
+                        ClientError::Timeout(Duration::from_millis(ms))
+                    }
+                    Ok(RemoteFailure::Other(text)) => ClientError::Remote(text),
+                    Err(_) => ClientError::Remote(format!(
+                        "the bridge of domain '{}' failed: {}",
+                        self.domain,
+                        String::from_utf8_lossy(&e.payload().to_bytes())
+                    )),
+                },
+            ),
+        }
+    }
+
+    fn feed(&self, key: String) -> Result<Feed, ClientError> {
+        let (tx, rx): (SyncSender<Vec<u8>>, _) = sync_channel(REMOTE_BUFFER);
+        let subscriber = self
+            .session
+            .declare_subscriber(key)
+            .callback(
+                move |s| match tx.try_send(s.payload().to_bytes().into_owned()) {
+                    Ok(()) | Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
+                },
+            )
+            .wait()
+            .map_err(|e| zenoh_error("remote subscription", e))?;
+        Ok(Feed {
+            _subscriber: subscriber,
+            rx,
+        })
+    }
+
+    /// Subscribes to the remote events stream.
+    pub(crate) fn subscribe(&mut self) -> Result<(), ClientError> {
+        if self.events.is_none() {
+            self.events = Some(self.feed(names::remote_events(&self.domain))?);
+        }
+        Ok(())
+    }
+
+    /// The next encoded event, waiting at most `timeout`.
+    pub(crate) fn next_event(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, ClientError> {
+        self.subscribe()?;
+        let Some(feed) = &self.events else {
+            return Ok(None);
+        };
+        match feed.rx.recv_timeout(timeout) {
+            Ok(bytes) => Ok(Some(bytes)),
+            Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => Ok(None),
+        }
+    }
+
+    /// The log lines that arrived since the last call (the first call subscribes).
+    pub(crate) fn log_lines(&mut self) -> Result<Vec<LogLine>, ClientError> {
+        if self.logs.is_none() {
+            self.logs = Some(self.feed(names::remote_logs(&self.domain))?);
+        }
+        let Some(feed) = &self.logs else {
+            return Ok(Vec::new());
+        };
+        Ok(feed
+            .rx
+            .try_iter()
+            .filter_map(|b| skillfab_proto::log::decode(&b).ok())
+            .collect())
+    }
+}

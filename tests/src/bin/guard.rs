@@ -1,0 +1,4 @@
+//! Test skill `guard` (see `skillfab_tests::skills::Guard`).
+fn main() -> std::process::ExitCode {
+    skill_sdk::main::<skillfab_tests::skills::Guard>()
+}

@@ -158,8 +158,17 @@ impl TestDomain {
 
     /// Starts `program` with `args` in its own process group; returns its index.
     pub fn spawn(&mut self, program: &str, args: &[&str]) -> usize {
+        self.spawn_at(&bin(program), args)
+    }
+
+    /// Starts the program at `path` (a system tool: `ip netns exec …`) with `args` in its own
+    /// process group; returns its index.
+    pub fn spawn_at(&mut self, path: &Path, args: &[&str]) -> usize {
         use std::os::unix::process::CommandExt;
-        let mut c = self.command(program);
+        let mut c = self.command_at(path);
+        let program = path
+            .file_name()
+            .map_or("program".into(), |n| n.to_string_lossy().into_owned());
         let log = self
             .dir
             .join(format!("{}-{program}.log", self.children.len()));

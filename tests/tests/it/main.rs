@@ -5,6 +5,7 @@
 //! One area: `cargo test -p skillfab-tests --test it exit_lab::`; one test: its full name.
 
 mod arbitration;
+mod bridge;
 mod console;
 mod control;
 mod denning;

@@ -17,6 +17,13 @@
 //! max_restarts = 5
 //! backoff_ms = 200
 //! registers = true        # false for processes that are not skills (e.g. a simulator)
+//!
+//! [bridge]                # `skillfab bridge` (docs/bridge.md), supervised like a process
+//! listen = ["tcp/0.0.0.0:7447"]   # and/or connect = ["tcp/HOST:PORT"]
+//! export = ["sonar"]
+//! import = ["nearest"]
+//! from = "far-domain"     # the domain the imports come from (default: this one's name)
+//! zenoh_config = "zenoh.json5"    # TLS, user/password (relative to this file)
 //! ```
 //! The raw file is parsed first (unknown keys are errors), then resolved into a validated
 //! [`Launch`] with program paths found and parameters rendered.
@@ -69,6 +76,71 @@ pub struct LaunchFile {
     /// `[[process]]`, in start order.
     #[serde(default)]
     pub process: Vec<ProcessEntry>,
+    /// `[bridge]`: the domain's bridge to other hosts, started after the processes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bridge: Option<BridgeSection>,
+}
+
+/// `[bridge]` of a launch file: the options of `skillfab bridge`.
+#[derive(Debug, Default, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BridgeSection {
+    /// Its name in the domain (default `bridge`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Zenoh endpoints to connect to.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub connect: Vec<String>,
+    /// Zenoh endpoints to listen on.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub listen: Vec<String>,
+    /// A Zenoh configuration file, relative to the launch file.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zenoh_config: Option<String>,
+    /// Join through a Zenoh router (client mode).
+    #[serde(default)]
+    pub client_mode: bool,
+    /// Topics sent out.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub export: Vec<String>,
+    /// Topics brought in.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub import: Vec<String>,
+    /// The remote domain of the imports.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub from: Option<String>,
+    /// Serve the control plane, events and logs to remote clients (default true).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub control: Option<bool>,
+}
+
+impl BridgeSection {
+    /// The `skillfab bridge` arguments (the domain is added at spawn).
+    fn args(&self, base: &Path) -> Vec<String> {
+        let mut args = vec!["bridge".to_string()];
+        let mut opt = |flag: &str, value: &str| {
+            args.push(flag.to_string());
+            args.push(value.to_string());
+        };
+        opt("--name", self.name.as_deref().unwrap_or("bridge"));
+        self.connect.iter().for_each(|e| opt("--connect", e));
+        self.listen.iter().for_each(|e| opt("--listen", e));
+        if let Some(f) = &self.zenoh_config {
+            opt("--zenoh-config", &base.join(f).display().to_string());
+        }
+        self.export.iter().for_each(|t| opt("--export", t));
+        self.import.iter().for_each(|t| opt("--import", t));
+        if let Some(d) = &self.from {
+            opt("--from", d);
+        }
+        if self.client_mode {
+            args.push("--client-mode".into());
+        }
+        if self.control == Some(false) {
+            args.push("--no-control".into());
+        }
+        args
+    }
 }
 
 /// `[manager]` of a launch file.
@@ -275,6 +347,31 @@ impl Launch {
                 registers: p.registers.unwrap_or(true),
             });
         }
+        if let Some(b) = &raw.bridge {
+            let name = b.name.clone().unwrap_or_else(|| "bridge".into());
+            let bad = |message: String| LaunchError::Process {
+                path: path.to_path_buf(),
+                name: name.clone(),
+                message,
+            };
+            if processes.iter().any(|q: &ProcessSpec| q.name == name) {
+                return Err(bad("the bridge's name is a process's too".into()));
+            }
+            let program = find_program("skillfab", base).ok_or_else(|| {
+                bad("program 'skillfab' not found (next to skillfab-manager, on PATH)".into())
+            })?;
+            processes.push(ProcessSpec {
+                name,
+                program,
+                args: b.args(base),
+                restart: Restart::OnFailure,
+                max_restarts: 5,
+                backoff: Duration::from_millis(200),
+                // Its skill (the imports' producer) registers; a bridge that only exports
+                // does not.
+                registers: !b.import.is_empty(),
+            });
+        }
         Ok(Launch {
             period: ms(raw.manager.period_ms, "period_ms")?,
             deadline: ms(raw.manager.deadline_ms, "deadline_ms")?,
@@ -289,6 +386,23 @@ mod tests {
 
     fn parse(text: &str) -> Result<Launch, LaunchError> {
         Launch::parse(text, Path::new("t.toml"), Path::new("/"))
+    }
+
+    #[test]
+    fn a_bridge_section_becomes_the_arguments_of_skillfab_bridge() {
+        let raw: LaunchFile = toml::from_str(
+            "[bridge]\nlisten = [\"tcp/0.0.0.0:7447\"]\nexport = [\"sonar\"]\n\
+             import = [\"nearest\"]\nfrom = \"far\"\nzenoh_config = \"z.json5\"\ncontrol = false\n",
+        )
+        .unwrap();
+        let args = raw.bridge.unwrap().args(Path::new("/robot"));
+        assert_eq!(
+            args.join(" "),
+            "bridge --name bridge --listen tcp/0.0.0.0:7447 --zenoh-config /robot/z.json5 \
+             --export sonar --import nearest --from far --no-control"
+        );
+        let e = toml::from_str::<LaunchFile>("[bridge]\nlisten = \"tcp/x\"\nspeed = 1\n");
+        assert!(e.is_err(), "unknown keys and wrong shapes are errors");
     }
 
     #[test]
@@ -418,7 +532,7 @@ mod tests {
                 let mut seen = std::collections::HashSet::new();
                 let entries: Vec<ProcessEntry> =
                     entries.into_iter().filter(|e| seen.insert(e.name.clone())).collect();
-                let file = LaunchFile { manager: ManagerSection::default(), process: entries.clone() };
+                let file = LaunchFile { manager: ManagerSection::default(), process: entries.clone(), bridge: None };
                 let text = toml::to_string(&file).unwrap();
                 let launch = parse(&text).unwrap();
                 prop_assert_eq!(launch.processes.len(), entries.len());

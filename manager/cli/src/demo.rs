@@ -164,6 +164,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     let (restarts, backoff_ms) = if killing { (100_000, 20) } else { (5, 200) };
     let text = |p: &Path| p.to_string_lossy().into_owned();
     let mut launch = LaunchFile {
+        bridge: None,
         manager: ManagerSection {
             period_ms: Some(period_ms),
             // (Lock-step: the manager's own, 10 s.)

@@ -193,17 +193,22 @@ fn a_remote_async_skill_computes_on_exported_sonar_and_a_local_skill_uses_it_acr
 #[test]
 fn remote_ctl_ls_set_query_monitor_and_logs_behave_as_local_ones() {
     let mut a = TestDomain::new("bridgectl");
-    a.hello(&[]);
     let port = free_port();
     let listen = format!("tcp/127.0.0.1:{port}");
-    a.spawn("skillfab", &["bridge", "--listen", &listen]);
+    // The hello network with a `[bridge]` section: `up` starts and supervises the bridge.
+    let launch = a.launch_file(&format!(
+        "{}[bridge]\nlisten = [\"{listen}\"]\n",
+        skillfab_tests::HELLO
+    ));
+    a.spawn("skillfab", &["up", launch.to_str().unwrap()]);
     let name = a.domain.name().to_string();
-    // The bridge serves requests once it is up: connect and ask until it answers.
+    // The bridge serves requests once it is up: connect and ask until it answers, with the
+    // three skills registered.
     let mut r = None;
     a.wait_until("the bridge to answer", || {
         r = Client::connect_remote(&name, &remote(port))
             .ok()
-            .filter(|c| c.list().is_ok());
+            .filter(|c| c.list().is_ok_and(|l| l.len() == 3));
         r.is_some()
     });
     let mut r = r.unwrap();

@@ -4,8 +4,9 @@
 
 use crate::figures::TopicFigures;
 use crate::{BridgeError, zenoh_error};
-use skillfab_client::Client;
+use skillfab_client::{Client, ClientError};
 use skillfab_proto::bridge::{SampleMeta, unix_now_ns};
+use skillfab_proto::control::ControlError;
 use skillfab_proto::domain::Domain;
 use skillfab_proto::names;
 use skillfab_proto::schema::MessageSchema;
@@ -22,22 +23,10 @@ pub(crate) fn local_schema(
     client: &Client,
     topic: &str,
 ) -> Result<Option<MessageSchema>, BridgeError> {
-    let skills = client.list()?;
-    let declared = skills
-        .iter()
-        .flat_map(|s| s.outputs.iter())
-        .chain(skills.iter().flat_map(|s| s.inputs.iter()))
-        .find(|p| p.topic == topic);
-    let Some(port) = declared else {
-        return Ok(None);
-    };
-    match skillfab_msgs::dynamic::find_schema(&port.type_name) {
-        Ok(Some(schema)) => Ok(Some(schema)),
-        Ok(None) => Err(BridgeError::UnknownType {
-            topic: topic.to_string(),
-            type_name: port.type_name.clone(),
-        }),
-        Err(e) => Err(BridgeError::MessageFiles(e.to_string())),
+    match client.topic_schema(topic) {
+        Ok(s) => Ok(Some(s)),
+        Err(ClientError::Refused(ControlError::UnknownTopic(_))) => Ok(None),
+        Err(e) => Err(e.into()),
     }
 }
 

@@ -106,7 +106,7 @@ pub(crate) fn serve(
     figures: &[TopicFigures],
     mut skill_args: Vec<String>,
 ) -> Result<(), BridgeError> {
-    let mut skill = ForeignSkill::new("skillfab-bridge", Mode::Async, skillfab_msgs::registry())
+    let mut skill = ForeignSkill::new("skillfab-bridge", Mode::Async, &[])
         .map_err(|e| BridgeError::Remote(e.to_string()))?;
     for (i, import) in imports.iter().enumerate() {
         // The port is named after the topic (`ctl query bridge.sonar`); a topic's `/` is not

@@ -80,17 +80,6 @@ pub enum BridgeError {
     /// The local manager could not be asked.
     #[error(transparent)]
     Client(#[from] ClientError),
-    /// An exported topic's type is known to no message file.
-    #[error("topic '{topic}' has type '{type_name}', found in no message file (SKILLFAB_MSG_PATH)")]
-    UnknownType {
-        /// The topic.
-        topic: String,
-        /// Its type.
-        type_name: String,
-    },
-    /// The message files could not be read.
-    #[error("message files: {0}")]
-    MessageFiles(String),
     /// The remote side.
     #[error("{0}")]
     Remote(String),

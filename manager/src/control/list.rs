@@ -42,6 +42,17 @@ impl Manager {
             .collect()
     }
 
+    /// The schema of `topic` as its producer declares it, else as a consumer does.
+    pub(super) fn topic_schema(&self, topic: &str) -> Result<Reply, ControlError> {
+        let decls = || self.skills.in_order().map(|(_, e)| &e.decl);
+        decls()
+            .flat_map(|d| d.outputs.iter())
+            .chain(decls().flat_map(|d| d.inputs.iter()))
+            .find(|p| p.topic == topic)
+            .map(|p| Reply::Schema(p.schema.clone()))
+            .ok_or_else(|| ControlError::UnknownTopic(topic.to_string()))
+    }
+
     /// Cycle statistics, per-skill figures and channel winners.
     pub(super) fn stats_info(&self) -> Stats {
         let l = self.stats.latency_us();

@@ -277,6 +277,7 @@ impl Manager {
             Request::Logging => Ok(self.logging()),
             Request::Record { file, topics } => self.record_request(file, topics),
             Request::SetPriority { skill, priority } => self.set_priority(client, skill, priority),
+            Request::TopicSchema(topic) => self.topic_schema(&topic),
             Request::BridgeReport(report) => {
                 self.bridges
                     .insert(report.name.clone(), (report, std::time::Instant::now()));

@@ -538,6 +538,17 @@ impl Client {
         self.done(Request::RemoveMonitor(id))
     }
 
+    /// The message schema of `topic`, as the skills that declare it declare it.
+    pub fn topic_schema(
+        &self,
+        topic: &str,
+    ) -> Result<skillfab_proto::schema::MessageSchema, ClientError> {
+        match self.request(&Request::TopicSchema(topic.into()))? {
+            Reply::Schema(s) => Ok(s),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
     /// Every monitor.
     pub fn monitors(&self) -> Result<Vec<MonitorInfo>, ClientError> {
         match self.request(&Request::ListMonitors)? {

@@ -118,6 +118,9 @@ pub enum Request {
     /// A bridge's figures (sent by `skillfab bridge` about once a second; shown in stats
     /// while they are fresh).
     BridgeReport(crate::bridge::BridgeStats),
+    /// The message schema of a topic, as the skills that declare it declare it (its
+    /// producer's first).
+    TopicSchema(String),
 }
 
 /// Encodes a request.

@@ -207,6 +207,8 @@ pub enum Reply {
         /// Skills whose input and output samples are logged.
         io_skills: Vec<String>,
     },
+    /// The message schema of a topic.
+    Schema(crate::schema::MessageSchema),
 }
 
 /// Why a request was refused. Every variant names what was wrong.
@@ -235,6 +237,9 @@ pub enum ControlError {
     /// Nothing has been published at that path yet.
     #[error("no value yet at '{0}'")]
     NoValue(String),
+    /// No registered skill declares the topic.
+    #[error("no skill declares topic '{0}'")]
+    UnknownTopic(String),
     /// A monitor expression that does not parse or type-check.
     #[error("bad expression '{expr}' {error}")]
     BadExpression {

@@ -37,10 +37,16 @@ struct Console {
 
 impl Console {
     fn start(t: &TestDomain, rows: u16, cols: u16) -> Console {
+        Console::start_with(t, rows, cols, &[])
+    }
+
+    /// With more `console` arguments (`--remote ENDPOINT`).
+    fn start_with(t: &TestDomain, rows: u16, cols: u16, args: &[&str]) -> Console {
         let pty = openpty(Some(&size(rows, cols)), None).expect("openpty");
         let slave: OwnedFd = pty.slave;
         let mut cmd = t.command("skillfab");
         cmd.arg("console")
+            .args(args)
             .env("TERM", "xterm-256color")
             .stdin(Stdio::from(slave.try_clone().unwrap()))
             .stdout(Stdio::from(slave.try_clone().unwrap()))
@@ -244,6 +250,49 @@ fn keys_drive_the_fabric() {
     con.keys(b"q");
     let status = con.wait_exit();
     assert!(status.success(), "console exit: {status}");
+}
+
+#[test]
+fn a_remote_console_shows_and_drives_a_domain_through_its_bridge() {
+    let mut t = TestDomain::new("consoleremote");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let launch = t.launch_file(&format!(
+        "{}[bridge]\nlisten = [\"{endpoint}\"]\n",
+        skillfab_tests::HELLO
+    ));
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("the hello network", || {
+        ["ticker", "scale", "smooth"]
+            .iter()
+            .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 2))
+    });
+    let client = Client::connect(&t.domain).unwrap();
+    let order: Vec<String> = client.list().unwrap().into_iter().map(|s| s.name).collect();
+    let scale = order.iter().position(|n| n == "scale").unwrap();
+
+    // Everything the console shows and does goes through the bridge.
+    let mut con = Console::start_with(&t, 40, 120, &["--remote", &endpoint]);
+    con.wait_for("skills (3)");
+    con.keys("j".repeat(scale).as_bytes());
+    let screen = con.wait_for("out scaled");
+    assert!(screen.contains("gain"), "{screen}");
+    con.keys(b"a");
+    t.wait_until("scale to be deactivated remotely", || {
+        client
+            .list()
+            .unwrap()
+            .iter()
+            .any(|s| s.name == "scale" && s.state == SkillState::Inactive)
+    });
+    con.wait_for("scale deactivated");
+    con.keys(b"q");
+    assert!(con.wait_exit().success());
 }
 
 #[test]

@@ -384,6 +384,38 @@ pub fn skill<'a>(report: &'a serde_json::Value, name: &str) -> &'a serde_json::V
         .unwrap_or_else(|| panic!("no skill '{name}' in report {report}"))
 }
 
+/// A TCP port on 127.0.0.1 nobody listens on now (a bridge binds it a moment later).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("bind a loopback port")
+        .local_addr()
+        .expect("the bound address")
+        .port()
+}
+
+/// A 6 m × 4 m box room; the robot at (2, 2) facing +x: the east wall is 4 m ahead, the
+/// nearest walls 2 m from its centre, barcode 9 straight ahead.
+pub const BOX_ROOM: &str = r#"
+name = "test-room"
+start = [2.0, 2.0, 0.0]
+outside = { min = [6.5, 0.0], max = [9.0, 4.0] }
+[[wall]]
+from = [0.0, 0.0]
+to = [6.0, 0.0]
+[[wall]]
+from = [6.0, 0.0]
+to = [6.0, 4.0]
+[[wall]]
+from = [6.0, 4.0]
+to = [0.0, 4.0]
+[[wall]]
+from = [0.0, 4.0]
+to = [0.0, 0.0]
+[[barcode]]
+id = 9
+at = [5.95, 2.0]
+"#;
+
 /// A 7 m × 5 m room with a 1.2 m door in the east wall and the barcode 0.7 m north of it;
 /// the robot starts 4 m away, facing the barcode's wall.
 pub const DOORWAY: &str = r#"

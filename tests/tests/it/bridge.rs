@@ -16,34 +16,6 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-/// A 6 m × 4 m room, the robot in its middle: the nearest walls are 2 m from its centre.
-const ROOM: &str = r#"
-name = "bridge-room"
-start = [2.0, 2.0, 0.0]
-outside = { min = [6.5, 0.0], max = [9.0, 4.0] }
-[[wall]]
-from = [0.0, 0.0]
-to = [6.0, 0.0]
-[[wall]]
-from = [6.0, 0.0]
-to = [6.0, 4.0]
-[[wall]]
-from = [6.0, 4.0]
-to = [0.0, 4.0]
-[[wall]]
-from = [0.0, 4.0]
-to = [0.0, 0.0]
-"#;
-
-/// A TCP port nobody listens on now (the bridge binds it a moment later).
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// The manager of `t` at 50 Hz.
 fn manager(t: &mut TestDomain) {
     t.spawn(
@@ -53,10 +25,10 @@ fn manager(t: &mut TestDomain) {
     t.board();
 }
 
-/// The simulated robot in [`ROOM`] and its device process, in `t`.
+/// The simulated robot in [`skillfab_tests::BOX_ROOM`] and its device process, in `t`.
 fn robot(t: &mut TestDomain) {
     let world = t.dir.join("room.toml");
-    std::fs::write(&world, ROOM).unwrap();
+    std::fs::write(&world, skillfab_tests::BOX_ROOM).unwrap();
     let link = t.dir.join("robot");
     t.spawn(
         "denning-sim",
@@ -91,7 +63,7 @@ fn value(c: &Client, path: &str) -> Option<f64> {
 #[test]
 fn a_remote_async_skill_computes_on_exported_sonar_and_a_local_skill_uses_it_across_a_link_cut() {
     let (mut a, mut b) = (TestDomain::new("bridgerobot"), TestDomain::new("bridgefar"));
-    let port = free_port();
+    let port = skillfab_tests::free_port();
     manager(&mut a);
     manager(&mut b);
     robot(&mut a);
@@ -193,7 +165,7 @@ fn a_remote_async_skill_computes_on_exported_sonar_and_a_local_skill_uses_it_acr
 #[test]
 fn remote_ctl_ls_set_query_monitor_and_logs_behave_as_local_ones() {
     let mut a = TestDomain::new("bridgectl");
-    let port = free_port();
+    let port = skillfab_tests::free_port();
     let listen = format!("tcp/127.0.0.1:{port}");
     // The hello network with a `[bridge]` section: `up` starts and supervises the bridge.
     let launch = a.launch_file(&format!(
@@ -318,7 +290,7 @@ fn a_type_mismatch_and_an_actuator_channel_are_refused_with_both_sides_named() {
     b.wait_until("guard to register", || {
         skillfab_tests::registered(&board, "guard").is_some()
     });
-    let port = free_port();
+    let port = skillfab_tests::free_port();
     let listen = format!("tcp/127.0.0.1:{port}");
     let an = a.domain.name().to_string();
     a.spawn(

@@ -142,6 +142,26 @@ impl Console {
     }
 }
 
+/// Selects scale (its detail pane shows its input and output decoded, and its parameter) and
+/// deactivates it with `a`; waits until the manager has it inactive and the console says so.
+fn select_and_deactivate_scale(t: &TestDomain, client: &Client, con: &mut Console) {
+    let order: Vec<String> = client.list().unwrap().into_iter().map(|s| s.name).collect();
+    let scale = order.iter().position(|n| n == "scale").unwrap();
+    con.keys("j".repeat(scale).as_bytes());
+    let screen = con.wait_for("out scaled");
+    assert!(screen.contains("in  tick"), "{screen}");
+    assert!(screen.contains("gain"), "{screen}");
+    con.keys(b"a");
+    t.wait_until("scale to be inactive", || {
+        client
+            .list()
+            .unwrap()
+            .iter()
+            .any(|s| s.name == "scale" && s.state == SkillState::Inactive)
+    });
+    con.wait_for("scale deactivated");
+}
+
 impl Drop for Console {
     fn drop(&mut self) {
         let _ = self.child.kill();
@@ -155,27 +175,10 @@ fn keys_drive_the_fabric() {
     let log = t.dir.join("params.jsonl");
     t.hello(&["--param-log", log.to_str().unwrap()]);
     let client = Client::connect(&t.domain).unwrap();
-    let order: Vec<String> = client.list().unwrap().into_iter().map(|s| s.name).collect();
-    let scale = order.iter().position(|n| n == "scale").unwrap();
 
     let mut con = Console::start(&t, 40, 120);
     con.wait_for("skills (3)");
-    // Select scale; its detail pane shows its input and output decoded, and its parameter.
-    con.keys("j".repeat(scale).as_bytes());
-    let screen = con.wait_for("out scaled");
-    assert!(screen.contains("in  tick"), "{screen}");
-    assert!(screen.contains("gain"), "{screen}");
-
-    // a: deactivate the selected skill.
-    con.keys(b"a");
-    t.wait_until("scale to be inactive", || {
-        client
-            .list()
-            .unwrap()
-            .iter()
-            .any(|s| s.name == "scale" && s.state == SkillState::Inactive)
-    });
-    con.wait_for("scale deactivated");
+    select_and_deactivate_scale(&t, &client, &mut con);
 
     // e: edit gain; an out-of-range value is refused with the manager's reason...
     con.keys(b"e");
@@ -255,12 +258,7 @@ fn keys_drive_the_fabric() {
 #[test]
 fn a_remote_console_shows_and_drives_a_domain_through_its_bridge() {
     let mut t = TestDomain::new("consoleremote");
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoint = format!("tcp/127.0.0.1:{}", skillfab_tests::free_port());
     let launch = t.launch_file(&format!(
         "{}[bridge]\nlisten = [\"{endpoint}\"]\n",
         skillfab_tests::HELLO
@@ -273,24 +271,11 @@ fn a_remote_console_shows_and_drives_a_domain_through_its_bridge() {
             .all(|n| skillfab_tests::registered(&board, n).is_some_and(|s| s.runs > 2))
     });
     let client = Client::connect(&t.domain).unwrap();
-    let order: Vec<String> = client.list().unwrap().into_iter().map(|s| s.name).collect();
-    let scale = order.iter().position(|n| n == "scale").unwrap();
 
     // Everything the console shows and does goes through the bridge.
     let mut con = Console::start_with(&t, 40, 120, &["--remote", &endpoint]);
     con.wait_for("skills (3)");
-    con.keys("j".repeat(scale).as_bytes());
-    let screen = con.wait_for("out scaled");
-    assert!(screen.contains("gain"), "{screen}");
-    con.keys(b"a");
-    t.wait_until("scale to be deactivated remotely", || {
-        client
-            .list()
-            .unwrap()
-            .iter()
-            .any(|s| s.name == "scale" && s.state == SkillState::Inactive)
-    });
-    con.wait_for("scale deactivated");
+    select_and_deactivate_scale(&t, &client, &mut con);
     con.keys(b"q");
     assert!(con.wait_exit().success());
 }

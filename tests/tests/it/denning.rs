@@ -12,28 +12,6 @@ use skillfab_tests::{TestDomain, bin};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// A 6 m × 4 m box room; the robot at (2, 2) facing +x: the east wall is 4 m ahead.
-const ROOM: &str = r#"
-name = "test-room"
-start = [2.0, 2.0, 0.0]
-outside = { min = [6.5, 0.0], max = [9.0, 4.0] }
-[[wall]]
-from = [0.0, 0.0]
-to = [6.0, 0.0]
-[[wall]]
-from = [6.0, 0.0]
-to = [6.0, 4.0]
-[[wall]]
-from = [6.0, 4.0]
-to = [0.0, 4.0]
-[[wall]]
-from = [0.0, 4.0]
-to = [0.0, 0.0]
-[[barcode]]
-id = 9
-at = [5.95, 2.0]
-"#;
-
 struct Robot {
     t: TestDomain,
     sim: usize,
@@ -59,7 +37,7 @@ impl Robot {
     fn start(tag: &str, sim_args: &[&str]) -> Robot {
         let mut t = TestDomain::new(tag);
         let world = t.dir.join("room.toml");
-        std::fs::write(&world, ROOM).unwrap();
+        std::fs::write(&world, skillfab_tests::BOX_ROOM).unwrap();
         let link = t.dir.join("robot");
         let trajectory = t.dir.join("trajectory.csv");
         t.spawn(

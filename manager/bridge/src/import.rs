@@ -3,7 +3,7 @@
 //! latest sample and its age; the cycle never waits for the network. A sample is published as
 //! it arrives (the Zenoh thread wakes the skill), not at the next cycle.
 
-use crate::figures::{Arrival, TopicFigures};
+use crate::figures::{Arrival, Refusal, TopicFigures};
 use crate::{BridgeError, zenoh_error};
 use skill_sdk::foreign::ForeignSkill;
 use skill_sdk::prelude::Mode;
@@ -42,7 +42,12 @@ pub(crate) fn remote_schema(
         if let Ok(sample) = reply.result() {
             return postcard::from_bytes(&sample.payload().to_bytes())
                 .map(Some)
-                .map_err(|e| BridgeError::Remote(format!("unreadable schema of '{topic}': {e}")));
+                .map_err(|e| {
+                    BridgeError::Remote(format!(
+                        "cannot import '{topic}' from domain '{from}': its exporter's schema is \
+                         unreadable ({e}; another skillfab version?)"
+                    ))
+                });
         }
     }
     Ok(None)
@@ -68,6 +73,13 @@ pub(crate) fn never_importable(topic: &str, from: &str) -> Option<String> {
 /// one a local skill declares with another type (both sides named).
 pub(crate) fn refusal(import: &Import, skills: &[SkillInfo], bridge: &str) -> Option<String> {
     let topic = &import.topic;
+    if let Some(why) = unsound(&import.schema) {
+        return Some(format!(
+            "cannot import '{topic}' from domain '{}': its exporter declares {}: {why}",
+            import.from,
+            describe(&import.schema)
+        ));
+    }
     for s in skills.iter().filter(|s| s.name != bridge) {
         if let Some(o) = s.outputs.iter().find(|o| o.topic == *topic) {
             return Some(format!(
@@ -94,6 +106,23 @@ pub(crate) fn refusal(import: &Import, skills: &[SkillInfo], bridge: &str) -> Op
     None
 }
 
+/// The largest sample an import takes (a shared-memory sample of this size is set aside per
+/// imported topic).
+const MAX_IMPORT_SIZE: u32 = 256 << 20;
+
+/// What is wrong with a remote schema no local publisher could be made for.
+fn unsound(s: &MessageSchema) -> Option<&'static str> {
+    if !s.align.is_power_of_two() || s.align > 4096 {
+        Some("its alignment is not a power of two up to 4096")
+    } else if !s.size.is_multiple_of(s.align) {
+        Some("its size is not a multiple of its alignment")
+    } else if s.size > MAX_IMPORT_SIZE {
+        Some("it is larger than the 256 MiB an import takes")
+    } else {
+        None
+    }
+}
+
 /// The newest sample of each import not yet republished.
 type Pending = Arc<Mutex<Vec<Option<(Vec<u8>, SampleMeta)>>>>;
 
@@ -106,8 +135,7 @@ pub(crate) fn serve(
     figures: &[TopicFigures],
     mut skill_args: Vec<String>,
 ) -> Result<(), BridgeError> {
-    let mut skill = ForeignSkill::new("skillfab-bridge", Mode::Async, &[])
-        .map_err(|e| BridgeError::Remote(e.to_string()))?;
+    let mut skill = ForeignSkill::new("skillfab-bridge", Mode::Async, &[])?;
     for (i, import) in imports.iter().enumerate() {
         // The port is named after the topic (`ctl query bridge.sonar`); a topic's `/` is not
         // allowed in a port name.
@@ -115,9 +143,7 @@ pub(crate) fn serve(
         if skill.outputs().iter().any(|p| p.port == port) {
             port = format!("{port}_{i}");
         }
-        skill
-            .output_schema(&port, import.schema.clone())
-            .map_err(|e| BridgeError::Remote(format!("topic '{}': {e}", import.topic)))?;
+        skill.output_schema(&port, import.schema.clone())?;
         skill_args.extend(["--remap".to_string(), format!("{port}={}", import.topic)]);
     }
     let pending: Pending = Arc::new(Mutex::new(vec![None; imports.len()]));
@@ -135,19 +161,14 @@ pub(crate) fn serve(
                 let meta = s
                     .attachment()
                     .and_then(|a| SampleMeta::decode(&a.to_bytes()).ok());
-                let Some(meta) = meta else {
-                    return refuse(&told, &topic, "a sample without its type");
-                };
                 let bytes = s.payload().to_bytes();
-                if fig.arrived(&meta, size, align) == Arrival::Refused
-                    || bytes.len() != size as usize
-                {
-                    return refuse(
-                        &told,
-                        &topic,
-                        &format!("{} ({} B, align {})", meta.type_name, meta.size, meta.align),
-                    );
-                }
+                let arrival = fig.arrived(meta.as_ref(), bytes.len(), size, align);
+                let (Arrival::Taken { .. }, Some(meta)) = (arrival.clone(), meta) else {
+                    if let Arrival::Refused(why) = arrival {
+                        refuse(&told, &topic, &why);
+                    }
+                    return;
+                };
                 if let Ok(mut p) = pending.lock() {
                     p[i] = Some((bytes.into_owned(), meta));
                 }
@@ -176,18 +197,58 @@ pub(crate) fn serve(
         }
         Ok(())
     }));
-    skill_sdk::foreign::run(skill, skill_args).map_err(|e| BridgeError::Remote(e.to_string()))?;
+    skill_sdk::foreign::run(skill, skill_args)?;
     drop(subscribers);
     Ok(())
 }
 
-/// A sample whose type is not the topic's here: dropped, counted, said once.
-fn refuse(told: &std::sync::atomic::AtomicBool, topic: &str, got: &str) {
+/// A sample that cannot be republished here: dropped, counted (`ctl stats`), said once per
+/// topic.
+fn refuse(told: &std::sync::atomic::AtomicBool, topic: &str, why: &Refusal) {
     if !told.swap(true, std::sync::atomic::Ordering::Relaxed) {
         tracing::error!(
             topic,
-            got,
-            "remote sample refused: its type is not the topic's here"
+            "remote sample refused: {why} (counted from now on, said once)"
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn import(size: u32, align: u32) -> Import {
+        Import {
+            topic: "tick".into(),
+            from: "far".into(),
+            schema: MessageSchema {
+                type_name: "far.Odd".into(),
+                doc: String::new(),
+                size,
+                align,
+                fields: Vec::new(),
+            },
+        }
+    }
+
+    #[test]
+    fn a_remote_schema_no_publisher_could_take_is_refused_with_why() {
+        assert_eq!(refusal(&import(8, 8), &[], "bridge"), None);
+        let why = refusal(&import(8, 3), &[], "bridge").unwrap_or_default();
+        assert!(
+            why.contains("cannot import 'tick' from domain 'far'")
+                && why.contains("far.Odd (8 B, align 3)")
+                && why.contains("not a power of two"),
+            "{why}"
+        );
+        assert!(refusal(&import(12, 8), &[], "bridge").is_some());
+        assert!(refusal(&import(512 << 20, 8), &[], "bridge").is_some());
+    }
+
+    #[test]
+    fn an_actuator_channel_is_never_importable() {
+        let why = never_importable("channel/drive", "far").unwrap_or_default();
+        assert!(why.contains("sync input"), "{why}");
+        assert_eq!(never_importable("sonar", "far"), None);
     }
 }

@@ -80,6 +80,12 @@ pub enum BridgeError {
     /// The local manager could not be asked.
     #[error(transparent)]
     Client(#[from] ClientError),
+    /// The bridge's importing skill could not be declared (a remote schema it cannot take).
+    #[error("the importing skill: {0}")]
+    Declare(#[from] skill_sdk::foreign::DeclError),
+    /// The bridge's importing skill failed to run.
+    #[error("the importing skill: {0}")]
+    Skill(#[from] skill_sdk::foreign::RunError),
     /// The remote side.
     #[error("{0}")]
     Remote(String),
@@ -95,13 +101,70 @@ pub(crate) fn zenoh_error(what: &str, e: impl std::fmt::Display) -> BridgeError 
     }
 }
 
-/// Set when the bridge is to end. Only the main thread reads iceoryx2's termination flag
-/// (a read clears it); the other threads look here.
-static STOP: AtomicBool = AtomicBool::new(false);
+/// Set when the bridge is to end, seen by its threads. Only the main thread reads iceoryx2's
+/// termination flag (a read clears it); it sets this one for the others.
+#[derive(Clone, Default)]
+pub(crate) struct Stop(Arc<AtomicBool>);
 
-/// Whether the bridge is ending (see [`STOP`]).
-pub(crate) fn stopping() -> bool {
-    STOP.load(Ordering::Acquire)
+impl Stop {
+    /// Whether the bridge is ending.
+    pub(crate) fn is_set(&self) -> bool {
+        self.0.load(Ordering::Acquire)
+    }
+
+    fn set(&self) {
+        self.0.store(true, Ordering::Release);
+    }
+}
+
+/// The bridge's threads: on every way out of [`run`] (an error included) they are told to
+/// stop and joined.
+struct Threads {
+    stop: Stop,
+    handles: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl Threads {
+    /// Runs `job` on a thread of its own; its error is logged and kept for the reports.
+    fn spawn(
+        &mut self,
+        what: &'static str,
+        errors: &Errors,
+        job: impl FnOnce(Stop) -> Result<(), BridgeError> + Send + 'static,
+    ) {
+        let (stop, errors) = (self.stop.clone(), errors.clone());
+        self.handles.push(std::thread::spawn(move || {
+            if let Err(e) = job(stop) {
+                tracing::error!(error = %e, "{what} stopped");
+                errors.push(format!("{what} stopped: {e}"));
+            }
+        }));
+    }
+}
+
+impl Drop for Threads {
+    fn drop(&mut self) {
+        self.stop.set();
+        for t in self.handles.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Why topics are not carried, shared by the threads that find out and the reporter.
+#[derive(Clone, Default)]
+pub(crate) struct Errors(Arc<std::sync::Mutex<Vec<String>>>);
+
+impl Errors {
+    pub(crate) fn push(&self, why: String) {
+        if let Ok(mut e) = self.0.lock() {
+            e.push(why);
+        }
+    }
+
+    fn all(&self) -> Vec<String> {
+        self.0.lock().map(|e| e.clone()).unwrap_or_default()
+    }
 }
 
 /// How often the bridge reports its figures to the manager.
@@ -147,20 +210,30 @@ pub fn run(domain: &Domain, args: &BridgeArgs) -> Result<(), BridgeError> {
     let Some(local) = local else { return Ok(()) };
 
     let requests = Arc::new(AtomicU64::new(0));
+    let errors = Errors::default();
+    let mut threads = Threads {
+        stop: Stop::default(),
+        handles: Vec::new(),
+    };
+    // The control plane first: a topic still waited for holds up nothing else.
+    if !args.no_control {
+        let (s, d, r) = (session.clone(), domain.clone(), requests.clone());
+        threads.spawn("remote control", &errors, move |stop| {
+            remote::serve_control(&s, &d, r, &stop)
+        });
+        let (s, d) = (session.clone(), domain.clone());
+        threads.spawn("event forwarding", &errors, move |stop| {
+            remote::forward_events(&s, &d, &stop)
+        });
+        let (s, d, n) = (session.clone(), domain.clone(), args.name.clone());
+        threads.spawn("log forwarding", &errors, move |stop| {
+            remote::forward_logs(&s, &d, &n, &stop)
+        });
+    }
     let mut exports = Vec::new();
-    let mut errors = Vec::new();
-    let mut threads = Vec::new();
     for topic in &args.export {
-        let schema = loop {
-            if let Some(s) = export::local_schema(&local, topic)? {
-                break s;
-            }
-            tracing::info!(topic, "waiting for a local skill that declares the topic");
-            if node.wait(SCHEMA_WAIT).is_err() {
-                return Ok(());
-            }
-        };
-        let figures = TopicFigures::new(topic, "", &schema.type_name);
+        // The type is known once a local skill declares the topic (the export's thread asks).
+        let figures = TopicFigures::new(topic, "", "");
         exports.push(figures.clone());
         let (session, domain, name, topic) = (
             session.clone(),
@@ -168,44 +241,30 @@ pub fn run(domain: &Domain, args: &BridgeArgs) -> Result<(), BridgeError> {
             args.name.clone(),
             topic.clone(),
         );
-        threads.push(std::thread::spawn(move || {
-            if let Err(e) = export::serve(&session, &domain, &name, &topic, &schema, &figures) {
-                tracing::error!(topic, error = %e, "export stopped");
-            }
-        }));
-    }
-    if !args.no_control {
-        let (s, d, r) = (session.clone(), domain.clone(), requests.clone());
-        threads.push(std::thread::spawn(move || {
-            if let Err(e) = remote::serve_control(&s, &d, r) {
-                tracing::error!(error = %e, "remote control stopped");
-            }
-        }));
-        let (s, d) = (session.clone(), domain.clone());
-        threads.push(std::thread::spawn(move || {
-            if let Err(e) = remote::forward_events(&s, &d) {
-                tracing::error!(error = %e, "event forwarding stopped");
-            }
-        }));
-        let (s, d, n) = (session.clone(), domain.clone(), args.name.clone());
-        threads.push(std::thread::spawn(move || {
-            if let Err(e) = remote::forward_logs(&s, &d, &n) {
-                tracing::error!(error = %e, "log forwarding stopped");
-            }
-        }));
+        threads.spawn("export", &errors, move |stop| {
+            export::serve(&session, &domain, &name, &topic, &figures, &stop)
+        });
     }
 
     let mut imports = Vec::new();
     for topic in &args.import {
         let schema = loop {
-            if let Some(s) = import::remote_schema(&session, &from, topic, SCHEMA_WAIT)? {
-                break s;
+            match import::remote_schema(&session, &from, topic, SCHEMA_WAIT) {
+                Ok(Some(s)) => break Some(s),
+                Ok(None) => {}
+                // An exporter answered nonsense: this topic is refused, the others go on.
+                Err(e) => {
+                    tracing::error!("{e}");
+                    errors.push(e.to_string());
+                    break None;
+                }
             }
             tracing::info!(topic, from = %from, "waiting for the remote bridge that exports the topic");
             if node.wait(Duration::from_millis(100)).is_err() {
                 return Ok(());
             }
         };
+        let Some(schema) = schema else { continue };
         let import = import::Import {
             topic: topic.clone(),
             from: from.clone(),
@@ -224,19 +283,20 @@ pub fn run(domain: &Domain, args: &BridgeArgs) -> Result<(), BridgeError> {
         .map(|i| TopicFigures::new(&i.topic, &i.from, &i.schema.type_name))
         .collect();
 
-    {
-        let report = Reporter {
-            name: args.name.clone(),
-            domain: domain.clone(),
-            session: session.clone(),
-            exports,
-            imports: import_figures.clone(),
-            requests,
-            errors,
-        };
-        drop(local);
-        threads.push(std::thread::spawn(move || report.run()));
-    }
+    let report = Reporter {
+        name: args.name.clone(),
+        domain: domain.clone(),
+        session: session.clone(),
+        exports,
+        imports: import_figures.clone(),
+        requests,
+        errors: errors.clone(),
+    };
+    drop(local);
+    threads.spawn("reports", &errors, move |stop| {
+        report.run(&stop);
+        Ok(())
+    });
 
     if imports.is_empty() {
         while node.wait(Duration::from_millis(200)).is_ok() {}
@@ -250,11 +310,8 @@ pub fn run(domain: &Domain, args: &BridgeArgs) -> Result<(), BridgeError> {
         ];
         import::serve(&session, &imports, &import_figures, skill_args)?;
     }
-    STOP.store(true, Ordering::Release);
     tracing::info!("bridge leaving");
-    for t in threads {
-        let _ = t.join();
-    }
+    drop(threads);
     session
         .close()
         .wait()
@@ -292,17 +349,17 @@ struct Reporter {
     exports: Vec<TopicFigures>,
     imports: Vec<TopicFigures>,
     requests: Arc<AtomicU64>,
-    errors: Vec<String>,
+    errors: Errors,
 }
 
 impl Reporter {
-    fn run(self) {
+    fn run(self, stop: &Stop) {
         // A client is not `Send`: this thread has its own.
         let mut client = Client::connect(&self.domain).ok();
         let mut next = Instant::now();
         // Whether the link was up at the last look, and ever.
         let (mut was_up, mut ever_up, mut reconnects) = (false, false, 0u64);
-        while !stopping() {
+        while !stop.is_set() {
             let now = Instant::now();
             if now < next {
                 std::thread::sleep((next - now).min(Duration::from_millis(200)));
@@ -328,7 +385,7 @@ impl Reporter {
                 exports: self.exports.iter().map(TopicFigures::report).collect(),
                 imports: self.imports.iter().map(TopicFigures::report).collect(),
                 requests: self.requests.load(Ordering::Relaxed),
-                errors: self.errors.clone(),
+                errors: self.errors.all(),
             };
             if client.is_none() {
                 client = Client::connect(&self.domain).ok();

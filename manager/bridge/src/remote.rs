@@ -7,7 +7,7 @@
 //! hold up another's requests) and replies with the manager's encoded answer — or, when there
 //! is no answer to give, a [`RemoteFailure`].
 
-use crate::{BridgeError, zenoh_error};
+use crate::{BridgeError, Stop, zenoh_error};
 use skillfab_client::{Client, ClientError};
 use skillfab_proto::bridge::RemoteFailure;
 use skillfab_proto::control::{self, Response};
@@ -18,13 +18,18 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use zenoh::Wait;
 use zenoh::query::Query;
 
-/// A remote client's worker ends after this long without a request (its local client, and
-/// the monitors that belonged to it, go with it).
+/// A remote client's worker is let go after this long without a request (its local client,
+/// and the monitors that belonged to it, go with it).
 const CLIENT_IDLE: Duration = Duration::from_secs(300);
+
+/// Remote clients served at once. Each holds one of the manager's control places
+/// ([`skillfab_proto::services::CONTROL_MAX_CLIENTS`]); beyond this many, the one heard
+/// from least recently is let go, so remote clients can never crowd out local ones.
+const MAX_REMOTE_CLIENTS: usize = 32;
 
 /// How often log lines are picked up (the log stream has no event service: readers poll).
 const LOG_POLL: Duration = Duration::from_millis(50);
@@ -37,6 +42,7 @@ pub(crate) fn serve_control(
     session: &zenoh::Session,
     domain: &Domain,
     requests: Arc<AtomicU64>,
+    stop: &Stop,
 ) -> Result<(), BridgeError> {
     let (tx, rx) = channel::<Query>();
     let _queryable = session
@@ -46,8 +52,11 @@ pub(crate) fn serve_control(
         })
         .wait()
         .map_err(|e| zenoh_error("control queryable", e))?;
-    let mut workers: HashMap<String, Sender<(Query, control::RequestEnvelope)>> = HashMap::new();
-    while !crate::stopping() {
+    let mut workers: HashMap<String, Worker> = HashMap::new();
+    while !stop.is_set() {
+        // Idle workers are let go here, by the only thread that sends to them: a request is
+        // never handed to a worker that is ending (one that is let go finishes its queue).
+        workers.retain(|_, w| w.last.elapsed() < CLIENT_IDLE);
         let query = match rx.recv_timeout(TICK) {
             Ok(q) => q,
             Err(RecvTimeoutError::Timeout) => continue,
@@ -66,22 +75,41 @@ pub(crate) fn serve_control(
                 continue;
             }
         };
-        let mut job = (query, envelope);
-        // A worker that ended (idle) is replaced; the job goes to the new one.
-        for _ in 0..2 {
-            let worker = workers
-                .entry(job.1.client.clone())
-                .or_insert_with(|| spawn_worker(domain.clone()));
-            match worker.send(job) {
-                Ok(()) => break,
-                Err(back) => {
-                    job = back.0;
-                    workers.remove(&job.1.client);
-                }
-            }
+        let id = envelope.client.clone();
+        if !workers.contains_key(&id)
+            && workers.len() >= MAX_REMOTE_CLIENTS
+            && let Some(oldest) = workers
+                .iter()
+                .min_by_key(|(_, w)| w.last)
+                .map(|(k, _)| k.clone())
+        {
+            tracing::info!(
+                client = %oldest,
+                "{MAX_REMOTE_CLIENTS} remote clients: the least recently heard from is let go"
+            );
+            workers.remove(&oldest);
+        }
+        let worker = workers.entry(id.clone()).or_insert_with(|| Worker {
+            jobs: spawn_worker(domain.clone()),
+            last: Instant::now(),
+        });
+        worker.last = Instant::now();
+        if let Err(back) = worker.jobs.send((query, envelope)) {
+            // Its thread is gone (it panicked): said, and a fresh one serves the next request.
+            workers.remove(&id);
+            fail(
+                &(back.0).0,
+                &RemoteFailure::Other("the bridge's worker for this client failed".into()),
+            );
         }
     }
     Ok(())
+}
+
+/// One remote client's worker: its job queue, and when it was last given one.
+struct Worker {
+    jobs: Sender<(Query, control::RequestEnvelope)>,
+    last: Instant,
 }
 
 fn reply(query: &Query, response: &Response) {
@@ -107,7 +135,8 @@ fn spawn_worker(domain: Domain) -> Sender<(Query, control::RequestEnvelope)> {
 
 fn work(domain: &Domain, jobs: &Receiver<(Query, control::RequestEnvelope)>) {
     let mut client: Option<Client> = None;
-    while let Ok((query, envelope)) = jobs.recv_timeout(CLIENT_IDLE) {
+    // Until the dispatcher lets the worker go (and its queue is done).
+    while let Ok((query, envelope)) = jobs.recv() {
         if client.is_none() {
             match Client::connect(domain) {
                 Ok(c) => client = Some(c),
@@ -134,24 +163,30 @@ fn failure(e: &ClientError) -> RemoteFailure {
     match e {
         ClientError::NoManager(d) => RemoteFailure::NoManager(d.clone()),
         ClientError::Timeout(t) => RemoteFailure::Timeout(t.as_millis() as u64),
+        ClientError::Full { max } => RemoteFailure::Full(*max as u32),
         other => RemoteFailure::Other(other.to_string()),
     }
 }
 
 /// Forwards every event of the domain to `skillfab/<domain>/events` until the process is
 /// asked to end (reconnecting to a manager that left and came back).
-pub(crate) fn forward_events(session: &zenoh::Session, domain: &Domain) -> Result<(), BridgeError> {
+pub(crate) fn forward_events(
+    session: &zenoh::Session,
+    domain: &Domain,
+    stop: &Stop,
+) -> Result<(), BridgeError> {
     let publisher = session
         .declare_publisher(names::remote_events(domain.name()))
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .wait()
         .map_err(|e| zenoh_error("events publisher", e))?;
     let mut client: Option<Client> = None;
-    while !crate::stopping() {
+    let mut failing = false;
+    while !stop.is_set() {
         let Some(c) = client.as_mut() else {
             client = Client::connect(domain)
                 .ok()
-                .and_then(|mut c| c.subscribe().ok().map(|()| c));
+                .and_then(|c| c.subscribe().ok().map(|()| c));
             if client.is_none() {
                 std::thread::sleep(TICK);
             }
@@ -159,10 +194,11 @@ pub(crate) fn forward_events(session: &zenoh::Session, domain: &Domain) -> Resul
         };
         match c.next_event(TICK) {
             Ok(Some(ev)) => {
-                if let Ok(bytes) = control::encode_event(&ev)
-                    && let Err(e) = publisher.put(bytes).wait()
-                {
-                    tracing::warn!(error = %e, "event not forwarded");
+                if let Ok(bytes) = control::encode_event(&ev) {
+                    match publisher.put(bytes).wait() {
+                        Ok(()) => failing = false,
+                        Err(e) => warn_once(&mut failing, "event not forwarded", &e),
+                    }
                 }
             }
             Ok(None) => {}
@@ -178,21 +214,49 @@ pub(crate) fn forward_logs(
     session: &zenoh::Session,
     domain: &Domain,
     bridge: &str,
+    stop: &Stop,
 ) -> Result<(), BridgeError> {
     let publisher = session
         .declare_publisher(names::remote_logs(domain.name()))
         .wait()
         .map_err(|e| zenoh_error("logs publisher", e))?;
-    let reader = LogReader::open(domain, &format!("{bridge}-logs"))?;
-    while !crate::stopping() {
+    let mut reader: Option<LogReader> = None;
+    let mut failing = false;
+    while !stop.is_set() {
         std::thread::sleep(LOG_POLL);
-        for line in reader.poll()? {
-            if let Ok(bytes) = skillfab_proto::log::encode(&line)
-                && let Err(e) = publisher.put(bytes).wait()
-            {
-                tracing::warn!(error = %e, "log line not forwarded");
+        let lines = match reader.as_ref() {
+            Some(r) => r.poll(),
+            None => LogReader::open(domain, &format!("{bridge}-logs")).and_then(|r| {
+                let lines = r.poll();
+                reader = Some(r);
+                lines
+            }),
+        };
+        let lines = match lines {
+            Ok(lines) => lines,
+            Err(e) => {
+                // Opened afresh at the next poll; said once per run of failures.
+                reader = None;
+                warn_once(&mut failing, "log lines not read", &e);
+                continue;
+            }
+        };
+        for line in lines {
+            if let Ok(bytes) = skillfab_proto::log::encode(&line) {
+                match publisher.put(bytes).wait() {
+                    Ok(()) => failing = false,
+                    Err(e) => warn_once(&mut failing, "log line not forwarded", &e),
+                }
             }
         }
     }
     Ok(())
+}
+
+/// Logs the first failure of a run of them (`failing` is cleared by the next success).
+pub(crate) fn warn_once(failing: &mut bool, what: &str, e: &dyn std::fmt::Display) {
+    if !*failing {
+        tracing::warn!(error = %e, "{what} (said once until it works again)");
+        *failing = true;
+    }
 }

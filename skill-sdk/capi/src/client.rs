@@ -73,7 +73,7 @@ pub unsafe extern "C" fn sf_client_connect(domain: *const c_char) -> *mut sf_cli
         };
         // Subscribed at once: a monitor installed next may fire before the first
         // sf_client_next_event, and its event must not be lost.
-        match Client::connect(&d).and_then(|mut inner| inner.subscribe().map(|()| inner)) {
+        match Client::connect(&d).and_then(|inner| inner.subscribe().map(|()| inner)) {
             Ok(inner) => Box::into_raw(Box::new(sf_client {
                 inner,
                 pending: None,

@@ -70,9 +70,33 @@ pub enum ClientError {
     /// An answer of the wrong kind for the request.
     #[error("unexpected answer: {0}")]
     Unexpected(String),
-    /// The link to a remote domain (Zenoh, its bridge) failed.
-    #[error("remote: {0}")]
-    Remote(String),
+    /// A Zenoh session could not be opened or configured, or refused a request.
+    #[error("zenoh: {what}: {reason}")]
+    Zenoh {
+        /// What was being done.
+        what: String,
+        /// Zenoh's reason.
+        reason: String,
+    },
+    /// No bridge of the remote domain answered (not running, not reachable, or another
+    /// domain name on that host).
+    #[error("no bridge of domain '{domain}' answered {through} within {timeout:?}")]
+    NoBridge {
+        /// The remote domain asked for.
+        domain: String,
+        /// The endpoints tried ("through tcp/…"), or the configuration file's.
+        through: String,
+        /// How long the client waited.
+        timeout: Duration,
+    },
+    /// The remote domain's bridge could not carry the request out.
+    #[error("the bridge of domain '{domain}': {reason}")]
+    Remote {
+        /// The remote domain.
+        domain: String,
+        /// The bridge's reason.
+        reason: String,
+    },
 }
 
 fn sdk(what: &str, e: impl std::fmt::Debug) -> ClientError {
@@ -161,8 +185,9 @@ struct Local {
     wake: Notifier<ipc::Service>,
     answers: Listener<ipc::Service>,
     node: Node<ipc::Service>,
-    /// Subscribed on first use: a client that never reads events costs the manager nothing.
-    events: Option<EventsPort>,
+    /// Subscribed on first use (a monitor installed, an event read): a client that never
+    /// reads events costs the manager nothing.
+    events: Mutex<Option<EventsPort>>,
     /// Opened on first use ([`Client::log_lines`]).
     logs: Option<LogReader>,
 }
@@ -209,7 +234,7 @@ impl Client {
                 node,
                 wake,
                 answers,
-                events: None,
+                events: Mutex::new(None),
                 logs: None,
             })),
             seq: AtomicU64::new(0),
@@ -410,24 +435,32 @@ impl Local {
             .map(|b| b.header().manager_pid.load(Ordering::Acquire))
     }
 
+    fn events(&self) -> Result<std::sync::MutexGuard<'_, Option<EventsPort>>, ClientError> {
+        self.events
+            .lock()
+            .map_err(|_| ClientError::Unexpected("client poisoned".into()))
+    }
+
     /// Subscribes to the events stream.
-    fn subscribe(&mut self) -> Result<(), ClientError> {
-        if self.events.is_none() {
+    fn subscribe(&self) -> Result<(), ClientError> {
+        let mut events = self.events()?;
+        if events.is_none() {
             let listener = services::listener(&self.node, &names::events())?;
             let sub = services::events_service(&self.node)?
                 .subscriber_builder()
                 .buffer_size(services::EVENT_BUFFER)
                 .create()
                 .map_err(|e| sdk("events subscriber", e))?;
-            self.events = Some((sub, listener));
+            *events = Some((sub, listener));
         }
         Ok(())
     }
 
     /// The next encoded event, waiting at most `timeout`.
-    fn next_event(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, ClientError> {
+    fn next_event(&self, timeout: Duration) -> Result<Option<Vec<u8>>, ClientError> {
         self.subscribe()?;
-        let Some((events, listener)) = self.events.as_ref() else {
+        let events = self.events()?;
+        let Some((events, listener)) = events.as_ref() else {
             return Ok(None);
         };
         let deadline = Instant::now() + timeout;
@@ -516,13 +549,17 @@ impl Client {
         }
     }
 
-    /// Installs a monitor; its firings arrive as events. Returns its id.
+    /// Installs a monitor; its firings arrive as events ([`Client::next_event`]). Returns its
+    /// id. The client is subscribed to events first, so not even a firing in the very next
+    /// cycle is missed (over a bridge, the subscription reaches the far side before the
+    /// request does: one link, in order).
     pub fn add_monitor(
         &self,
         expr: &str,
         mode: MonitorMode,
         hold: u32,
     ) -> Result<u64, ClientError> {
+        self.subscribe()?;
         match self.request(&Request::AddMonitor {
             expr: expr.into(),
             mode,
@@ -647,11 +684,11 @@ impl Client {
 
     /// Subscribes to the events stream (done by the first [`Client::next_event`] too): every
     /// event published from now on can be read.
-    pub fn subscribe(&mut self) -> Result<(), ClientError> {
-        match &mut self.link {
+    pub fn subscribe(&self) -> Result<(), ClientError> {
+        match &self.link {
             Link::Local(l) => l.subscribe(),
             Link::Remote(r) => r
-                .get_mut()
+                .lock()
                 .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
                 .subscribe(),
         }

@@ -40,8 +40,15 @@ pub struct ZenohOptions {
 
 /// Why a Zenoh session could not be opened.
 fn zenoh_error(what: &str, e: impl std::fmt::Display) -> ClientError {
-    ClientError::Remote(format!("{what}: {e}"))
+    ClientError::Zenoh {
+        what: what.to_string(),
+        reason: e.to_string(),
+    }
 }
+
+/// How much longer a remote client waits than its bridge does for the manager: a slow
+/// manager is reported as such (the bridge's `Timeout`), not as a bridge that never answered.
+const BRIDGE_MARGIN: Duration = Duration::from_secs(2);
 
 /// The Zenoh configuration for `o`: multicast scouting off and no listener unless asked
 /// (a bridge is reached where it is told to be), then `o`'s mode and endpoints.
@@ -120,26 +127,32 @@ impl Remote {
         Ok(Remote {
             session: open(o)?,
             domain: domain.to_string(),
-            endpoint: o.connect.join(", "),
+            endpoint: if o.connect.is_empty() {
+                "through the endpoints of the Zenoh configuration".to_string()
+            } else {
+                format!("through {}", o.connect.join(", "))
+            },
             events: None,
             logs: None,
         })
     }
 
-    /// Sends an encoded request to the domain's bridge and waits for its manager's answer.
+    /// Sends an encoded request to the domain's bridge and waits for its manager's answer
+    /// (the bridge waits `timeout` for the manager; this side a little longer).
     pub(crate) fn request(&self, bytes: Vec<u8>, timeout: Duration) -> Result<Reply, ClientError> {
         let replies = self
             .session
             .get(names::remote_control(&self.domain))
             .payload(bytes)
-            .timeout(timeout)
+            .timeout(timeout + BRIDGE_MARGIN)
             .wait()
             .map_err(|e| zenoh_error("remote request", e))?;
         let Ok(reply) = replies.recv() else {
-            return Err(ClientError::Remote(format!(
-                "no bridge of domain '{}' answered through {} within {timeout:?}",
-                self.domain, self.endpoint
-            )));
+            return Err(ClientError::NoBridge {
+                domain: self.domain.clone(),
+                through: self.endpoint.clone(),
+                timeout: timeout + BRIDGE_MARGIN,
+            });
         };
         match reply.result() {
             Ok(sample) => {
@@ -147,20 +160,24 @@ impl Remote {
                     .map_err(|e| ClientError::Decode(e.to_string()))?;
                 Ok(response?)
             }
-            Err(e) => Err(
-                match postcard::from_bytes::<RemoteFailure>(&e.payload().to_bytes()) {
+            Err(e) => {
+                let bytes = e.payload().to_bytes();
+                Err(match postcard::from_bytes::<RemoteFailure>(&bytes) {
                     Ok(RemoteFailure::NoManager(d)) => ClientError::NoManager(d),
                     Ok(RemoteFailure::Timeout(ms)) => {
                         ClientError::Timeout(Duration::from_millis(ms))
                     }
-                    Ok(RemoteFailure::Other(text)) => ClientError::Remote(text),
-                    Err(_) => ClientError::Remote(format!(
-                        "the bridge of domain '{}' failed: {}",
-                        self.domain,
-                        String::from_utf8_lossy(&e.payload().to_bytes())
-                    )),
-                },
-            ),
+                    Ok(RemoteFailure::Full(max)) => ClientError::Full { max: max as usize },
+                    Ok(failure) => ClientError::Remote {
+                        domain: self.domain.clone(),
+                        reason: failure.to_string(),
+                    },
+                    Err(_) => ClientError::Remote {
+                        domain: self.domain.clone(),
+                        reason: String::from_utf8_lossy(&bytes).into_owned(),
+                    },
+                })
+            }
         }
     }
 

@@ -40,14 +40,21 @@ impl SampleMeta {
 
 /// Why a bridge could not carry a remote control request (the manager's own refusals travel
 /// as ordinary answers).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, thiserror::Error)]
+#[non_exhaustive]
 pub enum RemoteFailure {
     /// No manager runs in the bridge's domain.
+    #[error("no manager is running in domain '{0}'")]
     NoManager(String),
     /// The manager did not answer in time (ms).
+    #[error("no answer from the manager within {0} ms")]
     Timeout(u64),
     /// Anything else, as text.
+    #[error("{0}")]
     Other(String),
+    /// Every place on the manager's control plane stayed taken (how many it serves).
+    #[error("the manager serves at most {0} clients at once and none left")]
+    Full(u32),
 }
 
 /// Wall-clock time in ns since the Unix epoch (one-way latency between hosts needs a shared
@@ -64,7 +71,7 @@ pub fn unix_now_ns() -> u64 {
 pub struct TopicStats {
     /// The local topic.
     pub topic: String,
-    /// The remote domain it comes from or goes to.
+    /// The remote domain an import comes from (empty for an export: whoever subscribes).
     pub remote: String,
     /// Its message type.
     pub type_name: String,

@@ -325,9 +325,9 @@ impl ForeignSkill {
         &self.outputs
     }
 
-    /// A handle with which other threads make this skill run at once: an async skill then
-    /// runs on the next wake-up even with no fresh input (a gateway that receives samples on
-    /// its own threads publishes them as they come, not at the next cycle).
+    /// A handle with which other threads make this skill run at once. An async skill that
+    /// asked for one runs when it is woken, and only then — not on fresh inputs nor once per
+    /// cycle (a gateway that receives samples on its own threads publishes them as they come).
     pub fn waker(&mut self) -> crate::runtime::Waker {
         self.waker.get_or_insert_with(Default::default).clone()
     }

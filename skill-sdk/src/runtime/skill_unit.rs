@@ -210,8 +210,11 @@ pub(crate) fn step_skill<P: Params>(
                     fresh & (1 << i) == 0 || p.latest_header().is_some_and(|h| h.cycle == k)
                 })
         }
-        // A wake from another thread (a gateway's) makes a run due as well.
-        Mode::Async if common.waker.as_ref().is_some_and(super::Waker::take) => true,
+        // A unit with a waker (a gateway's) runs when another thread woke it, and only then:
+        // without inputs it would otherwise be due every cycle, for nothing.
+        Mode::Async if common.waker.is_some() => {
+            common.waker.as_ref().is_some_and(super::Waker::take)
+        }
         Mode::Async if inputs.is_empty() => k > common.last_cycle,
         Mode::Async => inputs.iter().any(|p| p.is_fresh()),
     };

@@ -6,8 +6,8 @@ use crate::board::Board;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-/// A handle that makes the unit run now (an async unit runs on its next wake-up even with
-/// no fresh input). Cheap to clone; `Send` and `Sync`.
+/// A handle that makes the unit run now (an async unit with a waker runs when woken, and
+/// only then). Cheap to clone; `Send` and `Sync`.
 #[derive(Clone, Default)]
 pub struct Waker(Arc<State>);
 

@@ -268,8 +268,12 @@ fn remote_ctl_ls_set_query_monitor_and_logs_behave_as_local_ones() {
     let mut nobody = nobody;
     nobody.set_timeout(Duration::from_millis(500));
     match nobody.list() {
-        Err(ClientError::Remote(text)) => {
-            assert!(text.contains("no bridge of domain 'nobody-here'"), "{text}")
+        Err(e @ ClientError::NoBridge { .. }) => {
+            let text = e.to_string();
+            assert!(
+                text.contains("no bridge of domain 'nobody-here' answered through tcp/127.0.0.1:"),
+                "{text}"
+            )
         }
         other => panic!("{other:?}"),
     }

@@ -24,6 +24,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::faults::{Faults, Kill, Killer};
+use skillfab_sequence::ClientFabric;
 
 /// Options of `skillfab demo exit-lab`.
 #[derive(Debug, Clone)]
@@ -49,6 +50,9 @@ pub struct DemoOptions {
     pub lockstep: bool,
     /// Record the first run here (MCAP, every topic).
     pub record: Option<PathBuf>,
+    /// A plan (`skillfab sequence`'s format) that drives the robot instead of the sequencer
+    /// written in Rust here.
+    pub plan: Option<skillfab_sequence::Plan>,
 }
 
 /// One run's outcome.
@@ -380,6 +384,12 @@ impl Sequencer {
     }
 }
 
+/// What drives the robot: the sequencer written here, or a plan.
+enum Driver {
+    Code(Sequencer),
+    Plan(skillfab_sequence::Sequencer),
+}
+
 /// One run of the experiment.
 pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOutcome> {
     let wall = Instant::now();
@@ -412,18 +422,31 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         }
         out.steps.push((what.to_string(), cycle, t));
     };
-    c.activate(&["wander", "avoid", "barcode_track"])?;
-    step(
-        &c,
-        &mut out,
-        "activate wander + avoid + barcode_track; monitor the door's barcode",
-    );
-    let mut seq = Sequencer {
-        phase: Phase::Search,
-        seen: c.add_monitor("barcode_track.target.seen == 1", MonitorMode::Once, 0)?,
-        near: None,
-        far: None,
-        found: None,
+    // The plan's first tick, or the Rust sequencer's first step.
+    let mut driver = match &opts.plan {
+        Some(plan) => {
+            let mut p = skillfab_sequence::Sequencer::new(plan, None)?;
+            p.tick(&mut ClientFabric::new(&c))?;
+            for s in p.take_steps() {
+                step(&c, &mut out, &s);
+            }
+            Driver::Plan(p)
+        }
+        None => {
+            c.activate(&["wander", "avoid", "barcode_track"])?;
+            step(
+                &c,
+                &mut out,
+                "activate wander + avoid + barcode_track; monitor the door's barcode",
+            );
+            Driver::Code(Sequencer {
+                phase: Phase::Search,
+                seen: c.add_monitor("barcode_track.target.seen == 1", MonitorMode::Once, 0)?,
+                near: None,
+                far: None,
+                found: None,
+            })
+        }
     };
     let sim_killer = opts.faults.kill_sim_every_s.map(|every| {
         Killer::start_sim(
@@ -446,20 +469,43 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     }
     let started = Instant::now();
     loop {
-        if INTERRUPTED.load(Ordering::Acquire) {
+        if interrupted() {
             bail!("interrupted");
         }
         if out.time_s == 0.0 && started.elapsed() > Duration::from_secs(30) {
             bail!("the simulator wrote no ground truth within 30 s (see the log of skillfab up)");
         }
         let ev = c.next_event(Duration::from_millis(100))?;
-        if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
-            if let Some(what) = seq.on_monitor(&c, id)? {
-                step(&c, &mut out, &what);
+        match &mut driver {
+            Driver::Code(seq) => {
+                if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
+                    if let Some(what) = seq.on_monitor(&c, id)? {
+                        step(&c, &mut out, &what);
+                    }
+                    // Lock-step: the manager paused after the cycle the monitor fired in.
+                    if opts.lockstep {
+                        c.run()?;
+                    }
+                }
             }
-            // Lock-step: the manager paused after the cycle the monitor fired in.
-            if opts.lockstep {
-                c.run()?;
+            Driver::Plan(p) => {
+                let me = c.id().to_string();
+                let mut fired = ev.is_some_and(|e| p.on_event(&me, &e.kind));
+                // Whatever else fired in that cycle, at once.
+                while let Some(e) = c.next_event(Duration::ZERO)? {
+                    fired |= p.on_event(&me, &e.kind);
+                }
+                let status = p.tick(&mut ClientFabric::new(&c))?;
+                for s in p.take_steps() {
+                    step(&c, &mut out, &s);
+                }
+                if status != skillfab_sequence::Status::Running {
+                    step(&c, &mut out, &format!("the plan ended: {status:?}"));
+                    break;
+                }
+                if fired && opts.lockstep {
+                    c.run()?;
+                }
             }
         }
         if let Some(now) = latest(&traj) {
@@ -497,14 +543,22 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             link("connects")?,
         ))
     })();
-    c.set_param("avoid", "safe_distance", "0.6")?;
+    match &mut driver {
+        Driver::Code(_) => {
+            c.set_param("avoid", "safe_distance", "0.6")?;
+            step(&c, &mut out, "avoid.safe_distance restored");
+        }
+        // Halted: what it set for the passage is restored, its monitors removed.
+        Driver::Plan(p) => {
+            p.halt(&mut ClientFabric::new(&c));
+            for s in p.take_steps() {
+                step(&c, &mut out, &s);
+            }
+        }
+    }
     let all: Vec<&str> = SKILLS.iter().copied().filter(|s| *s != "stop").collect();
     c.deactivate(&all)?;
-    step(
-        &c,
-        &mut out,
-        "avoid.safe_distance restored; skills deactivated",
-    );
+    step(&c, &mut out, "skills deactivated");
     out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
     // The robot may have gone on a little while the sequencer looked: the time it first was
     // outside is the mission's.
@@ -540,9 +594,8 @@ extern "C" fn on_signal(_: nix::libc::c_int) {
     INTERRUPTED.store(true, Ordering::Release);
 }
 
-/// Runs the experiment `opts.runs` times. Ctrl-C or SIGTERM ends it cleanly: the network is
-/// shut down and its shared memory and files removed.
-pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
+/// From now on SIGINT and SIGTERM only set a flag: [`interrupted`] says whether one came.
+pub fn catch_interrupts() -> anyhow::Result<()> {
     for sig in [
         nix::sys::signal::Signal::SIGINT,
         nix::sys::signal::Signal::SIGTERM,
@@ -550,6 +603,18 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         // SAFETY: the handler only stores to an atomic.
         unsafe { nix::sys::signal::signal(sig, nix::sys::signal::SigHandler::Handler(on_signal)) }?;
     }
+    Ok(())
+}
+
+/// Whether SIGINT or SIGTERM came since [`catch_interrupts`].
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::Acquire)
+}
+
+/// Runs the experiment `opts.runs` times. Ctrl-C or SIGTERM ends it cleanly: the network is
+/// shut down and its shared memory and files removed.
+pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
+    catch_interrupts()?;
     let mut detail = Vec::new();
     for run in 0..opts.runs {
         let seed = opts.seed + u64::from(run);

@@ -6,6 +6,7 @@ mod demo;
 mod faults;
 mod new;
 mod replay;
+mod sequence;
 
 use clap::{Parser, Subcommand};
 use skillfab_manager::args::{DomainArg, ManagerArgs, UpArgs, init_tracing};
@@ -120,6 +121,22 @@ enum Cmd {
         #[command(subcommand)]
         what: NewCmd,
     },
+    /// Run a plan (BehaviorTree.CPP v4 XML: docs/sequence.md) as this domain's sequencer:
+    /// activate, set parameters, wait for monitors, with timeouts, retries and fallbacks.
+    /// Exit status 0 when the plan succeeds, 1 when it fails; Ctrl-C halts it (parameters it
+    /// set for a while are restored, its monitors removed).
+    Sequence {
+        /// The plan file.
+        file: PathBuf,
+        /// The tree to run (default: the plan's main_tree_to_execute).
+        #[arg(long)]
+        tree: Option<String>,
+        /// Only read and check the plan.
+        #[arg(long)]
+        check: bool,
+        #[command(flatten)]
+        remote: RemoteArg,
+    },
     /// Talk to a running manager: the sequencer's link, from the shell.
     Ctl {
         /// Print JSON instead of text.
@@ -178,6 +195,10 @@ enum DemoCmd {
         /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
+        /// Drive the robot with this plan (`skillfab sequence`'s format, e.g.
+        /// skills/plans/exit-lab.xml) instead of the sequencer written in Rust.
+        #[arg(long, value_name = "FILE.xml")]
+        plan: Option<PathBuf>,
     },
 }
 
@@ -269,6 +290,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
         Cmd::Ctl { json, remote, cmd } => ctl::run(&domain, remote.options(), json, cmd),
+        Cmd::Sequence {
+            file,
+            tree,
+            check,
+            remote,
+        } => sequence::run(&domain, remote.options(), &file, tree.as_deref(), check),
         Cmd::Bridge(args) => Ok(skillfab_bridge::run(&domain, &args)?),
         Cmd::New {
             what: NewCmd::Skill { name, lang, dir },
@@ -320,6 +347,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     drop_rate,
                     lockstep,
                     record,
+                    plan,
                 },
         } => {
             for (name, k) in [
@@ -361,6 +389,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
                 lockstep,
                 record: record.map(std::path::absolute).transpose()?,
+                plan: plan.as_deref().map(sequence::read_plan).transpose()?,
             };
             let summary = demo::demo(&opts)?;
             if json {

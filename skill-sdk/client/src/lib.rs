@@ -276,6 +276,19 @@ impl Client {
         &self.domain
     }
 
+    /// The fabric's clock as the manager set it for the current cycle (what skills read:
+    /// cycle × period with a period, lock-step included). `None` over a bridge (the board is
+    /// another host's shared memory) or with no manager running.
+    pub fn clock(&self) -> Option<skillfab_proto::board::Clock> {
+        match &self.link {
+            Link::Local(l) => Board::open(&l.domain.prefix())
+                .ok()
+                .filter(Board::manager_alive)
+                .map(|b| b.header().clock()),
+            Link::Remote(_) => None,
+        }
+    }
+
     /// This client's id (monitors belong to it).
     pub fn id(&self) -> &str {
         &self.id

@@ -143,3 +143,61 @@ fn ctrl_c_leaves_no_process_or_shared_memory_behind() {
     assert!(err.contains("interrupted"), "{err}");
     assert_nothing_left(pid);
 }
+
+/// One lock-step run of the demo (seed 1) in the doorway world: its JSON summary.
+fn lockstep_run(t: &TestDomain, extra: &[&str]) -> serde_json::Value {
+    let args = [
+        &[
+            "--lockstep",
+            "--seed",
+            "1",
+            "--runs",
+            "1",
+            "--limit-s",
+            "150",
+            "--json",
+        ][..],
+        extra,
+    ]
+    .concat();
+    let out = demo(t, &args).wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo {extra:?} failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&stdout).unwrap()
+}
+
+#[test]
+fn the_exit_lab_plan_takes_the_same_steps_in_the_same_cycles_as_the_rust_sequencer() {
+    let t = TestDomain::new("exitlabplan");
+    let plan = skillfab_tests::repo_root().join("skills/plans/exit-lab.xml");
+    let by_plan = lockstep_run(&t, &["--plan", plan.to_str().unwrap()]);
+    let by_code = lockstep_run(&t, &[]);
+    let (p, c) = (&by_plan["runs_detail"][0], &by_code["runs_detail"][0]);
+    assert_eq!(p["success"], true, "{p}");
+    assert_eq!(p["collisions"], 0, "{p}");
+    assert_eq!(p["time_s"], c["time_s"], "plan {p}\ncode {c}");
+    let cycle = |run: &serde_json::Value, what: &str| {
+        run["steps"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s[0].as_str().unwrap().starts_with(what))
+            .map(|s| s[1].as_u64().unwrap())
+            .unwrap_or_else(|| panic!("no step '{what}' in {run}"))
+    };
+    // (The demo notices "outside" whenever it looks: that step's cycle is not the plan's.)
+    for what in ["barcode seen", "door located"] {
+        assert_eq!(cycle(p, what), cycle(c, what), "{what}: plan {p}\ncode {c}");
+    }
+    // The plan lowered avoid's distance for the passage and restored it when halted.
+    let steps = p["steps"].to_string();
+    assert!(
+        steps.contains("avoid.safe_distance = 0.2")
+            && steps.contains("avoid.safe_distance restored to 0.6"),
+        "{steps}"
+    );
+}

@@ -16,3 +16,4 @@ mod faults;
 mod newcomer;
 mod polyglot;
 mod replay;
+mod sequence;

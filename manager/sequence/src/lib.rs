@@ -1,0 +1,24 @@
+//! `skillfab sequence`: a sequencer that is a plan, not a hand-written state machine.
+//!
+//! A plan is a BehaviorTree.CPP v4 XML file (the format of Nav2, editable in Groot): control
+//! nodes (`Sequence`, `Fallback`, `Parallel`), decorators (`RetryUntilSuccessful`,
+//! `Timeout`, `Inverter`, `ForceSuccess`, `ForceFailure`, and `WithParam`: a parameter set
+//! while its child runs, restored after) and the fabric's actions (`Activate`, `Deactivate`,
+//! `SetParam`, `WaitFor` a monitor condition, `Sleep`, `Log`). Times are the fabric's (cycle ×
+//! period), so a plan run in lock-step is as deterministic as the skills. See
+//! docs/sequence.md.
+//!
+//! Layout: [`plan`] reads and checks the file; [`tree`] is the behaviour tree engine over a
+//! [`tree::Fabric`] (unit-tested without a fabric); [`run`] drives a real one through the
+//! client library.
+
+pub mod plan;
+pub mod run;
+pub mod tree;
+
+#[cfg(test)]
+mod tests;
+
+pub use plan::{Plan, PlanError};
+pub use run::{ClientFabric, Sequencer, run};
+pub use tree::{Fabric, FabricError, SeqError, Status};

@@ -1,0 +1,514 @@
+//! Reading a plan: BehaviorTree.CPP v4 XML (the format of Nav2 and Groot) into a checked
+//! description of its trees ([`Spec`]). Every mistake is refused with its line and what
+//! would be right; nothing runs until the whole file is sound.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// A plan that cannot be run, with where.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{file}:{line}: {reason}")]
+pub struct PlanError {
+    /// The plan file (or `<plan>`).
+    pub file: String,
+    /// The line (1-based; 0: the file as a whole).
+    pub line: u32,
+    /// What is wrong.
+    pub reason: String,
+}
+
+/// One node of a tree, as written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spec {
+    /// What the node does.
+    pub kind: Kind,
+    /// Its `name` attribute, or its element name (what the step log calls it).
+    pub name: String,
+    /// Where it is written.
+    pub line: u32,
+}
+
+/// The nodes a plan can use: BehaviorTree.CPP's control nodes and decorators, and the
+/// fabric's actions.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Kind {
+    /// Children in order; fails at the first that fails.
+    Sequence(Vec<Spec>),
+    /// Children in order; succeeds at the first that succeeds.
+    Fallback(Vec<Spec>),
+    /// Children ticked together: succeeds once `success` of them succeeded, fails once
+    /// `failure` of them failed (the others are halted).
+    Parallel {
+        /// Successes needed (`None`: all the children).
+        success: Option<usize>,
+        /// Failures that fail it.
+        failure: usize,
+        /// The children.
+        children: Vec<Spec>,
+    },
+    /// The child again after a failure, up to `attempts` times in all (`None`: for ever).
+    Retry {
+        /// Attempts in all.
+        attempts: Option<u32>,
+        /// The child.
+        child: Box<Spec>,
+    },
+    /// The child, halted and failed if it runs longer than `after` (fabric time).
+    Timeout {
+        /// How long the child may run.
+        after: Duration,
+        /// The child.
+        child: Box<Spec>,
+    },
+    /// The child's success as failure and the other way round.
+    Inverter(Box<Spec>),
+    /// The child again and again while it succeeds (running meanwhile); fails when it fails.
+    KeepRunningUntilFailure(Box<Spec>),
+    /// The child, then success whatever it returned.
+    ForceSuccess(Box<Spec>),
+    /// The child, then failure whatever it returned.
+    ForceFailure(Box<Spec>),
+    /// A parameter set for as long as the child runs, restored after (also when halted).
+    WithParam {
+        /// Skill.
+        skill: String,
+        /// Parameter.
+        param: String,
+        /// Value, as `ctl set` takes it.
+        value: String,
+        /// The child.
+        child: Box<Spec>,
+    },
+    /// Activate skills (all or none).
+    Activate(Vec<String>),
+    /// Deactivate skills (all or none).
+    Deactivate(Vec<String>),
+    /// Set a parameter (not restored).
+    SetParam {
+        /// Skill.
+        skill: String,
+        /// Parameter.
+        param: String,
+        /// Value, as `ctl set` takes it.
+        value: String,
+    },
+    /// Running until a monitor on `condition` fires (held `hold` cycles), then success.
+    WaitFor {
+        /// A monitor expression (`barcode_track.target.range < 1.7`).
+        condition: String,
+        /// Cycles it must hold.
+        hold: u32,
+    },
+    /// Running for `after` of fabric time, then success.
+    Sleep(Duration),
+    /// A line in the step log; success.
+    Log(String),
+    /// Success.
+    AlwaysSuccess,
+    /// Failure.
+    AlwaysFailure,
+    /// Another tree of the plan, by its ID.
+    SubTree(String),
+}
+
+/// A whole plan: its trees by ID and the one to run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Trees by ID.
+    pub trees: BTreeMap<String, Spec>,
+    /// The tree run unless another is asked for (`main_tree_to_execute`, or the only one).
+    pub main: String,
+}
+
+/// A reader of one file's elements: errors carry the file and the element's line.
+struct Reader<'a> {
+    file: &'a str,
+    doc: &'a roxmltree::Document<'a>,
+}
+
+impl Reader<'_> {
+    fn error(&self, node: roxmltree::Node<'_, '_>, reason: String) -> PlanError {
+        PlanError {
+            file: self.file.to_string(),
+            line: self.doc.text_pos_at(node.range().start).row,
+            reason,
+        }
+    }
+
+    fn attr(&self, node: roxmltree::Node<'_, '_>, name: &str) -> Result<String, PlanError> {
+        node.attribute(name).map(str::to_string).ok_or_else(|| {
+            self.error(
+                node,
+                format!(
+                    "<{}> needs the attribute {name}=\"…\"",
+                    node.tag_name().name()
+                ),
+            )
+        })
+    }
+
+    fn number<T: std::str::FromStr>(
+        &self,
+        node: roxmltree::Node<'_, '_>,
+        name: &str,
+    ) -> Result<Option<T>, PlanError> {
+        node.attribute(name)
+            .map(|v| {
+                v.trim().parse::<T>().map_err(|_| {
+                    self.error(
+                        node,
+                        format!(
+                            "<{}> {name}=\"{v}\" is not a number of the right kind",
+                            node.tag_name().name()
+                        ),
+                    )
+                })
+            })
+            .transpose()
+    }
+
+    fn msec(&self, node: roxmltree::Node<'_, '_>) -> Result<Duration, PlanError> {
+        let ms: u64 = self.number(node, "msec")?.ok_or_else(|| {
+            self.error(
+                node,
+                format!("<{}> needs msec=\"…\"", node.tag_name().name()),
+            )
+        })?;
+        Ok(Duration::from_millis(ms))
+    }
+
+    fn skills(&self, node: roxmltree::Node<'_, '_>) -> Result<Vec<String>, PlanError> {
+        let list: Vec<String> = self
+            .attr(node, "skills")?
+            .split([',', ';', ' '])
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(str::to_string)
+            .collect();
+        if list.is_empty() {
+            return Err(self.error(node, "skills=\"\" names no skill".into()));
+        }
+        Ok(list)
+    }
+
+    /// The element children of `node` (comments and text between them are skipped; other
+    /// text is a mistake).
+    fn children<'n>(
+        &self,
+        node: roxmltree::Node<'n, 'n>,
+    ) -> Result<Vec<roxmltree::Node<'n, 'n>>, PlanError> {
+        let mut out = Vec::new();
+        for c in node.children() {
+            if c.is_element() {
+                out.push(c);
+            } else if c.is_text() && c.text().is_some_and(|t| !t.trim().is_empty()) {
+                return Err(self.error(c, "text where a node was expected".into()));
+            }
+        }
+        Ok(out)
+    }
+
+    fn one_child(&self, node: roxmltree::Node<'_, '_>) -> Result<Box<Spec>, PlanError> {
+        match self.children(node)?.as_slice() {
+            [c] => Ok(Box::new(self.spec(*c)?)),
+            other => Err(self.error(
+                node,
+                format!(
+                    "<{}> is a decorator: it takes exactly one child, not {}",
+                    node.tag_name().name(),
+                    other.len()
+                ),
+            )),
+        }
+    }
+
+    fn many(&self, node: roxmltree::Node<'_, '_>) -> Result<Vec<Spec>, PlanError> {
+        let children = self.children(node)?;
+        if children.is_empty() {
+            return Err(self.error(
+                node,
+                format!("<{}> has no children", node.tag_name().name()),
+            ));
+        }
+        children.into_iter().map(|c| self.spec(c)).collect()
+    }
+
+    fn leaf(&self, node: roxmltree::Node<'_, '_>) -> Result<(), PlanError> {
+        match self.children(node)?.first() {
+            Some(c) => Err(self.error(
+                *c,
+                format!("<{}> takes no children", node.tag_name().name()),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    fn spec(&self, node: roxmltree::Node<'_, '_>) -> Result<Spec, PlanError> {
+        let tag = node.tag_name().name();
+        // BehaviorTree.CPP's generic forms: <Action ID="Activate" …/>, <Condition ID=…/>.
+        let kind_name = match tag {
+            "Action" | "Condition" | "Control" | "Decorator" => node
+                .attribute("ID")
+                .ok_or_else(|| self.error(node, format!("<{tag}> needs ID=\"…\"")))?,
+            t => t,
+        };
+        let kind = match kind_name {
+            "Sequence" | "SequenceWithMemory" => Kind::Sequence(self.many(node)?),
+            "Fallback" => Kind::Fallback(self.many(node)?),
+            "Parallel" => {
+                let children = self.many(node)?;
+                let success: i64 = self.number(node, "success_count")?.unwrap_or(-1);
+                let failure: i64 = self.number(node, "failure_count")?.unwrap_or(1);
+                let n = children.len() as i64;
+                let count = |v: i64, what: &str| match v {
+                    -1 => Ok(None),
+                    v if (1..=n).contains(&v) => Ok(Some(v as usize)),
+                    v => Err(self.error(
+                        node,
+                        format!("{what}=\"{v}\": -1 (all) or 1 to {n} (its children)"),
+                    )),
+                };
+                Kind::Parallel {
+                    success: count(success, "success_count")?,
+                    failure: count(failure, "failure_count")?.unwrap_or(children.len()),
+                    children,
+                }
+            }
+            "RetryUntilSuccessful" => {
+                let n: i64 = self.number(node, "num_attempts")?.ok_or_else(|| {
+                    self.error(
+                        node,
+                        "<RetryUntilSuccessful> needs num_attempts=\"…\" (-1: for ever)".into(),
+                    )
+                })?;
+                let attempts = match n {
+                    -1 => None,
+                    n if n >= 1 => Some(n as u32),
+                    n => {
+                        return Err(
+                            self.error(node, format!("num_attempts=\"{n}\": -1 or at least 1"))
+                        );
+                    }
+                };
+                Kind::Retry {
+                    attempts,
+                    child: self.one_child(node)?,
+                }
+            }
+            "Timeout" => Kind::Timeout {
+                after: self.msec(node)?,
+                child: self.one_child(node)?,
+            },
+            "Inverter" => Kind::Inverter(self.one_child(node)?),
+            "KeepRunningUntilFailure" => Kind::KeepRunningUntilFailure(self.one_child(node)?),
+            "ForceSuccess" => Kind::ForceSuccess(self.one_child(node)?),
+            "ForceFailure" => Kind::ForceFailure(self.one_child(node)?),
+            "WithParam" => Kind::WithParam {
+                skill: self.attr(node, "skill")?,
+                param: self.attr(node, "param")?,
+                value: self.attr(node, "value")?,
+                child: self.one_child(node)?,
+            },
+            "Activate" => {
+                self.leaf(node)?;
+                Kind::Activate(self.skills(node)?)
+            }
+            "Deactivate" => {
+                self.leaf(node)?;
+                Kind::Deactivate(self.skills(node)?)
+            }
+            "SetParam" => {
+                self.leaf(node)?;
+                Kind::SetParam {
+                    skill: self.attr(node, "skill")?,
+                    param: self.attr(node, "param")?,
+                    value: self.attr(node, "value")?,
+                }
+            }
+            "WaitFor" => {
+                self.leaf(node)?;
+                Kind::WaitFor {
+                    condition: self.attr(node, "condition")?,
+                    hold: self.number(node, "hold")?.unwrap_or(0),
+                }
+            }
+            "Sleep" => {
+                self.leaf(node)?;
+                Kind::Sleep(self.msec(node)?)
+            }
+            "Log" => {
+                self.leaf(node)?;
+                Kind::Log(self.attr(node, "message")?)
+            }
+            "AlwaysSuccess" => {
+                self.leaf(node)?;
+                Kind::AlwaysSuccess
+            }
+            "AlwaysFailure" => {
+                self.leaf(node)?;
+                Kind::AlwaysFailure
+            }
+            "SubTree" => {
+                self.leaf(node)?;
+                Kind::SubTree(self.attr(node, "ID")?)
+            }
+            other => {
+                return Err(self.error(
+                    node,
+                    format!(
+                        "unknown node <{other}> (control: Sequence, Fallback, Parallel; \
+                         decorators: RetryUntilSuccessful, Timeout, Inverter, ForceSuccess, \
+                         ForceFailure, KeepRunningUntilFailure, WithParam; actions: Activate, \
+                         Deactivate, SetParam, WaitFor, Sleep, Log, AlwaysSuccess, \
+                         AlwaysFailure, SubTree)"
+                    ),
+                ));
+            }
+        };
+        Ok(Spec {
+            kind,
+            name: node
+                .attribute("name")
+                .map_or_else(|| kind_name.to_string(), str::to_string),
+            line: self.doc.text_pos_at(node.range().start).row,
+        })
+    }
+}
+
+impl Plan {
+    /// Reads a plan from `text`; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Plan, PlanError> {
+        let doc = roxmltree::Document::parse(text).map_err(|e| PlanError {
+            file: file.to_string(),
+            line: e.pos().row,
+            reason: format!("not well-formed XML: {e}"),
+        })?;
+        let r = Reader { file, doc: &doc };
+        let root = doc.root_element();
+        if root.tag_name().name() != "root" {
+            return Err(r.error(
+                root,
+                "the document element must be <root BTCPP_format=\"4\">".into(),
+            ));
+        }
+        if let Some(v) = root.attribute("BTCPP_format")
+            && v != "4"
+        {
+            return Err(r.error(root, format!("BTCPP_format=\"{v}\": only format 4 is read")));
+        }
+        let mut trees = BTreeMap::new();
+        for t in r.children(root)? {
+            match t.tag_name().name() {
+                "BehaviorTree" => {
+                    let id = r.attr(t, "ID")?;
+                    let body = match r.children(t)?.as_slice() {
+                        [b] => r.spec(*b)?,
+                        other => {
+                            return Err(r.error(
+                                t,
+                                format!(
+                                    "tree '{id}' must have exactly one root node, not {}",
+                                    other.len()
+                                ),
+                            ));
+                        }
+                    };
+                    if trees.insert(id.clone(), body).is_some() {
+                        return Err(r.error(t, format!("a second tree with ID '{id}'")));
+                    }
+                }
+                // Groot's palette of node types: not needed to run.
+                "TreeNodesModel" => {}
+                other => {
+                    return Err(r.error(
+                        t,
+                        format!("<{other}> in <root>: only <BehaviorTree> and <TreeNodesModel>"),
+                    ));
+                }
+            }
+        }
+        let main = match root.attribute("main_tree_to_execute") {
+            Some(m) => m.to_string(),
+            None if trees.len() == 1 => trees.keys().next().cloned().unwrap_or_default(),
+            None => {
+                return Err(r.error(
+                    root,
+                    "several trees and no main_tree_to_execute=\"…\" to say which to run".into(),
+                ));
+            }
+        };
+        let plan = Plan { trees, main };
+        if !plan.trees.contains_key(&plan.main) {
+            return Err(r.error(
+                root,
+                format!(
+                    "main_tree_to_execute=\"{}\": no tree has that ID",
+                    plan.main
+                ),
+            ));
+        }
+        plan.check_subtrees(file)?;
+        Ok(plan)
+    }
+
+    /// Every `SubTree` names a tree, and no tree contains itself.
+    fn check_subtrees(&self, file: &str) -> Result<(), PlanError> {
+        fn walk(
+            plan: &Plan,
+            spec: &Spec,
+            path: &mut Vec<String>,
+            file: &str,
+        ) -> Result<(), PlanError> {
+            let err = |reason: String| PlanError {
+                file: file.to_string(),
+                line: spec.line,
+                reason,
+            };
+            match &spec.kind {
+                Kind::SubTree(id) => {
+                    let Some(tree) = plan.trees.get(id) else {
+                        return Err(err(format!("SubTree ID=\"{id}\": no tree has that ID")));
+                    };
+                    if path.contains(id) {
+                        return Err(err(format!(
+                            "SubTree '{id}' contains itself ({} → {id})",
+                            path.join(" → ")
+                        )));
+                    }
+                    path.push(id.clone());
+                    walk(plan, tree, path, file)?;
+                    path.pop();
+                }
+                other => {
+                    for c in other.children() {
+                        walk(plan, c, path, file)?;
+                    }
+                }
+            }
+            Ok(())
+        }
+        for (id, tree) in &self.trees {
+            walk(self, tree, &mut vec![id.clone()], file)?;
+        }
+        Ok(())
+    }
+}
+
+impl Kind {
+    /// The child nodes as written.
+    pub fn children(&self) -> Vec<&Spec> {
+        match self {
+            Kind::Sequence(c) | Kind::Fallback(c) | Kind::Parallel { children: c, .. } => {
+                c.iter().collect()
+            }
+            Kind::Retry { child, .. }
+            | Kind::Timeout { child, .. }
+            | Kind::WithParam { child, .. }
+            | Kind::Inverter(child)
+            | Kind::KeepRunningUntilFailure(child)
+            | Kind::ForceSuccess(child)
+            | Kind::ForceFailure(child) => vec![child],
+            _ => Vec::new(),
+        }
+    }
+}

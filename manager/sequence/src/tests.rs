@@ -1,0 +1,383 @@
+//! The engine on a fabric that records what it is asked (no processes): node semantics,
+//! halting, parameters restored, refusals as failures; and the reader's errors.
+
+use crate::plan::Plan;
+use crate::run::Sequencer;
+use crate::tree::{Fabric, FabricError, Status};
+use skillfab_proto::param::ParamValue;
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// A fabric in memory: skills, parameters (f64), monitors, a clock moved by hand.
+#[derive(Default)]
+struct Mock {
+    active: BTreeMap<String, bool>,
+    params: BTreeMap<String, f64>,
+    monitors: BTreeMap<u64, String>,
+    next: u64,
+    now: Duration,
+    log: Vec<String>,
+}
+
+impl Mock {
+    fn new(skills: &[&str]) -> Mock {
+        let mut m = Mock::default();
+        for s in skills {
+            m.active.insert((*s).to_string(), false);
+        }
+        m.params.insert("avoid.safe_distance".into(), 0.6);
+        m
+    }
+
+    fn known(&self, skills: &[String]) -> Result<(), FabricError> {
+        match skills.iter().find(|s| !self.active.contains_key(*s)) {
+            Some(s) => Err(FabricError::Refused(format!("unknown skill '{s}'"))),
+            None => Ok(()),
+        }
+    }
+
+    /// The id of the monitor on `condition`.
+    fn monitor(&self, condition: &str) -> u64 {
+        self.monitors
+            .iter()
+            .find(|(_, c)| *c == condition)
+            .map(|(id, _)| *id)
+            .unwrap_or_else(|| panic!("no monitor on {condition}: {:?}", self.monitors))
+    }
+
+    fn on(&self) -> Vec<&str> {
+        self.active
+            .iter()
+            .filter(|(_, a)| **a)
+            .map(|(s, _)| s.as_str())
+            .collect()
+    }
+}
+
+impl Fabric for Mock {
+    fn activate(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        self.known(skills)?;
+        for s in skills {
+            self.active.insert(s.clone(), true);
+        }
+        Ok(())
+    }
+
+    fn deactivate(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        self.known(skills)?;
+        for s in skills {
+            self.active.insert(s.clone(), false);
+        }
+        Ok(())
+    }
+
+    fn get_param(&mut self, skill: &str, param: &str) -> Result<ParamValue, FabricError> {
+        self.params
+            .get(&format!("{skill}.{param}"))
+            .map(|v| ParamValue::Float(*v))
+            .ok_or_else(|| FabricError::Refused(format!("{skill}: unknown parameter '{param}'")))
+    }
+
+    fn set_param(&mut self, skill: &str, param: &str, value: &str) -> Result<(), FabricError> {
+        let key = format!("{skill}.{param}");
+        if !self.params.contains_key(&key) {
+            return Err(FabricError::Refused(format!(
+                "{skill}: unknown parameter '{param}'"
+            )));
+        }
+        let v = value
+            .parse()
+            .map_err(|_| FabricError::Refused(format!("'{value}' is not a number")))?;
+        self.params.insert(key.clone(), v);
+        self.log.push(format!("{key}={value}"));
+        Ok(())
+    }
+
+    fn set_param_value(
+        &mut self,
+        skill: &str,
+        param: &str,
+        value: ParamValue,
+    ) -> Result<(), FabricError> {
+        self.set_param(skill, param, &value.to_string())
+    }
+
+    fn add_monitor(&mut self, condition: &str, _hold: u32) -> Result<u64, FabricError> {
+        if condition.contains("nobody") {
+            return Err(FabricError::Refused("unknown skill 'nobody'".into()));
+        }
+        self.next += 1;
+        self.monitors.insert(self.next, condition.to_string());
+        Ok(self.next)
+    }
+
+    fn remove_monitor(&mut self, id: u64) {
+        self.monitors.remove(&id);
+    }
+
+    fn now(&mut self) -> Duration {
+        self.now
+    }
+}
+
+fn plan(body: &str) -> Plan {
+    let text =
+        format!(r#"<root BTCPP_format="4"><BehaviorTree ID="Main">{body}</BehaviorTree></root>"#);
+    Plan::parse(&text, "test.xml").unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A monitor firing, as the manager's event says it (a `Once` monitor is then gone).
+fn fire(seq: &mut Sequencer, f: &mut Mock, id: u64) {
+    f.monitors.remove(&id);
+    let ev = skillfab_proto::control::EventKind::MonitorFired {
+        id,
+        client: "me".into(),
+        expr: String::new(),
+        values: Vec::new(),
+        stamp_ns: 0,
+    };
+    assert!(seq.on_event("me", &ev));
+}
+
+#[test]
+fn a_sequence_activates_waits_for_its_monitor_and_goes_on() {
+    let p = plan(
+        r#"<Sequence>
+             <Activate skills="wander, avoid"/>
+             <WaitFor condition="barcode_track.target.seen == 1"/>
+             <Deactivate skills="wander"/>
+           </Sequence>"#,
+    );
+    let mut f = Mock::new(&["wander", "avoid"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(f.on(), ["avoid", "wander"]);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    let id = f.monitor("barcode_track.target.seen == 1");
+    // Another client's monitor is not this plan's.
+    let other = skillfab_proto::control::EventKind::MonitorFired {
+        id,
+        client: "someone-else".into(),
+        expr: String::new(),
+        values: Vec::new(),
+        stamp_ns: 0,
+    };
+    assert!(!seq.on_event("me", &other));
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    fire(&mut seq, &mut f, id);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert_eq!(f.on(), ["avoid"]);
+    assert_eq!(
+        seq.take_steps(),
+        [
+            "activate wander, avoid",
+            "WaitFor: barcode_track.target.seen == 1",
+            "deactivate wander"
+        ]
+    );
+}
+
+#[test]
+fn the_first_branch_of_a_parallel_to_finish_halts_the_other_and_a_param_is_restored() {
+    // The exit-lab pattern: search along the wall while watching for the door; the door
+    // found first halts the search (its monitor removed, its parameter restored).
+    let p = plan(
+        r#"<Parallel success_count="1" failure_count="1">
+             <WaitFor name="door" condition="door_locate.door.found == 1"/>
+             <WithParam skill="avoid" param="safe_distance" value="0.3">
+               <WaitFor name="far" condition="barcode_track.target.range > 4.0"/>
+             </WithParam>
+           </Parallel>"#,
+    );
+    let mut f = Mock::new(&[]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(f.params["avoid.safe_distance"], 0.3);
+    assert_eq!(f.monitors.len(), 2);
+    let door = f.monitor("door_locate.door.found == 1");
+    fire(&mut seq, &mut f, door);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert!(f.monitors.is_empty(), "{:?}", f.monitors);
+    assert_eq!(f.params["avoid.safe_distance"], 0.6);
+    let steps = seq.take_steps();
+    assert!(
+        steps.contains(&"avoid.safe_distance restored to 0.6".to_string()),
+        "{steps:?}"
+    );
+}
+
+#[test]
+fn a_timeout_halts_its_child_in_fabric_time_and_a_fallback_takes_the_next_way() {
+    let p = plan(
+        r#"<Fallback>
+             <Timeout msec="2000"><WaitFor condition="x.y.z == 1"/></Timeout>
+             <Activate skills="home"/>
+           </Fallback>"#,
+    );
+    let mut f = Mock::new(&["home"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    f.now = Duration::from_millis(1999);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    f.now = Duration::from_millis(2000);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert!(f.monitors.is_empty());
+    assert_eq!(f.on(), ["home"]);
+}
+
+#[test]
+fn a_refused_request_fails_its_node_and_a_retry_tries_again_up_to_its_attempts() {
+    let p = plan(
+        r#"<RetryUntilSuccessful num_attempts="3"><Activate skills="nobody"/></RetryUntilSuccessful>"#,
+    );
+    let mut f = Mock::new(&[]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Failure);
+    let steps = seq.take_steps();
+    assert!(
+        steps[0].contains("activate nobody: refused: unknown skill 'nobody'"),
+        "{steps:?}"
+    );
+    // A monitor on something that is not there fails its WaitFor the same way.
+    let p = plan(r#"<Inverter><WaitFor condition="nobody.x.y == 1"/></Inverter>"#);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+}
+
+#[test]
+fn subtrees_sleep_and_force() {
+    let text = r#"<root BTCPP_format="4" main_tree_to_execute="Main">
+      <BehaviorTree ID="Main">
+        <Sequence>
+          <SubTree ID="Pause"/>
+          <ForceSuccess><AlwaysFailure/></ForceSuccess>
+          <Action ID="Log" message="done"/>
+        </Sequence>
+      </BehaviorTree>
+      <BehaviorTree ID="Pause"><Sleep msec="500"/></BehaviorTree>
+    </root>"#;
+    let p = Plan::parse(text, "t.xml").unwrap();
+    let mut f = Mock::new(&[]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    f.now = Duration::from_millis(500);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert_eq!(seq.take_steps(), ["done"]);
+    // The other tree alone.
+    let mut pause = Sequencer::new(&p, Some("Pause")).unwrap();
+    assert_eq!(pause.tick(&mut f).unwrap(), Status::Running);
+    assert!(Sequencer::new(&p, Some("Nope")).is_err());
+}
+
+#[test]
+fn a_plan_with_mistakes_is_refused_with_the_line_and_what_is_wrong() {
+    let cases = [
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">\n<Sequnce/></BehaviorTree></root>",
+            2,
+            "unknown node <Sequnce>",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">\n<Timeout><AlwaysSuccess/></Timeout></BehaviorTree></root>",
+            2,
+            "needs msec",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">\n<Inverter/></BehaviorTree></root>",
+            2,
+            "exactly one child",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">\n<WaitFor hold=\"x\" condition=\"a.b.c\"/></BehaviorTree></root>",
+            2,
+            "hold=\"x\"",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\"><SubTree ID=\"A\"/></BehaviorTree></root>",
+            1,
+            "contains itself",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\"><SubTree ID=\"B\"/></BehaviorTree></root>",
+            1,
+            "no tree has that ID",
+        ),
+        ("<root BTCPP_format=\"3\"/>", 1, "only format 4"),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">\n<Sequence a=\"1></BehaviorTree></root>",
+            2,
+            "not well-formed XML",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\"><AlwaysSuccess/></BehaviorTree><BehaviorTree ID=\"B\"><AlwaysSuccess/></BehaviorTree></root>",
+            1,
+            "no main_tree_to_execute",
+        ),
+        (
+            "<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">\n<Parallel success_count=\"3\"><AlwaysSuccess/></Parallel></BehaviorTree></root>",
+            2,
+            "1 to 1",
+        ),
+    ];
+    for (text, line, reason) in cases {
+        let e = Plan::parse(text, "bad.xml").unwrap_err();
+        assert_eq!(e.line, line, "{e}");
+        assert!(e.reason.contains(reason), "{e} (wanted: {reason})");
+        assert!(
+            e.to_string().starts_with(&format!("bad.xml:{line}: ")),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered_distance() {
+    let text = include_str!("../../../skills/plans/exit-lab.xml");
+    let p = Plan::parse(text, "exit-lab.xml").unwrap();
+    let skills = [
+        "wander",
+        "avoid",
+        "barcode_track",
+        "home",
+        "door_locate",
+        "wall_follow",
+        "go_through",
+    ];
+    let mut f = Mock::new(&skills);
+    f.params.insert("wall_follow.side".into(), 1.0);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    let step = |f: &mut Mock, seq: &mut Sequencer, fired: Option<&str>| {
+        if let Some(c) = fired {
+            let id = f.monitor(c);
+            fire(seq, f, id);
+        }
+        assert_eq!(seq.tick(f).unwrap(), Status::Running);
+    };
+    step(&mut f, &mut seq, None);
+    assert_eq!(f.on(), ["avoid", "barcode_track", "wander"]);
+    step(&mut f, &mut seq, Some("barcode_track.target.seen == 1"));
+    assert_eq!(f.on(), ["avoid", "barcode_track", "door_locate", "home"]);
+    step(&mut f, &mut seq, Some("barcode_track.target.range < 1.7"));
+    assert_eq!(
+        f.on(),
+        ["avoid", "barcode_track", "door_locate", "wall_follow"]
+    );
+    assert_eq!(f.params["wall_follow.side"], -1.0);
+    step(&mut f, &mut seq, Some("barcode_track.target.range > 4.0"));
+    assert_eq!(f.on(), ["avoid", "barcode_track", "door_locate", "home"]);
+    step(&mut f, &mut seq, Some("barcode_track.target.range < 1.7"));
+    assert_eq!(f.params["wall_follow.side"], 1.0);
+    step(&mut f, &mut seq, Some("door_locate.door.found == 1"));
+    assert_eq!(
+        f.on(),
+        ["avoid", "barcode_track", "door_locate", "go_through"]
+    );
+    assert_eq!(f.params["avoid.safe_distance"], 0.2);
+    // Only the door's monitor was left, and it fired: none stays behind.
+    assert!(f.monitors.is_empty(), "{:?}", f.monitors);
+    // Halted (the robot is outside): the distance comes back.
+    seq.halt(&mut f);
+    assert_eq!(f.params["avoid.safe_distance"], 0.6);
+}

@@ -1,0 +1,142 @@
+//! `skillfab sequence`: plans run against a hello network (real processes, real iceoryx2) —
+//! success, failure and halting, with exit status, steps, parameters and monitors checked on
+//! the manager; a plan with a mistake refused with its line. The exit-lab plan drives the
+//! simulated robot in `exit_lab::`.
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use skillfab_client::Client;
+use skillfab_proto::control::SkillState;
+use skillfab_proto::param::ParamValue;
+use skillfab_tests::TestDomain;
+use std::path::{Path, PathBuf};
+use std::process::{Output, Stdio};
+
+fn plan(t: &TestDomain, body: &str) -> PathBuf {
+    let path = t.dir.join("plan.xml");
+    std::fs::write(
+        &path,
+        format!("<root BTCPP_format=\"4\">\n<BehaviorTree ID=\"Main\">\n{body}\n</BehaviorTree>\n</root>\n"),
+    )
+    .unwrap();
+    path
+}
+
+fn sequence(t: &TestDomain, plan: &Path) -> (Output, String) {
+    let out = t.run("skillfab", &["sequence", plan.to_str().unwrap()]);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out, text)
+}
+
+fn state(c: &Client, skill: &str) -> SkillState {
+    c.list()
+        .unwrap()
+        .into_iter()
+        .find(|s| s.name == skill)
+        .unwrap()
+        .state
+}
+
+#[test]
+fn a_plan_waits_times_out_falls_back_and_succeeds_and_a_refused_step_fails_it() {
+    let mut t = TestDomain::new("seqrun");
+    t.hello(&[]);
+    let c = Client::connect(&t.domain).unwrap();
+    let p = plan(
+        &t,
+        r#"<Sequence>
+             <Deactivate skills="smooth"/>
+             <WaitFor name="ticking" condition="ticker.tick.value &gt; 20"/>
+             <Fallback>
+               <Timeout msec="300"><WaitFor name="never" condition="ticker.tick.value &lt; 0"/></Timeout>
+               <Log message="gave up waiting: the other way"/>
+             </Fallback>
+             <SetParam skill="scale" param="gain" value="3"/>
+           </Sequence>"#,
+    );
+    let (out, text) = sequence(&t, &p);
+    assert!(out.status.success(), "{text}");
+    for step in [
+        "deactivate smooth",
+        "ticking: ticker.tick.value > 20",
+        "Timeout: timed out after 300 ms",
+        "gave up waiting: the other way",
+        "scale.gain = 3",
+        "the plan succeeded",
+    ] {
+        assert!(text.contains(step), "no '{step}' in:\n{text}");
+    }
+    assert_eq!(state(&c, "smooth"), SkillState::Inactive);
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(3.0)
+    );
+    // The timed-out monitor was removed; the one that fired is gone.
+    assert!(c.monitors().unwrap().is_empty());
+
+    // A step the manager refuses fails the plan: exit status 1, the reason word for word.
+    let p = plan(
+        &t,
+        r#"<RetryUntilSuccessful num_attempts="2"><Activate skills="nobody"/></RetryUntilSuccessful>"#,
+    );
+    let (out, text) = sequence(&t, &p);
+    assert!(!out.status.success(), "{text}");
+    assert!(
+        text.contains("activate nobody: refused: unknown skill 'nobody'")
+            && text.contains("the plan failed"),
+        "{text}"
+    );
+
+    // A mistake in the plan: nothing runs, the line and what is wrong are said.
+    let p = plan(&t, "<Sequnce/>");
+    let (out, text) = sequence(&t, &p);
+    assert!(!out.status.success());
+    assert!(
+        text.contains("plan.xml:3: unknown node <Sequnce>"),
+        "{text}"
+    );
+}
+
+#[test]
+fn ctrl_c_halts_a_plan_its_parameter_is_restored_and_its_monitor_removed() {
+    let mut t = TestDomain::new("seqhalt");
+    t.hello(&[]);
+    let c = Client::connect(&t.domain).unwrap();
+    let p = plan(
+        &t,
+        r#"<WithParam skill="scale" param="gain" value="7">
+             <WaitFor name="never" condition="ticker.tick.value &lt; 0"/>
+           </WithParam>"#,
+    );
+    let child = t
+        .command("skillfab")
+        .args(["sequence", p.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    t.wait_until("the plan to set the gain and install its monitor", || {
+        c.get_param("scale", "gain").unwrap() == ParamValue::Float(7.0)
+            && c.monitors().unwrap().len() == 1
+    });
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("scale.gain restored to 2") && text.contains("halted"),
+        "{text}"
+    );
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.0)
+    );
+    assert!(c.monitors().unwrap().is_empty());
+}

@@ -24,7 +24,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::faults::{Faults, Kill, Killer};
-use skillfab_sequence::ClientFabric;
+use skillfab_sequence::{ClientFabric, LockStep};
 
 /// Options of `skillfab demo exit-lab`.
 #[derive(Debug, Clone)]
@@ -387,7 +387,8 @@ impl Sequencer {
 /// What drives the robot: the sequencer written here, or a plan.
 enum Driver {
     Code(Sequencer),
-    Plan(skillfab_sequence::Sequencer),
+    /// With its lock-step pacing, if the manager runs in lock-step.
+    Plan(skillfab_sequence::Sequencer, Option<LockStep>),
 }
 
 /// One run of the experiment.
@@ -424,14 +425,11 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     };
     // The plan's first tick, or the Rust sequencer's first step.
     let mut driver = match &opts.plan {
-        Some(plan) => {
-            let mut p = skillfab_sequence::Sequencer::new(plan, None)?;
-            p.tick(&mut ClientFabric::new(&c))?;
-            for s in p.take_steps() {
-                step(&c, &mut out, &s);
-            }
-            Driver::Plan(p)
-        }
+        // Ticked first in the loop (in lock-step the manager waits for it).
+        Some(plan) => Driver::Plan(
+            skillfab_sequence::Sequencer::new(plan, None)?,
+            LockStep::of(&c),
+        ),
         None => {
             c.activate(&["wander", "avoid", "barcode_track"])?;
             step(
@@ -464,7 +462,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             opts.faults.seed ^ seed,
         )
     });
-    if opts.lockstep {
+    if opts.lockstep && matches!(driver, Driver::Code(_)) {
         c.run()?;
     }
     let started = Instant::now();
@@ -488,23 +486,32 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                     }
                 }
             }
-            Driver::Plan(p) => {
+            Driver::Plan(p, pace) => {
                 let me = c.id().to_string();
-                let mut fired = ev.is_some_and(|e| p.on_event(&me, &e.kind));
-                // Whatever else fired in that cycle, at once.
+                let mut events: Vec<EventKind> = ev.into_iter().map(|e| e.kind).collect();
+                // Whatever else happened in that cycle, at once.
                 while let Some(e) = c.next_event(Duration::ZERO)? {
-                    fired |= p.on_event(&me, &e.kind);
+                    events.push(e.kind);
                 }
-                let status = p.tick(&mut ClientFabric::new(&c))?;
-                for s in p.take_steps() {
-                    step(&c, &mut out, &s);
+                for e in &events {
+                    p.on_event(&me, e);
+                    if let Some(l) = pace.as_mut() {
+                        l.on_event(e);
+                    }
                 }
-                if status != skillfab_sequence::Status::Running {
-                    step(&c, &mut out, &format!("the plan ended: {status:?}"));
-                    break;
-                }
-                if fired && opts.lockstep {
-                    c.run()?;
+                // In lock-step the plan is ticked while the manager waits for it.
+                if pace.as_ref().is_none_or(LockStep::paused) {
+                    let status = p.tick(&mut ClientFabric::new(&c))?;
+                    for s in p.take_steps() {
+                        step(&c, &mut out, &s);
+                    }
+                    if status != skillfab_sequence::Status::Running {
+                        step(&c, &mut out, &format!("the plan ended: {status:?}"));
+                        break;
+                    }
+                    if let Some(l) = pace.as_mut() {
+                        l.resume(&c, p)?;
+                    }
                 }
             }
         }
@@ -549,7 +556,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             step(&c, &mut out, "avoid.safe_distance restored");
         }
         // Halted: what it set for the passage is restored, its monitors removed.
-        Driver::Plan(p) => {
+        Driver::Plan(p, _) => {
             p.halt(&mut ClientFabric::new(&c));
             for s in p.take_steps() {
                 step(&c, &mut out, &s);

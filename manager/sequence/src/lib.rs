@@ -20,5 +20,5 @@ pub mod tree;
 mod tests;
 
 pub use plan::{Plan, PlanError};
-pub use run::{ClientFabric, Sequencer, run};
+pub use run::{ClientFabric, LockStep, Sequencer, run};
 pub use tree::{Fabric, FabricError, SeqError, Status};

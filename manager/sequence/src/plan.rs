@@ -253,7 +253,7 @@ impl Reader<'_> {
             t => t,
         };
         let kind = match kind_name {
-            "Sequence" | "SequenceWithMemory" => Kind::Sequence(self.many(node)?),
+            "Sequence" => Kind::Sequence(self.many(node)?),
             "Fallback" => Kind::Fallback(self.many(node)?),
             "Parallel" => {
                 let children = self.many(node)?;

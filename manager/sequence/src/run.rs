@@ -135,6 +135,11 @@ impl Sequencer {
         self.root.halt(&mut cx);
     }
 
+    /// The earliest fabric time a running timer (`Sleep`, `Timeout`) of the plan is due.
+    pub fn deadline(&self) -> Option<Duration> {
+        self.root.deadline()
+    }
+
     /// The steps done since the last call.
     pub fn take_steps(&mut self) -> Vec<String> {
         std::mem::take(&mut self.steps)
@@ -145,11 +150,66 @@ impl Sequencer {
 /// checked at each tick).
 const POLL: Duration = Duration::from_millis(20);
 
+/// Lock-step pacing. The manager pauses after a cycle in which a monitor fired; it is resumed
+/// once the plan has reacted — with `run`, or, while a timer of the plan is running, with a
+/// `step` exactly as far as the timer, so that a `Sleep` or `Timeout` ends in the same cycle
+/// every run too. A plan run in lock-step is as reproducible as its skills.
+#[derive(Debug)]
+pub struct LockStep {
+    paused: bool,
+}
+
+impl LockStep {
+    /// Pacing for `client`'s manager if it runs in lock-step (it is taken as paused: a
+    /// manager started `--paused` waits for the plan's first tick).
+    pub fn of(client: &Client) -> Option<LockStep> {
+        client
+            .clock()
+            .filter(|c| c.lockstep)
+            .map(|_| LockStep { paused: true })
+    }
+
+    /// Whether the manager waits for the plan (it is ticked, then resumed).
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    /// Takes in an event: a monitor that fired paused the manager.
+    pub fn on_event(&mut self, event: &EventKind) {
+        if matches!(event, EventKind::MonitorFired { .. }) {
+            self.paused = true;
+        }
+    }
+
+    /// Resumes the manager after the plan reacted: up to its next timer, else freely.
+    pub fn resume(&mut self, client: &Client, seq: &Sequencer) -> Result<(), ClientError> {
+        let clock = client.clock();
+        let cycles = match (seq.deadline(), clock.and_then(|c| c.period)) {
+            (Some(due), Some(period)) => {
+                let now = clock.map_or(Duration::ZERO, |c| c.time);
+                let left = due.saturating_sub(now).as_nanos();
+                Some(left.div_ceil(period.as_nanos().max(1)).max(1) as u64)
+            }
+            _ => None,
+        };
+        match cycles {
+            // Ends at the timer, or earlier if a monitor fires: paused either way.
+            Some(n) => {
+                client.step(n)?;
+                self.paused = true;
+            }
+            None => {
+                client.run()?;
+                self.paused = false;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Runs `seq` over `client` until the tree succeeds or fails, or `stop` says so (then the
 /// tree is halted: `None`). `on_step` gets each step as it is done. In lock-step the manager
-/// pauses after a cycle in which a monitor fired; it is resumed once the plan has reacted,
-/// so what the plan does lands in the same cycle every run (and at the start, for a manager
-/// started `--paused`).
+/// is paced by the plan ([`LockStep`]).
 pub fn run(
     client: &mut Client,
     seq: &mut Sequencer,
@@ -162,8 +222,7 @@ pub fn run(
     };
     client.subscribe().map_err(failed)?;
     let id = client.id().to_string();
-    let lockstep = client.clock().is_some_and(|c| c.lockstep);
-    let mut first = true;
+    let mut lockstep = LockStep::of(client);
     loop {
         if stop() {
             seq.halt(&mut ClientFabric::new(client));
@@ -173,26 +232,33 @@ pub fn run(
             return Ok(None);
         }
         // Every event already here first: a plan reacts to all that fired in a cycle at once.
-        let mut wake = first;
         while let Some(ev) = client.next_event(Duration::ZERO).map_err(failed)? {
-            wake |= seq.on_event(&id, &ev.kind);
+            seq.on_event(&id, &ev.kind);
+            if let Some(l) = lockstep.as_mut() {
+                l.on_event(&ev.kind);
+            }
         }
-        let status = seq.tick(&mut ClientFabric::new(client))?;
-        for s in seq.take_steps() {
-            on_step(client, &s);
+        // In lock-step the plan is ticked while the manager waits for it, and only then.
+        if lockstep.as_ref().is_none_or(LockStep::paused) {
+            let status = seq.tick(&mut ClientFabric::new(client))?;
+            for s in seq.take_steps() {
+                on_step(client, &s);
+            }
+            if status != Status::Running {
+                return Ok(Some(status));
+            }
+            if let Some(l) = lockstep.as_mut() {
+                l.resume(client, seq).map_err(failed)?;
+                if l.paused() {
+                    continue;
+                }
+            }
         }
-        if status != Status::Running {
-            return Ok(Some(status));
-        }
-        if lockstep && wake {
-            client.run().map_err(failed)?;
-        }
-        first = false;
-        if let Some(ev) = client.next_event(POLL).map_err(failed)?
-            && seq.on_event(&id, &ev.kind)
-        {
-            // Ticked at the top of the loop, with any other event of the same cycle.
-            first = true;
+        if let Some(ev) = client.next_event(POLL).map_err(failed)? {
+            seq.on_event(&id, &ev.kind);
+            if let Some(l) = lockstep.as_mut() {
+                l.on_event(&ev.kind);
+            }
         }
     }
 }

@@ -381,3 +381,26 @@ fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered
     seq.halt(&mut f);
     assert_eq!(f.params["avoid.safe_distance"], 0.6);
 }
+
+#[test]
+fn the_earliest_running_timer_is_the_plans_deadline() {
+    let p = plan(
+        r#"<Parallel success_count="1">
+             <Timeout msec="5000"><WaitFor condition="a.b.c == 1"/></Timeout>
+             <Sequence><Sleep msec="2000"/><Sleep msec="9000"/></Sequence>
+           </Parallel>"#,
+    );
+    let mut f = Mock::new(&[]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.deadline(), None, "no timer runs before the first tick");
+    f.now = Duration::from_millis(1000);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(seq.deadline(), Some(Duration::from_millis(3000)));
+    // The first sleep over, the next one and the timeout remain.
+    f.now = Duration::from_millis(3000);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(seq.deadline(), Some(Duration::from_millis(6000)));
+    f.now = Duration::from_millis(6000);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Failure);
+    assert_eq!(seq.deadline(), None, "halted timers are not due");
+}

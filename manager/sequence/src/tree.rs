@@ -484,6 +484,41 @@ impl Node {
         }
     }
 
+    /// The earliest fabric time at which a running `Sleep` or `Timeout` below this node is
+    /// due (lock-step: the manager is stepped exactly that far, so a timer ends in the same
+    /// cycle every run).
+    pub fn deadline(&self) -> Option<Duration> {
+        let own = match &self.state {
+            State::Sleep {
+                after,
+                since: Some(s),
+            }
+            | State::Timeout {
+                after,
+                since: Some(s),
+                ..
+            } => Some(*s + *after),
+            _ => None,
+        };
+        let children: Vec<&Node> = match &self.state {
+            State::Sequence { children, .. }
+            | State::Fallback { children, .. }
+            | State::Parallel { children, .. } => children.iter().collect(),
+            State::Retry { child, .. }
+            | State::Timeout { child, .. }
+            | State::Inverter(child)
+            | State::KeepRunning(child)
+            | State::Force(child, _)
+            | State::WithParam { child, .. } => vec![child],
+            _ => Vec::new(),
+        };
+        children
+            .into_iter()
+            .filter_map(Node::deadline)
+            .chain(own)
+            .min()
+    }
+
     /// Stops a running node: what it holds is undone, its state is as if never ticked.
     pub fn halt(&mut self, cx: &mut Cx<'_>) {
         match &mut self.state {

@@ -104,8 +104,9 @@ impl Manager {
     }
 
     /// Evaluates every monitor on the newest samples of the cycle that just finished. In
-    /// lock-step a monitor that fires pauses cycling after this cycle: its owner reacts and
-    /// resumes (`run`), so what a sequencer does in reaction lands in the same cycle every run.
+    /// lock-step a monitor that fires pauses cycling after this cycle (ending a `step` early):
+    /// its owner reacts and resumes (`run`, `step`), so what a sequencer does in reaction
+    /// lands in the same cycle every run.
     pub(super) fn evaluate_monitors(&mut self) {
         let topics: HashSet<String> = self
             .monitors
@@ -150,6 +151,9 @@ impl Manager {
         }
         if fired && matches!(self.config.pace, Pace::LockStep(_)) {
             self.set_paused(true);
+            // A `step` in progress ends here too (its answer says at which cycle): its client
+            // reacts to the firing first.
+            self.stop_at = None;
         }
         let before = self.monitors.len();
         self.monitors.retain(|m| !m.spent());

@@ -140,3 +140,72 @@ fn ctrl_c_halts_a_plan_its_parameter_is_restored_and_its_monitor_removed() {
     );
     assert!(c.monitors().unwrap().is_empty());
 }
+
+#[test]
+fn in_lock_step_a_plans_timers_end_in_the_same_cycle_every_run() {
+    let mut t = TestDomain::new("seqlock");
+    let launch = t.launch_file(skillfab_tests::HELLO);
+    t.spawn(
+        "skillfab",
+        &["up", launch.to_str().unwrap(), "--lockstep", "--paused"],
+    );
+    let board = t.board();
+    t.wait_until("the hello network to register", || {
+        ["ticker", "scale", "smooth"]
+            .iter()
+            .all(|n| skillfab_tests::registered(&board, n).is_some())
+    });
+    // The period is 5 ms: 500 ms are 100 cycles, 250 ms 50. The manager waits for the plan
+    // (`--paused`), and is stepped exactly to each timer.
+    let p = plan(
+        &t,
+        r#"<Sequence>
+             <Log message="start"/>
+             <Sleep msec="500"/>
+             <Log message="woke"/>
+             <Timeout msec="250"><WaitFor condition="ticker.tick.value &lt; 0"/></Timeout>
+           </Sequence>"#,
+    );
+    let cycle_of = |text: &str, what: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.ends_with(what))
+            .unwrap_or_else(|| panic!("no '{what}' in:\n{text}"));
+        line.trim_start_matches("[cycle")
+            .split(',')
+            .next()
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    };
+    for _ in 0..2 {
+        let (out, text) = sequence(&t, &p);
+        assert!(!out.status.success(), "the timeout fails the plan: {text}");
+        let start = cycle_of(&text, "start");
+        assert_eq!(cycle_of(&text, "woke"), start + 100, "{text}");
+        assert_eq!(
+            cycle_of(&text, "timed out after 250 ms"),
+            start + 150,
+            "{text}"
+        );
+    }
+
+    // A monitor that fires ends a `step` early in lock-step (its client reacts first): the
+    // answer names the cycle, well before the thousand asked for.
+    let c = Client::connect(&t.domain).unwrap();
+    let (tick, _) = c.query("ticker.tick.value").unwrap();
+    let before = c.stats().unwrap().cycles;
+    let at_least = tick.as_f64().unwrap() + 20.0;
+    c.add_monitor(
+        &format!("ticker.tick.value > {at_least}"),
+        skillfab_proto::control::MonitorMode::Once,
+        0,
+    )
+    .unwrap();
+    let at = c.step(1000).unwrap();
+    assert!(
+        at > before + 15 && at < before + 40,
+        "stepped from {before} to {at}"
+    );
+}

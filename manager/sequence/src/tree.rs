@@ -104,6 +104,18 @@ impl Cx<'_> {
             }),
         }
     }
+
+    /// The status of an action whose request gave `r`: success (the step said), or failure
+    /// when refused.
+    fn done(&mut self, what: String, r: Result<(), FabricError>) -> Result<Status, SeqError> {
+        Ok(match self.outcome(&what, r)? {
+            Some(()) => {
+                self.step(what);
+                Status::Success
+            }
+            None => Status::Failure,
+        })
+    }
 }
 
 /// A node and its state between ticks.
@@ -408,41 +420,20 @@ impl Node {
                 Ok(status)
             }
             State::Activate(skills) => {
-                let what = format!("activate {}", skills.join(", "));
                 let r = cx.fabric.activate(skills);
-                Ok(match cx.outcome(&what, r)? {
-                    Some(()) => {
-                        cx.step(what);
-                        Status::Success
-                    }
-                    None => Status::Failure,
-                })
+                cx.done(format!("activate {}", skills.join(", ")), r)
             }
             State::Deactivate(skills) => {
-                let what = format!("deactivate {}", skills.join(", "));
                 let r = cx.fabric.deactivate(skills);
-                Ok(match cx.outcome(&what, r)? {
-                    Some(()) => {
-                        cx.step(what);
-                        Status::Success
-                    }
-                    None => Status::Failure,
-                })
+                cx.done(format!("deactivate {}", skills.join(", ")), r)
             }
             State::SetParam {
                 skill,
                 param,
                 value,
             } => {
-                let what = format!("{skill}.{param} = {value}");
                 let r = cx.fabric.set_param(skill, param, value);
-                Ok(match cx.outcome(&what, r)? {
-                    Some(()) => {
-                        cx.step(what);
-                        Status::Success
-                    }
-                    None => Status::Failure,
-                })
+                cx.done(format!("{skill}.{param} = {value}"), r)
             }
             State::WaitFor {
                 condition,

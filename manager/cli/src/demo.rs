@@ -24,7 +24,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::faults::{Faults, Kill, Killer};
-use skillfab_sequence::{ClientFabric, LockStep};
 
 /// Options of `skillfab demo exit-lab`.
 #[derive(Debug, Clone)]
@@ -388,7 +387,51 @@ impl Sequencer {
 enum Driver {
     Code(Sequencer),
     /// With its lock-step pacing, if the manager runs in lock-step.
-    Plan(skillfab_sequence::Sequencer, Option<LockStep>),
+    Plan(skillfab_sequence::Sequencer),
+}
+
+/// How long a run waits for the simulator's first ground truth.
+const NO_TRUTH: Duration = Duration::from_secs(30);
+
+/// How a run ended, by the simulator's ground truth.
+#[derive(Debug, Clone, Copy)]
+enum Verdict {
+    /// The robot is outside the lab.
+    Outside,
+    /// The time limit passed.
+    Limit,
+}
+
+/// The newest ground truth into `out`; how the run ended, if it has.
+fn watch(traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
+    let now = latest(traj)?;
+    out.time_s = now.t;
+    out.collisions = now.collisions;
+    if now.outside {
+        Some(Verdict::Outside)
+    } else if now.t > limit_s {
+        Some(Verdict::Limit)
+    } else {
+        None
+    }
+}
+
+/// Acts on how the run ended: outside, the robot is stopped.
+fn verdict(
+    c: &Client,
+    out: &mut RunOutcome,
+    v: Verdict,
+    step: &dyn Fn(&Client, &mut RunOutcome, &str),
+) -> anyhow::Result<()> {
+    match v {
+        Verdict::Outside => {
+            out.success = true;
+            c.activate(&["stop"])?;
+            step(c, out, "outside the lab: stop");
+        }
+        Verdict::Limit => step(c, out, "time limit reached"),
+    }
+    Ok(())
 }
 
 /// One run of the experiment.
@@ -415,21 +458,18 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         link: None,
         trajectory: Vec::new(),
     };
-    let step = |c: &Client, out: &mut RunOutcome, what: &str| {
+    let record = |c: &Client, steps: &mut Vec<(String, u64, f64)>, what: &str| {
         let cycle = c.stats().map(|s| s.cycles).unwrap_or(0);
         let t = latest(&traj).map_or(0.0, |r| r.t);
         if opts.verbose {
             println!("  [cycle {cycle:>6}, t = {t:>6.1} s] {what}");
         }
-        out.steps.push((what.to_string(), cycle, t));
+        steps.push((what.to_string(), cycle, t));
     };
-    // The plan's first tick, or the Rust sequencer's first step.
+    let step = |c: &Client, out: &mut RunOutcome, what: &str| record(c, &mut out.steps, what);
+    // The plan (run below), or the Rust sequencer's first step.
     let mut driver = match &opts.plan {
-        // Ticked first in the loop (in lock-step the manager waits for it).
-        Some(plan) => Driver::Plan(
-            skillfab_sequence::Sequencer::new(plan, None)?,
-            LockStep::of(&c),
-        ),
+        Some(plan) => Driver::Plan(skillfab_sequence::Sequencer::new(plan, None)?),
         None => {
             c.activate(&["wander", "avoid", "barcode_track"])?;
             step(
@@ -466,67 +506,77 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         c.run()?;
     }
     let started = Instant::now();
-    loop {
-        if interrupted() {
-            bail!("interrupted");
-        }
-        if out.time_s == 0.0 && started.elapsed() > Duration::from_secs(30) {
-            bail!("the simulator wrote no ground truth within 30 s (see the log of skillfab up)");
-        }
-        let ev = c.next_event(Duration::from_millis(100))?;
-        match &mut driver {
-            Driver::Code(seq) => {
-                if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
-                    if let Some(what) = seq.on_monitor(&c, id)? {
-                        step(&c, &mut out, &what);
-                    }
-                    // Lock-step: the manager paused after the cycle the monitor fired in.
-                    if opts.lockstep {
-                        c.run()?;
-                    }
+    match &mut driver {
+        Driver::Code(seq) => loop {
+            if interrupted() {
+                bail!("interrupted");
+            }
+            if out.time_s == 0.0 && started.elapsed() > NO_TRUTH {
+                bail!(
+                    "the simulator wrote no ground truth within 30 s (see the log of skillfab up)"
+                );
+            }
+            let ev = c.next_event(Duration::from_millis(100))?;
+            if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
+                if let Some(what) = seq.on_monitor(&c, id)? {
+                    step(&c, &mut out, &what);
+                }
+                // Lock-step: the manager paused after the cycle the monitor fired in.
+                if opts.lockstep {
+                    c.run()?;
                 }
             }
-            Driver::Plan(p, pace) => {
-                let me = c.id().to_string();
-                let mut events: Vec<EventKind> = ev.into_iter().map(|e| e.kind).collect();
-                // Whatever else happened in that cycle, at once.
-                while let Some(e) = c.next_event(Duration::ZERO)? {
-                    events.push(e.kind);
-                }
-                for e in &events {
-                    p.on_event(&me, e);
-                    if let Some(l) = pace.as_mut() {
-                        l.on_event(e);
-                    }
-                }
-                // In lock-step the plan is ticked while the manager waits for it.
-                if pace.as_ref().is_none_or(LockStep::paused) {
-                    let status = p.tick(&mut ClientFabric::new(&c))?;
-                    for s in p.take_steps() {
-                        step(&c, &mut out, &s);
-                    }
-                    if status != skillfab_sequence::Status::Running {
-                        step(&c, &mut out, &format!("the plan ended: {status:?}"));
-                        break;
-                    }
-                    if let Some(l) = pace.as_mut() {
-                        l.resume(&c, p)?;
-                    }
-                }
-            }
-        }
-        if let Some(now) = latest(&traj) {
-            out.time_s = now.t;
-            out.collisions = now.collisions;
-            if now.outside {
-                out.success = true;
-                c.activate(&["stop"])?;
-                step(&c, &mut out, "outside the lab: stop");
+            if let Some(v) = watch(&traj, &mut out, opts.limit_s) {
+                verdict(&c, &mut out, v, &step)?;
                 break;
             }
-            if now.t > opts.limit_s {
-                step(&c, &mut out, "time limit reached");
-                break;
+        },
+        // The plan runs (and paces a lock-step manager) until it ends or the ground truth
+        // ends the run; it is then halted: what it set is restored, its monitors removed.
+        Driver::Plan(p) => {
+            let mut seen: Option<Verdict> = None;
+            let mut looked = Instant::now();
+            let (limit_s, time_s) = (opts.limit_s, &mut out.time_s);
+            let mut collisions = 0;
+            let mut stop = || {
+                if interrupted() {
+                    return true;
+                }
+                // The trajectory file is read whole: ten times a second is enough.
+                if looked.elapsed() >= Duration::from_millis(100) {
+                    looked = Instant::now();
+                    if let Some(now) = latest(&traj) {
+                        collisions = now.collisions;
+                        *time_s = now.t;
+                        seen = if now.outside {
+                            Some(Verdict::Outside)
+                        } else if now.t > limit_s {
+                            Some(Verdict::Limit)
+                        } else {
+                            None
+                        };
+                    } else if started.elapsed() > NO_TRUTH {
+                        return true;
+                    }
+                }
+                seen.is_some()
+            };
+            let steps = &mut out.steps;
+            let mut on_step = |c: &Client, what: &str| record(c, steps, what);
+            let ended = skillfab_sequence::run(&mut c, p, &mut stop, &mut on_step)?;
+            if interrupted() {
+                bail!("interrupted");
+            }
+            out.collisions = collisions;
+            if let Some(status) = ended {
+                step(&c, &mut out, &format!("the plan ended: {status:?}"));
+            }
+            match seen.or_else(|| watch(&traj, &mut out, opts.limit_s)) {
+                Some(v) => verdict(&c, &mut out, v, &step)?,
+                None if out.time_s == 0.0 => bail!(
+                    "the simulator wrote no ground truth within 30 s (see the log of skillfab up)"
+                ),
+                None => {}
             }
         }
     }
@@ -555,13 +605,8 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             c.set_param("avoid", "safe_distance", "0.6")?;
             step(&c, &mut out, "avoid.safe_distance restored");
         }
-        // Halted: what it set for the passage is restored, its monitors removed.
-        Driver::Plan(p, _) => {
-            p.halt(&mut ClientFabric::new(&c));
-            for s in p.take_steps() {
-                step(&c, &mut out, &s);
-            }
-        }
+        // Halted already when the run ended.
+        Driver::Plan(_) => {}
     }
     let all: Vec<&str> = SKILLS.iter().copied().filter(|s| *s != "stop").collect();
     c.deactivate(&all)?;

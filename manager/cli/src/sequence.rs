@@ -48,7 +48,8 @@ pub fn run(
             None => println!("[cycle {cycle:>6}] {what}"),
         }
     };
-    match skillfab_sequence::run(&mut client, &mut seq, &crate::demo::interrupted, &mut print)? {
+    let mut stop = crate::demo::interrupted;
+    match skillfab_sequence::run(&mut client, &mut seq, &mut stop, &mut print)? {
         Some(Status::Success) => {
             println!("the plan succeeded");
             Ok(())

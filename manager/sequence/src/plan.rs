@@ -6,8 +6,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 /// A plan that cannot be run, with where.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{file}:{line}: {reason}")]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PlanError {
     /// The plan file (or `<plan>`).
     pub file: String,
@@ -16,6 +15,23 @@ pub struct PlanError {
     /// What is wrong.
     pub reason: String,
 }
+
+impl std::fmt::Display for PlanError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.file.as_str(), self.line) {
+            ("", _) => write!(f, "{}", self.reason),
+            (file, 0) => write!(f, "{file}: {}", self.reason),
+            (file, line) => write!(f, "{file}:{line}: {}", self.reason),
+        }
+    }
+}
+
+impl std::error::Error for PlanError {}
+
+/// How deep elements may nest, and how many nodes a tree may have with its sub-trees
+/// inlined: a plan beyond these is refused rather than run out of stack or memory.
+const MAX_DEPTH: usize = 64;
+const MAX_NODES: usize = 100_000;
 
 /// One node of a tree, as written.
 #[derive(Debug, Clone, PartialEq)]
@@ -147,18 +163,25 @@ impl Reader<'_> {
         })
     }
 
+    /// The attribute `name` as a number; `kind` says what is expected, for the error.
     fn number<T: std::str::FromStr>(
         &self,
         node: roxmltree::Node<'_, '_>,
         name: &str,
+        kind: &str,
     ) -> Result<Option<T>, PlanError> {
         node.attribute(name)
             .map(|v| {
                 v.trim().parse::<T>().map_err(|_| {
+                    let hint = if v.contains('{') {
+                        " (there is no blackboard: write the value itself)"
+                    } else {
+                        ""
+                    };
                     self.error(
                         node,
                         format!(
-                            "<{}> {name}=\"{v}\" is not a number of the right kind",
+                            "<{}> {name}=\"{v}\": {kind} expected{hint}",
                             node.tag_name().name()
                         ),
                     )
@@ -167,13 +190,38 @@ impl Reader<'_> {
             .transpose()
     }
 
+    /// Refuses attributes the node does not take (a misspelt one would be ignored silently);
+    /// `name` and `_…` (Groot's) go with every node.
+    fn only(&self, node: roxmltree::Node<'_, '_>, takes: &[&str]) -> Result<(), PlanError> {
+        for a in node.attributes() {
+            let n = a.name();
+            if n != "name" && !n.starts_with('_') && !takes.contains(&n) {
+                let expected = if takes.is_empty() {
+                    "it takes only name".to_string()
+                } else {
+                    format!("it takes {}", takes.join(", "))
+                };
+                return Err(self.error(
+                    node,
+                    format!(
+                        "<{}> has no attribute {n} ({expected})",
+                        node.tag_name().name()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     fn msec(&self, node: roxmltree::Node<'_, '_>) -> Result<Duration, PlanError> {
-        let ms: u64 = self.number(node, "msec")?.ok_or_else(|| {
-            self.error(
-                node,
-                format!("<{}> needs msec=\"…\"", node.tag_name().name()),
-            )
-        })?;
+        let ms: u64 = self
+            .number(node, "msec", "milliseconds, a whole number")?
+            .ok_or_else(|| {
+                self.error(
+                    node,
+                    format!("<{}> needs msec=\"…\"", node.tag_name().name()),
+                )
+            })?;
         Ok(Duration::from_millis(ms))
     }
 
@@ -208,9 +256,13 @@ impl Reader<'_> {
         Ok(out)
     }
 
-    fn one_child(&self, node: roxmltree::Node<'_, '_>) -> Result<Box<Spec>, PlanError> {
+    fn one_child(
+        &self,
+        node: roxmltree::Node<'_, '_>,
+        depth: usize,
+    ) -> Result<Box<Spec>, PlanError> {
         match self.children(node)?.as_slice() {
-            [c] => Ok(Box::new(self.spec(*c)?)),
+            [c] => Ok(Box::new(self.spec(*c, depth + 1)?)),
             other => Err(self.error(
                 node,
                 format!(
@@ -222,7 +274,7 @@ impl Reader<'_> {
         }
     }
 
-    fn many(&self, node: roxmltree::Node<'_, '_>) -> Result<Vec<Spec>, PlanError> {
+    fn many(&self, node: roxmltree::Node<'_, '_>, depth: usize) -> Result<Vec<Spec>, PlanError> {
         let children = self.children(node)?;
         if children.is_empty() {
             return Err(self.error(
@@ -230,7 +282,10 @@ impl Reader<'_> {
                 format!("<{}> has no children", node.tag_name().name()),
             ));
         }
-        children.into_iter().map(|c| self.spec(c)).collect()
+        children
+            .into_iter()
+            .map(|c| self.spec(c, depth + 1))
+            .collect()
     }
 
     fn leaf(&self, node: roxmltree::Node<'_, '_>) -> Result<(), PlanError> {
@@ -243,22 +298,45 @@ impl Reader<'_> {
         }
     }
 
-    fn spec(&self, node: roxmltree::Node<'_, '_>) -> Result<Spec, PlanError> {
+    fn spec(&self, node: roxmltree::Node<'_, '_>, depth: usize) -> Result<Spec, PlanError> {
+        if depth > MAX_DEPTH {
+            return Err(self.error(node, format!("nodes nested deeper than {MAX_DEPTH}")));
+        }
         let tag = node.tag_name().name();
         // BehaviorTree.CPP's generic forms: <Action ID="Activate" …/>, <Condition ID=…/>.
-        let kind_name = match tag {
-            "Action" | "Condition" | "Control" | "Decorator" => node
-                .attribute("ID")
-                .ok_or_else(|| self.error(node, format!("<{tag}> needs ID=\"…\"")))?,
-            t => t,
+        let generic = matches!(tag, "Action" | "Condition" | "Control" | "Decorator");
+        let kind_name = if generic {
+            node.attribute("ID")
+                .ok_or_else(|| self.error(node, format!("<{tag}> needs ID=\"…\"")))?
+        } else {
+            tag
         };
+        // The attributes each node takes (the generic forms' ID besides).
+        let takes: &[&str] = match kind_name {
+            "Parallel" => &["success_count", "failure_count"],
+            "RetryUntilSuccessful" => &["num_attempts"],
+            "Timeout" | "Sleep" => &["msec"],
+            "WithParam" | "SetParam" => &["skill", "param", "value"],
+            "Activate" | "Deactivate" => &["skills"],
+            "WaitFor" => &["condition", "hold"],
+            "Log" => &["message"],
+            "SubTree" => &["ID"],
+            _ => &[],
+        };
+        let mut takes = takes.to_vec();
+        if generic {
+            takes.push("ID");
+        }
         let kind = match kind_name {
-            "Sequence" => Kind::Sequence(self.many(node)?),
-            "Fallback" => Kind::Fallback(self.many(node)?),
+            "Sequence" => Kind::Sequence(self.many(node, depth)?),
+            "Fallback" => Kind::Fallback(self.many(node, depth)?),
             "Parallel" => {
-                let children = self.many(node)?;
-                let success: i64 = self.number(node, "success_count")?.unwrap_or(-1);
-                let failure: i64 = self.number(node, "failure_count")?.unwrap_or(1);
+                let children = self.many(node, depth)?;
+                let count_kind = "-1 (all) or a number of children";
+                let success: i64 = self
+                    .number(node, "success_count", count_kind)?
+                    .unwrap_or(-1);
+                let failure: i64 = self.number(node, "failure_count", count_kind)?.unwrap_or(1);
                 let n = children.len() as i64;
                 let count = |v: i64, what: &str| match v {
                     -1 => Ok(None),
@@ -275,15 +353,19 @@ impl Reader<'_> {
                 }
             }
             "RetryUntilSuccessful" => {
-                let n: i64 = self.number(node, "num_attempts")?.ok_or_else(|| {
-                    self.error(
-                        node,
-                        "<RetryUntilSuccessful> needs num_attempts=\"…\" (-1: for ever)".into(),
-                    )
-                })?;
+                let n: i64 = self
+                    .number(node, "num_attempts", "-1 (for ever) or at least 1")?
+                    .ok_or_else(|| {
+                        self.error(
+                            node,
+                            "<RetryUntilSuccessful> needs num_attempts=\"…\" (-1: for ever)".into(),
+                        )
+                    })?;
                 let attempts = match n {
                     -1 => None,
-                    n if n >= 1 => Some(n as u32),
+                    n if n >= 1 => Some(u32::try_from(n).map_err(|_| {
+                        self.error(node, format!("num_attempts=\"{n}\": at most {}", u32::MAX))
+                    })?),
                     n => {
                         return Err(
                             self.error(node, format!("num_attempts=\"{n}\": -1 or at least 1"))
@@ -292,22 +374,35 @@ impl Reader<'_> {
                 };
                 Kind::Retry {
                     attempts,
-                    child: self.one_child(node)?,
+                    child: self.one_child(node, depth)?,
                 }
             }
-            "Timeout" => Kind::Timeout {
-                after: self.msec(node)?,
-                child: self.one_child(node)?,
-            },
-            "Inverter" => Kind::Inverter(self.one_child(node)?),
-            "KeepRunningUntilFailure" => Kind::KeepRunningUntilFailure(self.one_child(node)?),
-            "ForceSuccess" => Kind::ForceSuccess(self.one_child(node)?),
-            "ForceFailure" => Kind::ForceFailure(self.one_child(node)?),
+            "Timeout" => {
+                let after = self.msec(node)?;
+                if after.is_zero() {
+                    return Err(self.error(
+                        node,
+                        "<Timeout> msec=\"0\": at least 1 (to wait without a limit, leave \
+                         the Timeout out)"
+                            .into(),
+                    ));
+                }
+                Kind::Timeout {
+                    after,
+                    child: self.one_child(node, depth)?,
+                }
+            }
+            "Inverter" => Kind::Inverter(self.one_child(node, depth)?),
+            "KeepRunningUntilFailure" => {
+                Kind::KeepRunningUntilFailure(self.one_child(node, depth)?)
+            }
+            "ForceSuccess" => Kind::ForceSuccess(self.one_child(node, depth)?),
+            "ForceFailure" => Kind::ForceFailure(self.one_child(node, depth)?),
             "WithParam" => Kind::WithParam {
                 skill: self.attr(node, "skill")?,
                 param: self.attr(node, "param")?,
                 value: self.attr(node, "value")?,
-                child: self.one_child(node)?,
+                child: self.one_child(node, depth)?,
             },
             "Activate" => {
                 self.leaf(node)?;
@@ -329,7 +424,9 @@ impl Reader<'_> {
                 self.leaf(node)?;
                 Kind::WaitFor {
                     condition: self.attr(node, "condition")?,
-                    hold: self.number(node, "hold")?.unwrap_or(0),
+                    hold: self
+                        .number(node, "hold", "cycles, a whole number")?
+                        .unwrap_or(0),
                 }
             }
             "Sleep" => {
@@ -365,6 +462,7 @@ impl Reader<'_> {
                 ));
             }
         };
+        self.only(node, &takes)?;
         Ok(Spec {
             kind,
             name: node
@@ -402,7 +500,7 @@ impl Plan {
                 "BehaviorTree" => {
                     let id = r.attr(t, "ID")?;
                     let body = match r.children(t)?.as_slice() {
-                        [b] => r.spec(*b)?,
+                        [b] => r.spec(*b, 0)?,
                         other => {
                             return Err(r.error(
                                 t,
@@ -451,44 +549,60 @@ impl Plan {
         Ok(plan)
     }
 
-    /// Every `SubTree` names a tree, and no tree contains itself.
+    /// Every `SubTree` names a tree, no tree contains itself, and no tree is larger than
+    /// [`MAX_NODES`] with its sub-trees inlined (each tree is walked once).
     fn check_subtrees(&self, file: &str) -> Result<(), PlanError> {
-        fn walk(
+        /// Nodes of `spec` with its sub-trees inlined.
+        fn size(
             plan: &Plan,
             spec: &Spec,
             path: &mut Vec<String>,
+            sizes: &mut BTreeMap<String, usize>,
             file: &str,
-        ) -> Result<(), PlanError> {
+        ) -> Result<usize, PlanError> {
             let err = |reason: String| PlanError {
                 file: file.to_string(),
                 line: spec.line,
                 reason,
             };
-            match &spec.kind {
+            let n = match &spec.kind {
                 Kind::SubTree(id) => {
-                    let Some(tree) = plan.trees.get(id) else {
-                        return Err(err(format!("SubTree ID=\"{id}\": no tree has that ID")));
-                    };
                     if path.contains(id) {
                         return Err(err(format!(
                             "SubTree '{id}' contains itself ({} → {id})",
                             path.join(" → ")
                         )));
                     }
+                    if let Some(n) = sizes.get(id) {
+                        return Ok(*n);
+                    }
+                    let Some(tree) = plan.trees.get(id) else {
+                        return Err(err(format!("SubTree ID=\"{id}\": no tree has that ID")));
+                    };
                     path.push(id.clone());
-                    walk(plan, tree, path, file)?;
+                    let n = size(plan, tree, path, sizes, file)?;
                     path.pop();
+                    sizes.insert(id.clone(), n);
+                    n
                 }
                 other => {
+                    let mut n = 1usize;
                     for c in other.children() {
-                        walk(plan, c, path, file)?;
+                        n = n.saturating_add(size(plan, c, path, sizes, file)?);
                     }
+                    n
                 }
+            };
+            if n > MAX_NODES {
+                return Err(err(format!(
+                    "more than {MAX_NODES} nodes with its sub-trees inlined"
+                )));
             }
-            Ok(())
+            Ok(n)
         }
+        let mut sizes = BTreeMap::new();
         for (id, tree) in &self.trees {
-            walk(self, tree, &mut vec![id.clone()], file)?;
+            size(self, tree, &mut vec![id.clone()], &mut sizes, file)?;
         }
         Ok(())
     }

@@ -12,17 +12,15 @@ use std::time::{Duration, Instant};
 /// The fabric a plan drives, through a client of the local manager (or a remote one).
 pub struct ClientFabric<'a> {
     client: &'a Client,
-    /// The wall clock's origin, for a client that cannot read the fabric's (over a bridge).
-    start: Instant,
+    /// The wall clock's origin, for a client that cannot read the fabric's (over a bridge):
+    /// the plan's, the same for all its ticks ([`Sequencer::origin`]).
+    origin: Instant,
 }
 
 impl<'a> ClientFabric<'a> {
-    /// Drives the fabric of `client`.
-    pub fn new(client: &'a Client) -> ClientFabric<'a> {
-        ClientFabric {
-            client,
-            start: Instant::now(),
-        }
+    /// Drives the fabric of `client`; `origin` is the plan's ([`Sequencer::origin`]).
+    pub fn new(client: &'a Client, origin: Instant) -> ClientFabric<'a> {
+        ClientFabric { client, origin }
     }
 }
 
@@ -76,11 +74,13 @@ impl Fabric for ClientFabric<'_> {
         let _ = self.client.remove_monitor(id);
     }
 
+    /// The fabric's clock on this host (none while its manager restarts: time stands still
+    /// for the plan's timers); over a bridge, the wall clock since the plan started.
     fn now(&mut self) -> Duration {
-        match self.client.clock() {
-            Some(c) => c.time,
-            None => self.start.elapsed(),
+        if self.client.is_remote() {
+            return self.origin.elapsed();
         }
+        self.client.clock().map_or(Duration::ZERO, |c| c.time)
     }
 }
 
@@ -89,6 +89,7 @@ pub struct Sequencer {
     root: Node,
     fired: HashSet<u64>,
     steps: Vec<String>,
+    origin: Instant,
 }
 
 impl Sequencer {
@@ -98,7 +99,13 @@ impl Sequencer {
             root: Node::build(plan, tree.unwrap_or(&plan.main))?,
             fired: HashSet::new(),
             steps: Vec::new(),
+            origin: Instant::now(),
         })
+    }
+
+    /// When the plan started: the origin of its wall-clock time over a bridge.
+    pub fn origin(&self) -> Instant {
+        self.origin
     }
 
     /// Takes in an event of `client`'s stream; whether the plan has something to react to
@@ -150,18 +157,24 @@ impl Sequencer {
 /// checked at each tick).
 const POLL: Duration = Duration::from_millis(20);
 
+/// The most cycles one `step` asks for: a long timer is stepped in parts, so that Ctrl-C is
+/// seen between them.
+const MAX_STEP: u64 = 200;
+
 /// Lock-step pacing. The manager pauses after a cycle in which a monitor fired; it is resumed
 /// once the plan has reacted — with `run`, or, while a timer of the plan is running, with a
 /// `step` exactly as far as the timer, so that a `Sleep` or `Timeout` ends in the same cycle
-/// every run too. A plan run in lock-step is as reproducible as its skills.
+/// every run too. A plan run in lock-step is as reproducible as its skills. When the plan
+/// ends, the manager stays paused (`ctl run` resumes it).
 #[derive(Debug)]
 pub struct LockStep {
     paused: bool,
 }
 
 impl LockStep {
-    /// Pacing for `client`'s manager if it runs in lock-step (it is taken as paused: a
-    /// manager started `--paused` waits for the plan's first tick).
+    /// Pacing for `client`'s manager if it runs in lock-step on this host (it is taken as
+    /// paused: a manager started `--paused` waits for the plan's first tick). Over a bridge
+    /// the board cannot be read: a plan does not pace a remote lock-step manager.
     pub fn of(client: &Client) -> Option<LockStep> {
         client
             .clock()
@@ -181,14 +194,16 @@ impl LockStep {
         }
     }
 
-    /// Resumes the manager after the plan reacted: up to its next timer, else freely.
+    /// Resumes the manager after the plan reacted: up to its next timer (at most
+    /// [`MAX_STEP`] cycles at a time), else freely.
     pub fn resume(&mut self, client: &Client, seq: &Sequencer) -> Result<(), ClientError> {
         let clock = client.clock();
         let cycles = match (seq.deadline(), clock.and_then(|c| c.period)) {
             (Some(due), Some(period)) => {
                 let now = clock.map_or(Duration::ZERO, |c| c.time);
                 let left = due.saturating_sub(now).as_nanos();
-                Some(left.div_ceil(period.as_nanos().max(1)).max(1) as u64)
+                let n = left.div_ceil(period.as_nanos().max(1)).max(1);
+                Some(u64::try_from(n).unwrap_or(u64::MAX).min(MAX_STEP))
             }
             _ => None,
         };
@@ -209,30 +224,54 @@ impl LockStep {
 
 /// Runs `seq` over `client` until the tree succeeds or fails, or `stop` says so (then the
 /// tree is halted: `None`). `on_step` gets each step as it is done. In lock-step the manager
-/// is paced by the plan ([`LockStep`]).
+/// is paced by the plan ([`LockStep`]). On an error the tree is halted as far as the fabric
+/// still answers (parameters restored, monitors removed) before the error is returned.
 pub fn run(
     client: &mut Client,
     seq: &mut Sequencer,
-    stop: &dyn Fn() -> bool,
+    stop: &mut dyn FnMut() -> bool,
     on_step: &mut dyn FnMut(&Client, &str),
 ) -> Result<Option<Status>, SeqError> {
-    let failed = |e: ClientError| SeqError::Fabric {
-        what: "events".into(),
-        source: FabricError::Failed(e.to_string()),
+    let outcome = drive(client, seq, stop, on_step);
+    if outcome.is_err() {
+        seq.halt(&mut ClientFabric::new(client, seq.origin()));
+        for s in seq.take_steps() {
+            on_step(client, &s);
+        }
+    }
+    outcome
+}
+
+fn drive(
+    client: &mut Client,
+    seq: &mut Sequencer,
+    stop: &mut dyn FnMut() -> bool,
+    on_step: &mut dyn FnMut(&Client, &str),
+) -> Result<Option<Status>, SeqError> {
+    let failed = |what: &'static str| {
+        move |e: ClientError| SeqError::Fabric {
+            what: what.into(),
+            source: FabricError::Failed(e.to_string()),
+        }
     };
-    client.subscribe().map_err(failed)?;
+    client
+        .subscribe()
+        .map_err(failed("subscribing to events"))?;
     let id = client.id().to_string();
     let mut lockstep = LockStep::of(client);
     loop {
         if stop() {
-            seq.halt(&mut ClientFabric::new(client));
+            seq.halt(&mut ClientFabric::new(client, seq.origin()));
             for s in seq.take_steps() {
                 on_step(client, &s);
             }
             return Ok(None);
         }
         // Every event already here first: a plan reacts to all that fired in a cycle at once.
-        while let Some(ev) = client.next_event(Duration::ZERO).map_err(failed)? {
+        while let Some(ev) = client
+            .next_event(Duration::ZERO)
+            .map_err(failed("reading events"))?
+        {
             seq.on_event(&id, &ev.kind);
             if let Some(l) = lockstep.as_mut() {
                 l.on_event(&ev.kind);
@@ -240,7 +279,7 @@ pub fn run(
         }
         // In lock-step the plan is ticked while the manager waits for it, and only then.
         if lockstep.as_ref().is_none_or(LockStep::paused) {
-            let status = seq.tick(&mut ClientFabric::new(client))?;
+            let status = seq.tick(&mut ClientFabric::new(client, seq.origin()))?;
             for s in seq.take_steps() {
                 on_step(client, &s);
             }
@@ -248,13 +287,14 @@ pub fn run(
                 return Ok(Some(status));
             }
             if let Some(l) = lockstep.as_mut() {
-                l.resume(client, seq).map_err(failed)?;
+                l.resume(client, seq)
+                    .map_err(failed("resuming the lock-step manager"))?;
                 if l.paused() {
                     continue;
                 }
             }
         }
-        if let Some(ev) = client.next_event(POLL).map_err(failed)? {
+        if let Some(ev) = client.next_event(POLL).map_err(failed("reading events"))? {
             seq.on_event(&id, &ev.kind);
             if let Some(l) = lockstep.as_mut() {
                 l.on_event(&ev.kind);

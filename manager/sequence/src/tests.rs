@@ -404,3 +404,99 @@ fn the_earliest_running_timer_is_the_plans_deadline() {
     assert_eq!(seq.tick(&mut f).unwrap(), Status::Failure);
     assert_eq!(seq.deadline(), None, "halted timers are not due");
 }
+
+#[test]
+fn a_parallel_decides_as_soon_as_it_can_and_the_later_children_do_not_act() {
+    // The door and "near the barcode" fire in the same cycle: the door (first) decides, and
+    // the search branch is halted before it reacts.
+    let p = plan(
+        r#"<Parallel success_count="1" failure_count="1">
+             <WaitFor name="door" condition="door == 1"/>
+             <Sequence>
+               <WaitFor name="near" condition="near == 1"/>
+               <Activate skills="wall_follow"/>
+             </Sequence>
+           </Parallel>"#,
+    );
+    let mut f = Mock::new(&["wall_follow"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    let (door, near) = (f.monitor("door == 1"), f.monitor("near == 1"));
+    fire(&mut seq, &mut f, door);
+    fire(&mut seq, &mut f, near);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert!(f.on().is_empty(), "the search reacted: {:?}", f.on());
+
+    // All must succeed and all may fail: one success and one failure can no longer succeed.
+    let p = plan(
+        r#"<Parallel success_count="-1" failure_count="-1">
+             <AlwaysSuccess/><AlwaysFailure/>
+           </Parallel>"#,
+    );
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Failure);
+}
+
+#[test]
+fn a_retry_is_due_at_once_and_a_timeout_past_its_time_does_not_tick_its_child() {
+    let p = plan(
+        r#"<RetryUntilSuccessful num_attempts="-1"><Activate skills="nobody"/></RetryUntilSuccessful>"#,
+    );
+    let mut f = Mock::new(&["home"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(
+        seq.deadline(),
+        Some(Duration::ZERO),
+        "a retry waits for nothing"
+    );
+
+    let p = plan(
+        r#"<Timeout msec="1000"><Sequence><Sleep msec="1000"/><Activate skills="home"/></Sequence></Timeout>"#,
+    );
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    f.now = Duration::from_millis(1000);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Failure);
+    assert!(f.on().is_empty(), "started after its time: {:?}", f.on());
+}
+
+#[test]
+fn misspelt_attributes_zero_timeouts_blackboard_keys_and_deep_nesting_are_refused() {
+    let refused = |body: &str| {
+        let text =
+            format!("<root BTCPP_format=\"4\"><BehaviorTree ID=\"A\">{body}</BehaviorTree></root>");
+        Plan::parse(&text, "p.xml").unwrap_err().reason
+    };
+    let e = refused(r#"<Parallel success_threshold="1"><AlwaysSuccess/></Parallel>"#);
+    assert!(
+        e.contains("no attribute success_threshold (it takes success_count, failure_count)"),
+        "{e}"
+    );
+    let e = refused(r#"<Timeout msec="0"><AlwaysSuccess/></Timeout>"#);
+    assert!(e.contains("at least 1"), "{e}");
+    let e = refused(r#"<Sleep msec="{delay}"/>"#);
+    assert!(e.contains("there is no blackboard"), "{e}");
+    let e = refused(
+        r#"<RetryUntilSuccessful num_attempts="4294967296"><AlwaysSuccess/></RetryUntilSuccessful>"#,
+    );
+    assert!(e.contains("at most 4294967295"), "{e}");
+    let deep = format!(
+        "{}<AlwaysSuccess/>{}",
+        "<Inverter>".repeat(80),
+        "</Inverter>".repeat(80)
+    );
+    let e = refused(&deep);
+    assert!(e.contains("nested deeper than 64"), "{e}");
+    // Sub-trees used twice at every level: refused by size, checked once per tree.
+    let mut text = String::from("<root BTCPP_format=\"4\" main_tree_to_execute=\"T0\">");
+    for i in 0..30 {
+        text += &format!(
+            "<BehaviorTree ID=\"T{i}\"><Sequence><SubTree ID=\"T{n}\"/><SubTree ID=\"T{n}\"/></Sequence></BehaviorTree>",
+            n = i + 1
+        );
+    }
+    text += "<BehaviorTree ID=\"T30\"><AlwaysSuccess/></BehaviorTree></root>";
+    let e = Plan::parse(&text, "p.xml").unwrap_err();
+    assert!(e.reason.contains("more than 100000 nodes"), "{e}");
+}

@@ -143,6 +143,8 @@ enum State {
         child: Box<Node>,
         attempts: Option<u32>,
         failed: u32,
+        /// The child failed and is tried again at the next tick (due now).
+        again: bool,
     },
     Timeout {
         child: Box<Node>,
@@ -223,6 +225,7 @@ impl Node {
                 child: one(child),
                 attempts: *attempts,
                 failed: 0,
+                again: false,
             },
             Kind::Timeout { after, child } => State::Timeout {
                 child: one(child),
@@ -309,22 +312,29 @@ impl Node {
                 success,
                 failure,
             } => {
-                for (c, d) in children.iter_mut().zip(done.iter_mut()) {
-                    if d.is_none() {
-                        match c.tick(cx)? {
+                // As BehaviorTree.CPP: decided as soon as enough children succeeded, or
+                // too many failed for the successes still needed; the others are halted
+                // before they are ticked again.
+                let n = children.len();
+                let mut outcome = None;
+                for i in 0..n {
+                    if done[i].is_none() {
+                        match children[i].tick(cx)? {
                             Status::Running => {}
-                            s => *d = Some(s),
+                            s => done[i] = Some(s),
                         }
                     }
+                    let count = |s: Status| done.iter().filter(|d| **d == Some(s)).count();
+                    let (won, lost) = (count(Status::Success), count(Status::Failure));
+                    if won >= *success {
+                        outcome = Some(Status::Success);
+                    } else if lost >= *failure || n - lost < *success {
+                        outcome = Some(Status::Failure);
+                    }
+                    if outcome.is_some() {
+                        break;
+                    }
                 }
-                let count = |s: Status| done.iter().filter(|d| **d == Some(s)).count();
-                let outcome = if count(Status::Success) >= *success {
-                    Some(Status::Success)
-                } else if count(Status::Failure) >= *failure {
-                    Some(Status::Failure)
-                } else {
-                    None
-                };
                 let Some(outcome) = outcome else {
                     return Ok(Status::Running);
                 };
@@ -340,22 +350,28 @@ impl Node {
                 child,
                 attempts,
                 failed,
+                again,
             } => match child.tick(cx)? {
                 Status::Failure => {
                     *failed += 1;
                     if attempts.is_some_and(|n| *failed >= n) {
-                        *failed = 0;
+                        (*failed, *again) = (0, false);
                         return Ok(Status::Failure);
                     }
                     cx.step(format!("{name}: attempt {} failed; again", *failed));
-                    // Tried again at the next tick (a child that fails at once does not spin).
+                    // Tried again at the next tick, which is due at once (a child that fails
+                    // at once does not spin within one tick).
+                    *again = true;
                     Ok(Status::Running)
                 }
                 Status::Success => {
-                    *failed = 0;
+                    (*failed, *again) = (0, false);
                     Ok(Status::Success)
                 }
-                Status::Running => Ok(Status::Running),
+                Status::Running => {
+                    *again = false;
+                    Ok(Status::Running)
+                }
             },
             State::Timeout {
                 child,
@@ -364,13 +380,14 @@ impl Node {
             } => {
                 let now = cx.fabric.now();
                 let started = *since.get_or_insert(now);
+                // Past its time the child is not ticked again (it would start more).
+                if now.saturating_sub(started) >= *after {
+                    child.halt(cx);
+                    *since = None;
+                    cx.step(format!("{name}: timed out after {} ms", after.as_millis()));
+                    return Ok(Status::Failure);
+                }
                 match child.tick(cx)? {
-                    Status::Running if now.saturating_sub(started) >= *after => {
-                        child.halt(cx);
-                        *since = None;
-                        cx.step(format!("{name}: timed out after {} ms", after.as_millis()));
-                        Ok(Status::Failure)
-                    }
                     Status::Running => Ok(Status::Running),
                     s => {
                         *since = None;
@@ -489,6 +506,8 @@ impl Node {
                 since: Some(s),
                 ..
             } => Some(*s + *after),
+            // A retry waits for nothing: due now.
+            State::Retry { again: true, .. } => Some(Duration::ZERO),
             _ => None,
         };
         let children: Vec<&Node> = match &self.state {
@@ -527,9 +546,14 @@ impl Node {
                     *d = None;
                 }
             }
-            State::Retry { child, failed, .. } => {
+            State::Retry {
+                child,
+                failed,
+                again,
+                ..
+            } => {
                 child.halt(cx);
-                *failed = 0;
+                (*failed, *again) = (0, false);
             }
             State::Timeout { child, since, .. } => {
                 child.halt(cx);

@@ -98,7 +98,7 @@ pub(crate) fn serve(
             Ok(_) => wait_failing = false,
             Err(e) => {
                 // Not woken: the samples are still read at each IDLE.
-                crate::remote::warn_once(&mut wait_failing, "topic event not waited for", &e);
+                crate::warn_once(&mut wait_failing, "topic event not waited for", &e);
                 std::thread::sleep(IDLE);
             }
         }
@@ -122,7 +122,7 @@ pub(crate) fn serve(
             }
         })?;
         match failed {
-            Some(e) => crate::remote::warn_once(&mut put_failing, "sample not put on Zenoh", &e),
+            Some(e) => crate::warn_once(&mut put_failing, "sample not put on Zenoh", &e),
             None => put_failing = false,
         }
     }

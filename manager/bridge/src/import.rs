@@ -162,12 +162,11 @@ pub(crate) fn serve(
                     .attachment()
                     .and_then(|a| SampleMeta::decode(&a.to_bytes()).ok());
                 let bytes = s.payload().to_bytes();
-                let arrival = fig.arrived(meta.as_ref(), bytes.len(), size, align);
-                let (Arrival::Taken { .. }, Some(meta)) = (arrival.clone(), meta) else {
-                    if let Arrival::Refused(why) = arrival {
-                        refuse(&told, &topic, &why);
-                    }
-                    return;
+                let meta = match (fig.arrived(meta.as_ref(), bytes.len(), size, align), meta) {
+                    (Arrival::Taken { .. }, Some(meta)) => meta,
+                    (Arrival::Refused(why), _) => return refuse(&told, &topic, &why),
+                    // Not reached: a sample without its attachment is refused.
+                    (Arrival::Taken { .. }, None) => return,
                 };
                 if let Ok(mut p) = pending.lock() {
                     p[i] = Some((bytes.into_owned(), meta));

@@ -101,6 +101,14 @@ pub(crate) fn zenoh_error(what: &str, e: impl std::fmt::Display) -> BridgeError 
     }
 }
 
+/// Logs the first failure of a run of them (`failing` is cleared by the next success).
+pub(crate) fn warn_once(failing: &mut bool, what: &str, e: &dyn std::fmt::Display) {
+    if !*failing {
+        tracing::warn!(error = %e, "{what} (said once until it works again)");
+        *failing = true;
+    }
+}
+
 /// Set when the bridge is to end, seen by its threads. Only the main thread reads iceoryx2's
 /// termination flag (a read clears it); it sets this one for the others.
 #[derive(Clone, Default)]

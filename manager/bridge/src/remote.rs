@@ -7,7 +7,7 @@
 //! hold up another's requests) and replies with the manager's encoded answer — or, when there
 //! is no answer to give, a [`RemoteFailure`].
 
-use crate::{BridgeError, Stop, zenoh_error};
+use crate::{BridgeError, Stop, warn_once, zenoh_error};
 use skillfab_client::{Client, ClientError};
 use skillfab_proto::bridge::RemoteFailure;
 use skillfab_proto::control::{self, Response};
@@ -251,12 +251,4 @@ pub(crate) fn forward_logs(
         }
     }
     Ok(())
-}
-
-/// Logs the first failure of a run of them (`failing` is cleared by the next success).
-pub(crate) fn warn_once(failing: &mut bool, what: &str, e: &dyn std::fmt::Display) {
-    if !*failing {
-        tracing::warn!(error = %e, "{what} (said once until it works again)");
-        *failing = true;
-    }
 }

@@ -402,11 +402,8 @@ enum Verdict {
     Limit,
 }
 
-/// The newest ground truth into `out`; how the run ended, if it has.
-fn watch(traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
-    let now = latest(traj)?;
-    out.time_s = now.t;
-    out.collisions = now.collisions;
+/// How the run ended by ground truth `now`, if it has.
+fn judge(now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
     if now.outside {
         Some(Verdict::Outside)
     } else if now.t > limit_s {
@@ -415,6 +412,17 @@ fn watch(traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
         None
     }
 }
+
+/// The newest ground truth into `out`; how the run ended, if it has.
+fn watch(traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
+    let now = latest(traj)?;
+    out.time_s = now.t;
+    out.collisions = now.collisions;
+    judge(&now, limit_s)
+}
+
+const NO_TRUTH_ERROR: &str =
+    "the simulator wrote no ground truth within 30 s (see the log of skillfab up)";
 
 /// Acts on how the run ended: outside, the robot is stopped.
 fn verdict(
@@ -512,9 +520,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                 bail!("interrupted");
             }
             if out.time_s == 0.0 && started.elapsed() > NO_TRUTH {
-                bail!(
-                    "the simulator wrote no ground truth within 30 s (see the log of skillfab up)"
-                );
+                bail!(NO_TRUTH_ERROR);
             }
             let ev = c.next_event(Duration::from_millis(100))?;
             if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
@@ -534,10 +540,8 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         // The plan runs (and paces a lock-step manager) until it ends or the ground truth
         // ends the run; it is then halted: what it set is restored, its monitors removed.
         Driver::Plan(p) => {
-            let mut seen: Option<Verdict> = None;
             let mut looked = Instant::now();
-            let (limit_s, time_s) = (opts.limit_s, &mut out.time_s);
-            let mut collisions = 0;
+            let mut last: Option<TruthRecord> = None;
             let mut stop = || {
                 if interrupted() {
                     return true;
@@ -545,21 +549,12 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                 // The trajectory file is read whole: ten times a second is enough.
                 if looked.elapsed() >= Duration::from_millis(100) {
                     looked = Instant::now();
-                    if let Some(now) = latest(&traj) {
-                        collisions = now.collisions;
-                        *time_s = now.t;
-                        seen = if now.outside {
-                            Some(Verdict::Outside)
-                        } else if now.t > limit_s {
-                            Some(Verdict::Limit)
-                        } else {
-                            None
-                        };
-                    } else if started.elapsed() > NO_TRUTH {
-                        return true;
-                    }
+                    last = latest(&traj).or(last);
                 }
-                seen.is_some()
+                match &last {
+                    Some(now) => judge(now, opts.limit_s).is_some(),
+                    None => started.elapsed() > NO_TRUTH,
+                }
             };
             let steps = &mut out.steps;
             let mut on_step = |c: &Client, what: &str| record(c, steps, what);
@@ -567,16 +562,15 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             if interrupted() {
                 bail!("interrupted");
             }
-            out.collisions = collisions;
             if let Some(status) = ended {
                 step(&c, &mut out, &format!("the plan ended: {status:?}"));
             }
-            match seen.or_else(|| watch(&traj, &mut out, opts.limit_s)) {
-                Some(v) => verdict(&c, &mut out, v, &step)?,
-                None if out.time_s == 0.0 => bail!(
-                    "the simulator wrote no ground truth within 30 s (see the log of skillfab up)"
-                ),
-                None => {}
+            let Some(now) = latest(&traj).or(last) else {
+                bail!(NO_TRUTH_ERROR);
+            };
+            (out.time_s, out.collisions) = (now.t, now.collisions);
+            if let Some(v) = judge(&now, opts.limit_s) {
+                verdict(&c, &mut out, v, &step)?;
             }
         }
     }

@@ -125,13 +125,12 @@ pub struct Node {
 }
 
 enum State {
-    Sequence {
+    /// A sequence (`go_on` success) or a fallback (`go_on` failure): children in order while
+    /// each returns `go_on`.
+    Chain {
         children: Vec<Node>,
         at: usize,
-    },
-    Fallback {
-        children: Vec<Node>,
-        at: usize,
+        go_on: Status,
     },
     Parallel {
         children: Vec<Node>,
@@ -203,13 +202,15 @@ impl Node {
         };
         let one = |c: &Spec| Box::new(Node::from_spec(plan, c));
         let state = match &spec.kind {
-            Kind::Sequence(c) => State::Sequence {
+            Kind::Sequence(c) => State::Chain {
                 children: many(c),
                 at: 0,
+                go_on: Status::Success,
             },
-            Kind::Fallback(c) => State::Fallback {
+            Kind::Fallback(c) => State::Chain {
                 children: many(c),
                 at: 0,
+                go_on: Status::Failure,
             },
             Kind::Parallel {
                 success,
@@ -286,13 +287,13 @@ impl Node {
     /// Ticks the node once.
     pub fn tick(&mut self, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
         let name = &self.name;
-        // A sequence goes on while its children succeed; a fallback while they fail.
-        let go_on = match self.state {
-            State::Sequence { .. } => Status::Success,
-            _ => Status::Failure,
-        };
         match &mut self.state {
-            State::Sequence { children, at } | State::Fallback { children, at } => {
+            State::Chain {
+                children,
+                at,
+                go_on,
+            } => {
+                let go_on = *go_on;
                 while *at < children.len() {
                     match children[*at].tick(cx)? {
                         Status::Running => return Ok(Status::Running),
@@ -511,9 +512,9 @@ impl Node {
             _ => None,
         };
         let children: Vec<&Node> = match &self.state {
-            State::Sequence { children, .. }
-            | State::Fallback { children, .. }
-            | State::Parallel { children, .. } => children.iter().collect(),
+            State::Chain { children, .. } | State::Parallel { children, .. } => {
+                children.iter().collect()
+            }
             State::Retry { child, .. }
             | State::Timeout { child, .. }
             | State::Inverter(child)
@@ -532,7 +533,7 @@ impl Node {
     /// Stops a running node: what it holds is undone, its state is as if never ticked.
     pub fn halt(&mut self, cx: &mut Cx<'_>) {
         match &mut self.state {
-            State::Sequence { children, at } | State::Fallback { children, at } => {
+            State::Chain { children, at, .. } => {
                 if let Some(c) = children.get_mut(*at) {
                     c.halt(cx);
                 }

@@ -160,13 +160,9 @@ enum State {
         child: Box<Node>,
         old: Option<ParamValue>,
     },
-    Activate(Vec<String>),
-    Deactivate(Vec<String>),
-    SetParam {
-        skill: String,
-        param: String,
-        value: String,
-    },
+    /// An action that keeps no state between ticks (`Activate`, `Deactivate`, `SetParam`,
+    /// `Log`, `AlwaysSuccess`, `AlwaysFailure`), as written.
+    Act(Kind),
     WaitFor {
         condition: String,
         hold: u32,
@@ -176,8 +172,6 @@ enum State {
         after: Duration,
         since: Option<Duration>,
     },
-    Log(String),
-    Always(Status),
 }
 
 impl Node {
@@ -249,17 +243,12 @@ impl Node {
                 child: one(child),
                 old: None,
             },
-            Kind::Activate(s) => State::Activate(s.clone()),
-            Kind::Deactivate(s) => State::Deactivate(s.clone()),
-            Kind::SetParam {
-                skill,
-                param,
-                value,
-            } => State::SetParam {
-                skill: skill.clone(),
-                param: param.clone(),
-                value: value.clone(),
-            },
+            Kind::Activate(_)
+            | Kind::Deactivate(_)
+            | Kind::SetParam { .. }
+            | Kind::Log(_)
+            | Kind::AlwaysSuccess
+            | Kind::AlwaysFailure => State::Act(spec.kind.clone()),
             Kind::WaitFor { condition, hold } => State::WaitFor {
                 condition: condition.clone(),
                 hold: *hold,
@@ -269,13 +258,10 @@ impl Node {
                 after: *d,
                 since: None,
             },
-            Kind::Log(m) => State::Log(m.clone()),
-            Kind::AlwaysSuccess => State::Always(Status::Success),
-            Kind::AlwaysFailure => State::Always(Status::Failure),
             // Checked when the plan was read: the tree exists and does not contain itself.
             Kind::SubTree(id) => match plan.trees.get(id) {
                 Some(t) => return Node::from_spec(plan, t),
-                None => State::Always(Status::Failure),
+                None => State::Act(Kind::AlwaysFailure),
             },
         };
         Node {
@@ -437,22 +423,7 @@ impl Node {
                 }
                 Ok(status)
             }
-            State::Activate(skills) => {
-                let r = cx.fabric.activate(skills);
-                cx.done(format!("activate {}", skills.join(", ")), r)
-            }
-            State::Deactivate(skills) => {
-                let r = cx.fabric.deactivate(skills);
-                cx.done(format!("deactivate {}", skills.join(", ")), r)
-            }
-            State::SetParam {
-                skill,
-                param,
-                value,
-            } => {
-                let r = cx.fabric.set_param(skill, param, value);
-                cx.done(format!("{skill}.{param} = {value}"), r)
-            }
+            State::Act(kind) => act(kind, cx),
             State::WaitFor {
                 condition,
                 hold,
@@ -485,11 +456,6 @@ impl Node {
                 }
                 Ok(Status::Running)
             }
-            State::Log(message) => {
-                cx.step(message.clone());
-                Ok(Status::Success)
-            }
-            State::Always(s) => Ok(*s),
         }
     }
 
@@ -584,12 +550,37 @@ impl Node {
                 }
             }
             State::Sleep { since, .. } => *since = None,
-            State::Activate(_)
-            | State::Deactivate(_)
-            | State::SetParam { .. }
-            | State::Log(_)
-            | State::Always(_) => {}
+            State::Act(_) => {}
         }
+    }
+}
+
+/// Carries out an action that keeps no state.
+fn act(kind: &Kind, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
+    match kind {
+        Kind::Activate(skills) => {
+            let r = cx.fabric.activate(skills);
+            cx.done(format!("activate {}", skills.join(", ")), r)
+        }
+        Kind::Deactivate(skills) => {
+            let r = cx.fabric.deactivate(skills);
+            cx.done(format!("deactivate {}", skills.join(", ")), r)
+        }
+        Kind::SetParam {
+            skill,
+            param,
+            value,
+        } => {
+            let r = cx.fabric.set_param(skill, param, value);
+            cx.done(format!("{skill}.{param} = {value}"), r)
+        }
+        Kind::Log(message) => {
+            cx.step(message.clone());
+            Ok(Status::Success)
+        }
+        Kind::AlwaysSuccess => Ok(Status::Success),
+        // AlwaysFailure; nothing else is built as an `Act`.
+        _ => Ok(Status::Failure),
     }
 }
 

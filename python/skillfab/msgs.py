@@ -8,6 +8,18 @@ generator writes, and that every size and offset matches Rust.
 import ctypes
 
 
+class Arm(ctypes.Structure):
+    """The button pusher as the robot reports it."""
+
+    TYPE_NAME = "skillfab.Arm"
+    _fields_ = [
+        ("strokes", ctypes.c_uint32),
+        ("pressed", ctypes.c_uint32),
+        ("hits", ctypes.c_uint32),
+        ("age_ms", ctypes.c_double),
+    ]
+
+
 class Barcodes(ctypes.Structure):
     """Barcode sightings of the latest camera frame."""
 
@@ -50,6 +62,18 @@ class Bumpers(ctypes.Structure):
     ]
 
 
+class Car(ctypes.Structure):
+    """An elevator car whose doors are open on this floor, seen by its hall lantern."""
+
+    TYPE_NAME = "skillfab.Car"
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("x", ctypes.c_double),
+        ("y", ctypes.c_double),
+        ("heading", ctypes.c_double),
+    ]
+
+
 class Door(ctypes.Structure):
     """A located door opening, in the odometry frame."""
 
@@ -63,6 +87,17 @@ class Door(ctypes.Structure):
     ]
 
 
+class Doors(ctypes.Structure):
+    """Side doors passed along a corridor, from the sonar ring."""
+
+    TYPE_NAME = "skillfab.Doors"
+    _fields_ = [
+        ("left", ctypes.c_uint32),
+        ("right", ctypes.c_uint32),
+        ("beside", ctypes.c_int32),
+    ]
+
+
 class Drive(ctypes.Structure):
     """A synchro-drive command: the `drive` actuator channel."""
 
@@ -70,6 +105,19 @@ class Drive(ctypes.Structure):
     _fields_ = [
         ("translate", ctypes.c_double),
         ("rotate", ctypes.c_double),
+    ]
+
+
+class Junction(ctypes.Structure):
+    """Corridor intersections, from the sonar ring."""
+
+    TYPE_NAME = "skillfab.Junction"
+    _fields_ = [
+        ("count", ctypes.c_uint32),
+        ("inside", ctypes.c_bool),
+        ("left", ctypes.c_bool),
+        ("right", ctypes.c_bool),
+        ("ahead", ctypes.c_bool),
     ]
 
 
@@ -100,6 +148,37 @@ class Odometry(ctypes.Structure):
     ]
 
 
+class Progress(ctypes.Structure):
+    """How far a skill with one job is (entering a car, leaving it, pushing a button)."""
+
+    TYPE_NAME = "skillfab.Progress"
+    _fields_ = [
+        ("done", ctypes.c_bool),
+        ("phase", ctypes.c_uint32),
+        ("value", ctypes.c_double),
+    ]
+
+
+class Push(ctypes.Structure):
+    """The button pusher: the `push` actuator channel. The safe command is 'retracted'."""
+
+    TYPE_NAME = "skillfab.Push"
+    _fields_ = [
+        ("press", ctypes.c_bool),
+    ]
+
+
+class Say(ctypes.Structure):
+    """A message for the robot's speaker and display: the `say` actuator channel. The safe command (seq 0) says nothing."""
+
+    TYPE_NAME = "skillfab.Say"
+    _fields_ = [
+        ("seq", ctypes.c_uint32),
+        ("len", ctypes.c_uint32),
+        ("text", (ctypes.c_uint8 * 64)),
+    ]
+
+
 class Scalar(ctypes.Structure):
     """A generic scalar, for test and example networks."""
 
@@ -117,6 +196,19 @@ class Scaled(ctypes.Structure):
     TYPE_NAME = "skillfab.Scaled"
     _fields_ = [
         ("value", ctypes.c_double),
+    ]
+
+
+class Signs(ctypes.Structure):
+    """What the camera reads on signs (barcodes by the building's convention: 900 + floor on a floor sign or a car's floor indicator, a room number beside a door)."""
+
+    TYPE_NAME = "skillfab.Signs"
+    _fields_ = [
+        ("floor_known", ctypes.c_bool),
+        ("floor", ctypes.c_int32),
+        ("room", ctypes.c_uint32),
+        ("room_range", ctypes.c_double),
+        ("room_bearing", ctypes.c_double),
     ]
 
 
@@ -164,20 +256,39 @@ class Tick(ctypes.Structure):
     ]
 
 
+class Voice(ctypes.Structure):
+    """The robot's speaker and display as the robot reports them."""
+
+    TYPE_NAME = "skillfab.Voice"
+    _fields_ = [
+        ("said", ctypes.c_uint32),
+        ("seq", ctypes.c_uint32),
+    ]
+
+
 # Every type, by type name.
 BY_TYPE_NAME = {
+    Arm.TYPE_NAME: Arm,
     Barcodes.TYPE_NAME: Barcodes,
     Battery.TYPE_NAME: Battery,
     Blob64K.TYPE_NAME: Blob64K,
     Bumpers.TYPE_NAME: Bumpers,
+    Car.TYPE_NAME: Car,
     Door.TYPE_NAME: Door,
+    Doors.TYPE_NAME: Doors,
     Drive.TYPE_NAME: Drive,
+    Junction.TYPE_NAME: Junction,
     Link.TYPE_NAME: Link,
     Odometry.TYPE_NAME: Odometry,
+    Progress.TYPE_NAME: Progress,
+    Push.TYPE_NAME: Push,
+    Say.TYPE_NAME: Say,
     Scalar.TYPE_NAME: Scalar,
     Scaled.TYPE_NAME: Scaled,
+    Signs.TYPE_NAME: Signs,
     Smoothed.TYPE_NAME: Smoothed,
     Sonar.TYPE_NAME: Sonar,
     Target.TYPE_NAME: Target,
     Tick.TYPE_NAME: Tick,
+    Voice.TYPE_NAME: Voice,
 }

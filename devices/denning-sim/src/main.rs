@@ -3,12 +3,15 @@
 //! It opens a pty (keeping its own slave fd open so the device can come and go), sets raw
 //! mode, optionally links the slave to a stable path (`--link`), and speaks the robot side of
 //! `devices/denning/PROTOCOL.md`: handshake, status packets every period, barcode packets,
-//! commands, the 2 s watchdog. Bytes are paced at the baud rate; `--time-factor` runs faster
-//! than real time; `--corrupt-rate`/`--drop-rate` inject faults into the robot's output.
+//! commands, the 2 s watchdog; the button pusher (PUSH) and the speaker (SAY), which matter in
+//! a building (`--building`: floors and elevators) rather than a one-room world (`--world`).
+//! Bytes are paced at the baud rate; `--time-factor` runs faster than real time;
+//! `--corrupt-rate`/`--drop-rate` inject faults into the robot's output.
 
 use anyhow::{Context, bail};
 use clap::Parser;
 use denning::codec::{Command, Decoder, Packet};
+use denning_sim::building::Building;
 use denning_sim::sim::{Physical, Rng, Sim};
 use denning_sim::truth::TruthRecord;
 use denning_sim::world::World;
@@ -29,9 +32,17 @@ use std::time::{Duration, Instant};
 )]
 struct Args {
     /// World file (see devices/denning-sim/worlds/).
+    #[arg(
+        long,
+        required_unless_present = "building",
+        conflicts_with = "building"
+    )]
+    world: Option<PathBuf>,
+    /// Building file: floors and elevators (see devices/denning-sim/buildings/README.md).
     #[arg(long)]
-    world: PathBuf,
-    /// Seed of every random choice (noise, drift, faults).
+    building: Option<PathBuf>,
+    /// Seed of every random choice (noise, drift, faults; in a building the start and the
+    /// elevators).
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Simulated seconds per real second.
@@ -49,7 +60,7 @@ struct Args {
     /// Probability that an output byte is dropped.
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
-    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force).
+    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force, floor, said — messages spoken, delivered — spoken at the building's goal).
     #[arg(long)]
     trajectory: Option<PathBuf>,
     /// Keep the robot's physical state (pose, odometry, velocities, time) in this file, and
@@ -115,7 +126,11 @@ fn run(args: &Args) -> anyhow::Result<()> {
             bail!("{name} must be within 0..=1, got {p}");
         }
     }
-    let world = World::load(&args.world)?;
+    let mut sim = match (&args.world, &args.building) {
+        (Some(w), None) => Sim::new(World::load(w)?, args.seed),
+        (None, Some(b)) => Sim::in_building(Building::load(b)?, args.seed),
+        _ => bail!("give exactly one of --world and --building"),
+    };
     for sig in [
         nix::sys::signal::Signal::SIGINT,
         nix::sys::signal::Signal::SIGTERM,
@@ -139,11 +154,10 @@ fn run(args: &Args) -> anyhow::Result<()> {
     }
     // Keep our own slave fd open: the device may close and reopen the port at will.
     let _slave = pty.slave;
-    tracing::info!(world = %world.name, pty = %slave_path.display(), link = ?args.link, "robot ready");
+    tracing::info!(world = %sim.world.name, pty = %slave_path.display(), link = ?args.link, "robot ready");
     println!("{}", slave_path.display());
     let _ = std::io::stdout().flush();
 
-    let mut sim = Sim::new(world, args.seed);
     let resumed = args.state.as_deref().and_then(load_state);
     if let Some(p) = resumed {
         tracing::info!(time = p.time, x = p.pose[0], y = p.pose[1], "robot resumed");
@@ -344,6 +358,20 @@ impl Robot {
             }
             Command::Period(ms) => self.period = f64::from(ms.clamp(20, 1000)) / 1000.0,
             Command::Watchdog(ms) => self.watchdog = f64::from(ms.clamp(100, 5000)) / 1000.0,
+            Command::Push => {
+                let pressed = sim.push();
+                self.outbox.extend(
+                    Packet::Arm {
+                        strokes: sim.strokes,
+                        pressed,
+                    }
+                    .encode(),
+                );
+            }
+            Command::Say(text) => {
+                let said = sim.say(&text.to_string_lossy());
+                self.outbox.extend(Packet::Said(said).encode());
+            }
             Command::Step(_) => {}
         }
     }
@@ -397,9 +425,12 @@ impl Robot {
                 w: sim.vel[1],
                 stall: sim.stall,
                 collisions: sim.collisions,
-                outside: sim.world.is_outside([x, y]),
+                outside: sim.outside(),
                 cmd_age: sim.time - self.last_drive,
                 driven: sim.cmd != [0.0, 0.0],
+                floor: sim.floor(),
+                said: u32::from(sim.said),
+                delivered: sim.delivered.is_some(),
             }
             .write(t)?;
             t.flush()?;
@@ -439,4 +470,69 @@ fn write_all(fd: &OwnedFd, mut bytes: &[u8]) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use denning::codec::Text;
+
+    fn robot(sim: Sim) -> Robot {
+        Robot {
+            sim,
+            link: Link::Sync(0),
+            period: 0.1,
+            next_status: 0.0,
+            last_command: 0.0,
+            last_drive: 0.0,
+            watchdog: WATCHDOG,
+            outbox: Vec::new(),
+            trajectory: None,
+            state: None,
+            faults: Rng::new(1),
+        }
+    }
+
+    fn packets(r: &mut Robot) -> Vec<Packet> {
+        let mut d = Decoder::default();
+        d.push(&std::mem::take(&mut r.outbox));
+        std::iter::from_fn(|| d.next_frame())
+            .filter_map(|f| f.and_then(|p| Packet::decode(&p)).ok())
+            .collect()
+    }
+
+    #[test]
+    fn push_and_say_are_answered_at_once_after_the_handshake_only() {
+        let world = World::parse("name = 'x'\nstart = [0.0, 0.0, 0.0]\n", "t").unwrap();
+        let mut r = robot(Sim::new(world, 1));
+        r.command(Command::Push);
+        r.command(Command::Say(Text::new("hello")));
+        assert!(packets(&mut r).is_empty(), "no link yet");
+        for c in [
+            Command::Sync0,
+            Command::Sync1,
+            Command::Sync2,
+            Command::Sync1,
+        ] {
+            r.command(c);
+        }
+        packets(&mut r);
+        r.command(Command::Push);
+        r.command(Command::Say(Text::new("hello")));
+        r.command(Command::Push);
+        assert_eq!(
+            packets(&mut r),
+            vec![
+                Packet::Arm {
+                    strokes: 1,
+                    pressed: 0
+                },
+                Packet::Said(1),
+                Packet::Arm {
+                    strokes: 2,
+                    pressed: 0
+                },
+            ]
+        );
+    }
 }

@@ -1,9 +1,13 @@
 //! The robot model: synchro-drive kinematics with acceleration limits, collisions and stall,
 //! odometry with seeded drift, a 24-sonar ring with cones, noise and grazing-angle misses,
-//! and a barcode camera. Deterministic for a given seed and command sequence.
+//! and a barcode camera; a button pusher and a speaker. In a plain [`World`] or in a
+//! [`Building`] with elevators ([`crate::site`]). Deterministic for a given seed and command
+//! sequence.
 
-use crate::world::{Segment, World, point_segment, ray_hit};
-use denning::codec::{Sighting, Status};
+use crate::building::{Building, START_CLEARANCE, clearance};
+use crate::site::{Mark, Site};
+use crate::world::{Barcode, P, Segment, World, point_segment, ray_hit};
+use denning::codec::{MAX_SIGHTINGS, Sighting, Status};
 use std::f64::consts::{PI, TAU};
 
 /// Robot radius (m).
@@ -25,6 +29,10 @@ pub const CAMERA_RANGE: f64 = 6.0;
 pub const ACCEL: f64 = 0.5;
 /// Rotate acceleration limit (rad/s²).
 pub const RACCEL: f64 = 100.0 * PI / 180.0;
+/// How far ahead of the robot's centre the pusher's tip reaches (m).
+pub const REACH: f64 = 0.75;
+/// How far off the heading a button may be for the pusher to press it (rad): 12°.
+pub const PUSH_ALIGN: f64 = 12.0 * PI / 180.0;
 
 /// A seeded random source (splitmix64) with Gaussian samples.
 #[derive(Debug, Clone)]
@@ -55,9 +63,16 @@ impl Rng {
 /// The simulated robot in its world.
 #[derive(Debug, Clone)]
 pub struct Sim {
-    /// The world.
+    /// The world: a plain world, or in a building the fixed layout of the robot's floor.
     pub world: World,
+    /// What blocks motion, sound and sight.
     segments: Vec<Segment>,
+    /// What the camera can see (the world's, or the floor's and the cars').
+    barcodes: Vec<Barcode>,
+    /// What each of `barcodes` is.
+    marks: Vec<Mark>,
+    /// The building and its cars (`None`: a plain world).
+    site: Option<Box<Site>>,
     /// True pose (m, m, rad).
     pub pose: [f64; 3],
     /// Odometry pose (drifts).
@@ -80,6 +95,14 @@ pub struct Sim {
     /// Odometry scale errors (translate, rotate), fixed per seed.
     drift: [f64; 2],
     next_group: usize,
+    /// Pusher strokes so far.
+    pub strokes: u16,
+    /// Buttons pressed so far.
+    pub presses: u16,
+    /// Messages spoken so far.
+    pub said: u16,
+    /// When a message was first spoken at the building's goal (s).
+    pub delivered: Option<f64>,
 }
 
 /// What the robot keeps when the process that simulates its serial side restarts: its body
@@ -97,20 +120,74 @@ pub struct Physical {
     pub collisions: u64,
     /// Simulated time (s).
     pub time: f64,
+    /// The floor (0 in a plain world, and in a state file that does not say).
+    #[serde(default)]
+    pub floor: i32,
 }
 
 fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
 
+/// The building's start moved uniformly within its jitter, redrawn until it is clear of
+/// walls (the unmoved start is: the building is checked).
+fn jittered(b: &Building, rng: &mut Rng) -> [f64; 3] {
+    let segments = b.segments(b.start_floor);
+    for _ in 0..1000 {
+        let p: [f64; 3] =
+            std::array::from_fn(|i| b.start[i] + (2.0 * rng.uniform() - 1.0) * b.start_jitter[i]);
+        if clearance(&segments, [p[0], p[1]]) >= START_CLEARANCE {
+            return [p[0], p[1], wrap(p[2])];
+        }
+    }
+    b.start
+}
+
 impl Sim {
     /// A robot at the world's start.
     pub fn new(world: World, seed: u64) -> Sim {
+        let start = world.start;
+        let (segments, barcodes) = (world.segments(), world.barcode.clone());
+        Sim::with(world, start, segments, barcodes, None, seed)
+    }
+
+    /// A robot at the building's start (`building` checked by [`Building::parse`]), moved
+    /// within its jitter by the seed, which also places the cars.
+    pub fn in_building(building: Building, seed: u64) -> Sim {
+        // A stream of its own: the robot's noise and drift are those of the same seed in a
+        // world.
+        let mut rng = Rng::new(seed ^ 0xB17D_1A6E_E1E7_A70E);
+        let start = jittered(&building, &mut rng);
+        let site = Site::new(building, rng);
+        let world = site.world().unwrap_or_else(|| World {
+            name: site.building().name.clone(),
+            start,
+            outside: None,
+            wall: Vec::new(),
+            boxes: Vec::new(),
+            door: Vec::new(),
+            barcode: Vec::new(),
+        });
+        let mut sim = Sim::with(world, start, Vec::new(), Vec::new(), Some(site), seed);
+        sim.refresh();
+        sim
+    }
+
+    fn with(
+        world: World,
+        start: [f64; 3],
+        segments: Vec<Segment>,
+        barcodes: Vec<Barcode>,
+        site: Option<Site>,
+        seed: u64,
+    ) -> Sim {
         let mut rng = Rng::new(seed);
         let drift = [0.01 * rng.gauss(), 0.01 * rng.gauss()];
-        let start = world.start;
         Sim {
-            segments: world.segments(),
+            marks: vec![Mark::Sign; barcodes.len()],
+            segments,
+            barcodes,
+            site: site.map(Box::new),
             world,
             pose: start,
             odom: [0.0, 0.0, start[2]],
@@ -124,6 +201,42 @@ impl Sim {
             rng,
             drift,
             next_group: 0,
+            strokes: 0,
+            presses: 0,
+            said: 0,
+            delivered: None,
+        }
+    }
+
+    /// The building the robot is in (`None`: a plain world).
+    pub fn site(&self) -> Option<&Site> {
+        self.site.as_deref()
+    }
+
+    /// The robot's floor (0 in a plain world; riding between floors, the one it left).
+    pub fn floor(&self) -> i32 {
+        self.site.as_ref().map_or(0, |s| s.floor())
+    }
+
+    /// Whether the robot rides an elevator car between floors.
+    pub fn in_transit(&self) -> bool {
+        self.site.as_ref().is_some_and(|s| s.in_transit())
+    }
+
+    /// Whether the robot is in the world's (in a building: its floor's) outside region.
+    pub fn outside(&self) -> bool {
+        !self.in_transit() && self.world.is_outside([self.pose[0], self.pose[1]])
+    }
+
+    /// Rebuilds the building's segments and barcodes if anything in sight changed, and the
+    /// floor's world if the robot changed floors.
+    fn refresh(&mut self) {
+        let Some(site) = self.site.as_mut() else {
+            return;
+        };
+        site.refresh(&mut self.segments, &mut self.barcodes, &mut self.marks);
+        if let Some(w) = site.moved_floor() {
+            self.world = w;
         }
     }
 
@@ -135,6 +248,7 @@ impl Sim {
             vel: self.vel,
             collisions: self.collisions,
             time: self.time,
+            floor: self.floor(),
         }
     }
 
@@ -146,6 +260,10 @@ impl Sim {
         self.vel = p.vel;
         self.collisions = p.collisions;
         self.time = p.time;
+        if let Some(site) = self.site.as_mut() {
+            site.place(p.floor, [p.pose[0], p.pose[1]]);
+            self.refresh();
+        }
     }
 
     fn clearance(&self, p: [f64; 2]) -> (f64, Option<[f64; 2]>) {
@@ -201,6 +319,69 @@ impl Sim {
             wrap(self.odom[2] + dw),
         ];
         self.time += dt;
+        if let Some(site) = self.site.as_mut() {
+            site.step(dt, [self.pose[0], self.pose[1]]);
+            self.refresh();
+        }
+    }
+
+    /// Whether nothing stands between `from` and a barcode or button at `to`, `range` away
+    /// (it hangs just in front of its wall: what is within 5 cm behind it does not hide it).
+    fn in_sight(&self, from: P, to: P, range: f64) -> bool {
+        let d = [(to[0] - from[0]) / range, (to[1] - from[1]) / range];
+        !self
+            .segments
+            .iter()
+            .filter_map(|s| ray_hit(from, d, s))
+            .any(|(t, _)| t < range - 0.05)
+    }
+
+    /// One stroke of the button pusher. Its tip reaches [`REACH`] straight ahead: it presses
+    /// the nearest button in sight within [`REACH`] of the robot's centre and [`PUSH_ALIGN`] of
+    /// its heading. Returns the button's id, or 0 for a miss (always, in a plain world).
+    pub fn push(&mut self) -> u16 {
+        self.strokes = self.strokes.saturating_add(1);
+        let [x, y, th] = self.pose;
+        let hit = self
+            .barcodes
+            .iter()
+            .zip(&self.marks)
+            .filter(|(_, m)| m.is_button())
+            .filter_map(|(b, m)| {
+                let (dx, dy) = (b.at[0] - x, b.at[1] - y);
+                let range = dx.hypot(dy);
+                let reached = range <= REACH
+                    && wrap(dy.atan2(dx) - th).abs() <= PUSH_ALIGN
+                    && self.in_sight([x, y], b.at, range);
+                reached.then_some((range, b.id, *m))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let Some((_, id, mark)) = hit else {
+            tracing::debug!(strokes = self.strokes, "the pusher pressed nothing");
+            return 0;
+        };
+        self.presses = self.presses.saturating_add(1);
+        tracing::info!(button = id, floor = self.floor(), "button pressed");
+        if let Some(site) = self.site.as_mut() {
+            site.press(mark);
+            self.refresh();
+        }
+        id
+    }
+
+    /// Speaks `text`; in a building, on the goal floor near the goal, that delivers the
+    /// message (the first time is remembered). Returns the messages spoken so far.
+    pub fn say(&mut self, text: &str) -> u16 {
+        self.said = self.said.saturating_add(1);
+        let at_goal = self
+            .site
+            .as_ref()
+            .is_some_and(|s| s.at_goal([self.pose[0], self.pose[1]]));
+        if at_goal && self.delivered.is_none() {
+            self.delivered = Some(self.time);
+        }
+        tracing::info!(text, said = self.said, at_goal, "the robot says");
+        self.said
     }
 
     /// Range seen by sonar `i` (m from the ring; `None`: no echo).
@@ -232,20 +413,15 @@ impl Sim {
     pub fn camera(&mut self) -> Vec<Sighting> {
         let [x, y, th] = self.pose;
         let mut out = Vec::new();
-        for b in self.world.barcode.clone() {
+        for i in 0..self.barcodes.len() {
+            let b = self.barcodes[i];
             let (dx, dy) = (b.at[0] - x, b.at[1] - y);
             let range = dx.hypot(dy);
             let bearing = wrap(dy.atan2(dx) - th);
             if range > CAMERA_RANGE || bearing.abs() > CAMERA_HALF_FOV {
                 continue;
             }
-            let d = [dx / range, dy / range];
-            let blocked = self
-                .segments
-                .iter()
-                .filter_map(|s| ray_hit([x, y], d, s))
-                .any(|(t, _)| t < range - 0.05);
-            if blocked {
+            if !self.in_sight([x, y], b.at, range) {
                 continue;
             }
             let r = range + 0.02 * self.rng.gauss();
@@ -255,6 +431,10 @@ impl Sim {
                 bearing: (bear.to_degrees() * 10.0).round() as i16,
                 range: (r * 1000.0).round().clamp(0.0, 65535.0) as u16,
             });
+        }
+        // A packet holds MAX_SIGHTINGS: when more are in view (a lobby), the nearest are sent.
+        if out.len() > MAX_SIGHTINGS {
+            out.sort_by_key(|s| s.range);
         }
         out
     }

@@ -30,17 +30,24 @@ pub struct TruthRecord {
     pub cmd_age: f64,
     /// Whether a non-zero drive command is in force (the robot is being driven, not stopping).
     pub driven: bool,
+    /// The robot's floor (0 in a plain world; riding between floors, the one it left).
+    pub floor: i32,
+    /// Messages spoken so far.
+    pub said: u32,
+    /// Whether the message has been delivered (spoken at the building's goal).
+    pub delivered: bool,
 }
 
 impl TruthRecord {
     /// The CSV header: the column names [`TruthRecord::read`] looks columns up by.
-    pub const HEADER: &'static str = "t,x,y,theta,v,w,stall,collisions,outside,cmd_age,driven";
+    pub const HEADER: &'static str =
+        "t,x,y,theta,v,w,stall,collisions,outside,cmd_age,driven,floor,said,delivered";
 
     /// Writes the record as one CSV line.
     pub fn write(&self, out: &mut impl Write) -> io::Result<()> {
         writeln!(
             out,
-            "{:.3},{:.4},{:.4},{:.4},{:.3},{:.3},{},{},{},{:.3},{}",
+            "{:.3},{:.4},{:.4},{:.4},{:.3},{:.3},{},{},{},{:.3},{},{},{},{}",
             self.t,
             self.x,
             self.y,
@@ -51,7 +58,10 @@ impl TruthRecord {
             self.collisions,
             u8::from(self.outside),
             self.cmd_age,
-            u8::from(self.driven)
+            u8::from(self.driven),
+            self.floor,
+            self.said,
+            u8::from(self.delivered)
         )
     }
 
@@ -91,6 +101,9 @@ impl TruthRecord {
                     outside: at(8)? > 0.5,
                     cmd_age: at(9)?,
                     driven: at(10)? > 0.5,
+                    floor: at(11)? as i32,
+                    said: at(12)? as u32,
+                    delivered: at(13)? > 0.5,
                 })
             })
             .collect()
@@ -115,6 +128,9 @@ mod tests {
             outside: true,
             cmd_age: 0.1,
             driven: true,
+            floor: -1,
+            said: 3,
+            delivered: true,
         };
         let mut text = format!("{}\n", TruthRecord::HEADER).into_bytes();
         r.write(&mut text).unwrap();
@@ -125,14 +141,15 @@ mod tests {
 
     #[test]
     fn columns_are_found_by_name() {
-        let text =
-            "driven,cmd_age,outside,collisions,stall,w,v,theta,y,x,t\n1,0.1,1,0,0,0,0,0,2,1,5\n";
+        let text = "delivered,said,floor,driven,cmd_age,outside,collisions,stall,w,v,theta,y,x,t\n\
+                    1,2,4,1,0.1,1,0,0,0,0,0,2,1,5\n";
         let all = TruthRecord::parse_all(text);
         assert_eq!(all.len(), 1);
         assert_eq!(
             (all[0].t, all[0].x, all[0].y, all[0].outside),
             (5.0, 1.0, 2.0, true)
         );
+        assert_eq!((all[0].floor, all[0].said, all[0].delivered), (4, 2, true));
         assert!(TruthRecord::parse_all("a,b\n1,2\n").is_empty());
     }
 }

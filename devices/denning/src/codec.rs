@@ -15,6 +15,9 @@ pub const SONARS: usize = 24;
 
 const ARG_POS: u8 = 0x3B;
 const ARG_NEG: u8 = 0x1B;
+const ARG_STR: u8 = 0x2B;
+/// Longest text a SAY command carries (bytes).
+pub const MAX_SAY: usize = 64;
 
 /// Why bytes or a payload were refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -183,6 +186,49 @@ pub enum Command {
     /// Lock-step only: advance this many ms of simulated time, then acknowledge
     /// ([`Packet::Stepped`]).
     Step(u16),
+    /// One stroke of the button pusher (answered by [`Packet::Arm`]).
+    Push,
+    /// Speak and show a message (answered by [`Packet::Said`]).
+    Say(Text),
+}
+
+/// A SAY command's text: at most [`MAX_SAY`] bytes, kept inline so commands stay `Copy`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Text {
+    len: u8,
+    bytes: [u8; MAX_SAY],
+}
+
+impl Text {
+    /// The first [`MAX_SAY`] bytes of `s` (cut at a character boundary).
+    pub fn new(s: &str) -> Text {
+        let mut end = s.len().min(MAX_SAY);
+        while !s.is_char_boundary(end) {
+            end -= 1;
+        }
+        Text::from_bytes(&s.as_bytes()[..end])
+    }
+
+    /// The first [`MAX_SAY`] bytes of `b`.
+    pub fn from_bytes(b: &[u8]) -> Text {
+        let n = b.len().min(MAX_SAY);
+        let mut bytes = [0; MAX_SAY];
+        bytes[..n].copy_from_slice(&b[..n]);
+        Text {
+            len: n as u8,
+            bytes,
+        }
+    }
+
+    /// The bytes.
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..usize::from(self.len)]
+    }
+
+    /// The text (invalid UTF-8 replaced).
+    pub fn to_string_lossy(&self) -> String {
+        String::from_utf8_lossy(self.as_bytes()).into_owned()
+    }
 }
 
 fn int_arg(v: i32) -> [u8; 3] {
@@ -210,12 +256,19 @@ impl Command {
             Command::Period(ms) => with(60, i32::from(ms)),
             Command::Watchdog(ms) => with(62, i32::from(ms)),
             Command::Step(ms) => with(70, i32::from(ms)),
+            Command::Push => vec![80],
+            Command::Say(t) => {
+                let b = t.as_bytes();
+                let mut p = vec![81, ARG_STR, b.len() as u8];
+                p.extend_from_slice(b);
+                p
+            }
         }
     }
 
     /// The command, framed.
     pub fn encode(self) -> Vec<u8> {
-        // Command payloads are 1 or 4 bytes: always frameable.
+        // Command payloads are 1 or 4 bytes, or 3 + 64 at most (SAY): always frameable.
         frame(&self.payload()).unwrap_or_default()
     }
 
@@ -250,6 +303,26 @@ impl Command {
             60 => Command::Period(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
             62 => Command::Watchdog(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
             70 => Command::Step(arg()?.clamp(0, i32::from(u16::MAX)) as u16),
+            80 => Command::Push,
+            81 => {
+                if p.len() < 3 {
+                    return Err(CodecError::Short {
+                        what: "say",
+                        len: p.len(),
+                    });
+                }
+                if p[1] != ARG_STR {
+                    return Err(CodecError::BadArg(p[1]));
+                }
+                let n = usize::from(p[2]);
+                if p.len() < 3 + n || n > MAX_SAY {
+                    return Err(CodecError::Short {
+                        what: "say text",
+                        len: p.len(),
+                    });
+                }
+                Command::Say(Text::from_bytes(&p[3..3 + n]))
+            }
             code => {
                 return Err(CodecError::Unknown {
                     what: "command",
@@ -305,6 +378,15 @@ pub enum Packet {
     Barcodes(Vec<Sighting>),
     /// Lock-step: a STEP is done; the robot's time now (ms since it started).
     Stepped(u32),
+    /// The button pusher after a stroke.
+    Arm {
+        /// Strokes made since the robot started.
+        strokes: u16,
+        /// The button the last stroke pressed (its id; 0: it pressed none).
+        pressed: u16,
+    },
+    /// Messages spoken since the robot started.
+    Said(u16),
 }
 
 impl Packet {
@@ -342,6 +424,17 @@ impl Packet {
             Packet::Stepped(ms) => {
                 let mut p = vec![0x50];
                 p.extend_from_slice(&ms.to_le_bytes());
+                p
+            }
+            Packet::Arm { strokes, pressed } => {
+                let mut p = vec![0x60];
+                p.extend_from_slice(&strokes.to_le_bytes());
+                p.extend_from_slice(&pressed.to_le_bytes());
+                p
+            }
+            Packet::Said(n) => {
+                let mut p = vec![0x61];
+                p.extend_from_slice(&n.to_le_bytes());
                 p
             }
         }
@@ -416,6 +509,15 @@ impl Packet {
             ]))),
             0x50 => Err(CodecError::Short {
                 what: "stepped",
+                len: p.len(),
+            }),
+            0x60 if p.len() >= 5 => Ok(Packet::Arm {
+                strokes: u16_at(1),
+                pressed: u16_at(3),
+            }),
+            0x61 if p.len() >= 3 => Ok(Packet::Said(u16_at(1))),
+            0x60 | 0x61 => Err(CodecError::Short {
+                what: "arm or said",
                 len: p.len(),
             }),
             code => Err(CodecError::Unknown {
@@ -549,11 +651,20 @@ mod tests {
         }
 
         #[test]
-        fn commands_round_trip(v in any::<i16>(), ms in any::<u16>(), on in any::<bool>()) {
-            for c in [Command::Vel(v), Command::RVel(v), Command::Period(ms), Command::Watchdog(ms), Command::Enable(on), Command::Sync0, Command::Step(ms)] {
+        fn commands_round_trip(v in any::<i16>(), ms in any::<u16>(), on in any::<bool>(), text in "\\PC{0,80}") {
+            for c in [Command::Vel(v), Command::RVel(v), Command::Period(ms), Command::Watchdog(ms), Command::Enable(on), Command::Sync0, Command::Step(ms), Command::Push, Command::Say(Text::new(&text))] {
                 let mut d = Decoder::default();
                 d.push(&c.encode());
                 prop_assert_eq!(Command::decode(&d.next_frame().unwrap().unwrap()).unwrap(), c);
+            }
+        }
+
+        #[test]
+        fn arm_and_said_round_trip(strokes in any::<u16>(), pressed in any::<u16>()) {
+            for p in [Packet::Arm { strokes, pressed }, Packet::Said(strokes)] {
+                let mut d = Decoder::default();
+                d.push(&p.encode());
+                prop_assert_eq!(Packet::decode(&d.next_frame().unwrap().unwrap()).unwrap(), p);
             }
         }
 

@@ -52,6 +52,11 @@ pub struct Sample {
     pub stats: DecodeStats,
     /// Successful handshakes.
     pub connects: u64,
+    /// The button pusher's last report: strokes so far, the button the last one pressed
+    /// (0: none), and when it came.
+    pub arm: Option<(u16, u16, Instant)>,
+    /// Messages the robot has spoken.
+    pub said: u16,
 }
 
 struct Shared {
@@ -364,6 +369,23 @@ impl Driver {
             .1
     }
 
+    /// Sends a one-off command (a pusher stroke, a message to say) now; whether it went out
+    /// (not while the robot is not connected). In lock-step it reaches the robot before the
+    /// cycle's step, so the robot acts on it in that step.
+    pub fn send(&self, cmd: Command) -> bool {
+        let mut s = lock(&self.shared);
+        let Some(link) = s.link.as_mut() else {
+            return false;
+        };
+        match link.writer.write_all(&cmd.encode()) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::debug!(error = %e, "command not written");
+                false
+            }
+        }
+    }
+
     /// Sets the drive command (m/s, rad/s).
     pub fn command(&self, translate: f64, rotate: f64) {
         let now = Instant::now();
@@ -566,6 +588,8 @@ fn apply(s: &mut Sample, p: Packet, odometer: &mut Odometer, at: Instant) {
     match p {
         Packet::Status(st) => apply_status(s, &st, odometer, at),
         Packet::Barcodes(b) => s.barcodes = (b, Some(at)),
+        Packet::Arm { strokes, pressed } => s.arm = Some((strokes, pressed, at)),
+        Packet::Said(n) => s.said = n,
         Packet::Sync(_) | Packet::Stepped(_) => {}
     }
 }

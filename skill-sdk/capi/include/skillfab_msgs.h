@@ -8,6 +8,16 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+/** The button pusher as the robot reports it. */
+typedef struct sf_Arm {
+    uint32_t strokes;
+    uint32_t pressed;
+    uint32_t hits;
+    double age_ms;
+} sf_Arm;
+#define SF_ARM_TYPE_NAME "skillfab.Arm"
+#define SF_ARM_SIZE 24
+
 /** Barcode sightings of the latest camera frame. */
 typedef struct sf_Barcodes {
     uint32_t count;
@@ -42,6 +52,16 @@ typedef struct sf_Bumpers {
 #define SF_BUMPERS_TYPE_NAME "skillfab.Bumpers"
 #define SF_BUMPERS_SIZE 8
 
+/** An elevator car whose doors are open on this floor, seen by its hall lantern. */
+typedef struct sf_Car {
+    uint32_t id;
+    double x;
+    double y;
+    double heading;
+} sf_Car;
+#define SF_CAR_TYPE_NAME "skillfab.Car"
+#define SF_CAR_SIZE 32
+
 /** A located door opening, in the odometry frame. */
 typedef struct sf_Door {
     bool found;
@@ -53,6 +73,15 @@ typedef struct sf_Door {
 #define SF_DOOR_TYPE_NAME "skillfab.Door"
 #define SF_DOOR_SIZE 40
 
+/** Side doors passed along a corridor, from the sonar ring. */
+typedef struct sf_Doors {
+    uint32_t left;
+    uint32_t right;
+    int32_t beside;
+} sf_Doors;
+#define SF_DOORS_TYPE_NAME "skillfab.Doors"
+#define SF_DOORS_SIZE 12
+
 /** A synchro-drive command: the `drive` actuator channel. */
 typedef struct sf_Drive {
     double translate;
@@ -60,6 +89,17 @@ typedef struct sf_Drive {
 } sf_Drive;
 #define SF_DRIVE_TYPE_NAME "skillfab.Drive"
 #define SF_DRIVE_SIZE 16
+
+/** Corridor intersections, from the sonar ring. */
+typedef struct sf_Junction {
+    uint32_t count;
+    bool inside;
+    bool left;
+    bool right;
+    bool ahead;
+} sf_Junction;
+#define SF_JUNCTION_TYPE_NAME "skillfab.Junction"
+#define SF_JUNCTION_SIZE 8
 
 /** The state of a device's link to its hardware. */
 typedef struct sf_Link {
@@ -84,6 +124,31 @@ typedef struct sf_Odometry {
 #define SF_ODOMETRY_TYPE_NAME "skillfab.Odometry"
 #define SF_ODOMETRY_SIZE 40
 
+/** How far a skill with one job is (entering a car, leaving it, pushing a button). */
+typedef struct sf_Progress {
+    bool done;
+    uint32_t phase;
+    double value;
+} sf_Progress;
+#define SF_PROGRESS_TYPE_NAME "skillfab.Progress"
+#define SF_PROGRESS_SIZE 16
+
+/** The button pusher: the `push` actuator channel. The safe command is "retracted". */
+typedef struct sf_Push {
+    bool press;
+} sf_Push;
+#define SF_PUSH_TYPE_NAME "skillfab.Push"
+#define SF_PUSH_SIZE 1
+
+/** A message for the robot's speaker and display: the `say` actuator channel. The safe command (seq 0) says nothing. */
+typedef struct sf_Say {
+    uint32_t seq;
+    uint32_t len;
+    uint8_t text[64];
+} sf_Say;
+#define SF_SAY_TYPE_NAME "skillfab.Say"
+#define SF_SAY_SIZE 72
+
 /** A generic scalar, for test and example networks. */
 typedef struct sf_Scalar {
     double value;
@@ -99,6 +164,17 @@ typedef struct sf_Scaled {
 } sf_Scaled;
 #define SF_SCALED_TYPE_NAME "skillfab.Scaled"
 #define SF_SCALED_SIZE 8
+
+/** What the camera reads on signs (barcodes by the building's convention: 900 + floor on a floor sign or a car's floor indicator, a room number beside a door). */
+typedef struct sf_Signs {
+    bool floor_known;
+    int32_t floor;
+    uint32_t room;
+    double room_range;
+    double room_bearing;
+} sf_Signs;
+#define SF_SIGNS_TYPE_NAME "skillfab.Signs"
+#define SF_SIGNS_SIZE 32
 
 /** A smoothed value (the hello network's `smooth`). */
 typedef struct sf_Smoothed {
@@ -135,5 +211,13 @@ typedef struct sf_Tick {
 } sf_Tick;
 #define SF_TICK_TYPE_NAME "skillfab.Tick"
 #define SF_TICK_SIZE 8
+
+/** The robot's speaker and display as the robot reports them. */
+typedef struct sf_Voice {
+    uint32_t said;
+    uint32_t seq;
+} sf_Voice;
+#define SF_VOICE_TYPE_NAME "skillfab.Voice"
+#define SF_VOICE_SIZE 8
 
 #endif /* SKILLFAB_MSGS_H */

@@ -30,12 +30,17 @@ pub struct TrackOut<'a> {
 /// frame (a running average over sightings that forgets old ones, as odometry drifts), and
 /// its range and bearing from the robot now. Each sighting is used once: the camera's report
 /// stays in the input until the next one, and placing it again from a pose that moved on
-/// would smear the estimate.
+/// would smear the estimate. A new `id`, or a new activation, starts from nothing: one
+/// tracker serves a plan's successive targets (a door, a button, a sign), and the old
+/// target's place must not leak into the new one's.
 #[derive(Default)]
 pub struct BarcodeTrack {
     sum: (f64, f64, f64),
     /// Age of the report seen in the last cycle (a younger one is a new report).
     last_age_ms: Option<f64>,
+    /// The id the estimate belongs to.
+    tracking: Option<u32>,
+    activation: Activation,
 }
 
 /// Weight kept by the older sightings when a new one arrives.
@@ -48,6 +53,11 @@ impl Skill for BarcodeTrack {
     fn compute(&mut self, ctx: &Ctx<TrackParams>, i: TrackIn, o: &mut TrackOut) -> SkillResult {
         let od = *i.odometry;
         let b = *i.barcodes;
+        let begins = self.activation.begins(ctx.cycle);
+        if begins || self.tracking != Some(ctx.params.id) {
+            self.sum = (0.0, 0.0, 0.0);
+            self.tracking = Some(ctx.params.id);
+        }
         let new = self.last_age_ms.is_none_or(|last| b.age_ms < last);
         self.last_age_ms = Some(b.age_ms);
         let mut visible = false;

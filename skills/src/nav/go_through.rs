@@ -17,6 +17,9 @@ pub struct GoThroughParams {
     /// Centring gain between the door posts (rad per m of imbalance).
     #[param(default = 0.8, min = 0.0, max = 10.0)]
     pub centre: f64,
+    /// Through when this far beyond the door line (m, along its axis).
+    #[param(default = 0.8, min = 0.0, max = 5.0)]
+    pub past: f64,
 }
 
 /// Inputs of [`GoThrough`].
@@ -28,6 +31,17 @@ pub struct GoIn<'a> {
     pub odometry: Input<'a, Odometry>,
     /// The ring (centring between the posts).
     pub sonar: Input<'a, Sonar>,
+}
+
+/// Outputs of [`GoThrough`].
+#[derive(Outputs)]
+pub struct GoOut<'a> {
+    /// The proposal.
+    pub drive: Proposal<'a, Drive>,
+    /// How far through: phase 0 lining up (or backing off a post), 1 passing, 2 through
+    /// (`done`: `past` beyond the door line); value: the distance along the door's axis from
+    /// the door line (m, negative before it). Nothing found yet: phase 0, value 0.
+    pub progress: Output<'a, Progress>,
 }
 
 /// Drive through a located opening: to a point `approach` before it on its axis, then along
@@ -45,13 +59,30 @@ pub struct GoThrough {
 impl Skill for GoThrough {
     type Params = GoThroughParams;
     type Inputs<'a> = GoIn<'a>;
-    type Outputs<'a> = DriveOut<'a>;
+    type Outputs<'a> = GoOut<'a>;
     const PRIORITY: i32 = 6;
-    fn compute(&mut self, ctx: &Ctx<GoThroughParams>, i: GoIn, o: &mut DriveOut) -> SkillResult {
+    fn compute(&mut self, ctx: &Ctx<GoThroughParams>, i: GoIn, o: &mut GoOut) -> SkillResult {
         let (d, od, s, p) = (*i.door, *i.odometry, *i.sonar, ctx.params);
         if !d.found {
+            o.progress.set(Progress::default());
             return Ok(());
         }
+        let (c, sn) = (d.heading.cos(), d.heading.sin());
+        // Along-axis and cross-axis position relative to the door centre.
+        let along = (od.x - d.x) * c + (od.y - d.y) * sn;
+        let cross = -(od.x - d.x) * sn + (od.y - d.y) * c;
+        let phase = if along >= p.past {
+            2
+        } else if self.backing == 0 && (self.lined_up || along > 0.3) {
+            1
+        } else {
+            0
+        };
+        o.progress.set(Progress {
+            done: phase == 2,
+            phase,
+            value: along,
+        });
         if self.backing > 0 {
             self.backing -= 1;
             o.drive.set(Drive {
@@ -60,10 +91,6 @@ impl Skill for GoThrough {
             });
             return Ok(());
         }
-        let (c, sn) = (d.heading.cos(), d.heading.sin());
-        // Along-axis and cross-axis position relative to the door centre.
-        let along = (od.x - d.x) * c + (od.y - d.y) * sn;
-        let cross = -(od.x - d.x) * sn + (od.y - d.y) * c;
         let start = (d.x - p.approach * c, d.y - p.approach * sn);
         if !self.lined_up && (od.x - start.0).hypot(od.y - start.1) < 0.25 {
             self.lined_up = true;

@@ -25,7 +25,7 @@ pub use wall_follow::*;
 pub use wander::*;
 
 use skill_sdk::prelude::*;
-use skillfab_msgs::{Barcodes, Door, Drive, Odometry, SONARS, Sonar, Target};
+use skillfab_msgs::{Barcodes, Door, Drive, Odometry, Progress, SONARS, Sonar, Target};
 use std::f64::consts::{PI, TAU};
 
 /// Angle of sonar `i` from the front (rad, counter-clockwise).
@@ -39,13 +39,13 @@ pub fn wrap(a: f64) -> f64 {
 }
 
 /// A usable range: no echo counts as far, never-read as unknown.
-fn range(s: &Sonar, i: usize) -> Option<f64> {
+pub(crate) fn range(s: &Sonar, i: usize) -> Option<f64> {
     let r = s.range[i % SONARS];
     if r.is_nan() { None } else { Some(r.min(10.0)) }
 }
 
 /// The smallest range among sonars whose angle lies within `[from, to]` (rad).
-fn min_in(s: &Sonar, from: f64, to: f64) -> f64 {
+pub(crate) fn min_in(s: &Sonar, from: f64, to: f64) -> f64 {
     (0..SONARS)
         .filter(|&i| {
             let a = sonar_angle(i);
@@ -60,4 +60,23 @@ fn min_in(s: &Sonar, from: f64, to: f64) -> f64 {
 pub struct DriveOut<'a> {
     /// The proposal.
     pub drive: Proposal<'a, Drive>,
+}
+
+/// When a skill (re)starts. The runtime does not run an inactive skill, so a run that does not
+/// follow the previous cycle's begins a new activation: skills that count or remember "since
+/// activated" start afresh there (a sequencer reuses them from step to step of a plan).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Activation {
+    /// The cycle of the last run.
+    last: Option<u64>,
+}
+
+impl Activation {
+    /// Notes a run in `cycle`; true when it begins an activation (the first run, a run after a
+    /// gap of more than one cycle, or cycles that went back: a restarted manager).
+    pub fn begins(&mut self, cycle: u64) -> bool {
+        let fresh = self.last.is_none_or(|l| cycle > l + 1 || cycle <= l);
+        self.last = Some(cycle);
+        fresh
+    }
 }

@@ -2,10 +2,13 @@
 //! tty or the simulator's link; `--baud`), publishes the latest buffered sample at the start
 //! of every cycle without waiting for the robot, and forwards the arbitrated `drive` command.
 
+use denning::codec::{Command as Wire, Text};
 use denning::driver::{Driver, Odometer, SONARS};
 use denning::transport::{Serial, Transport};
 use skill_sdk::prelude::*;
-use skillfab_msgs::{Barcodes, Battery, Bumpers, Drive, Link, Odometry, Sonar};
+use skillfab_msgs::{
+    Arm, Barcodes, Battery, Bumpers, Drive, Link, Odometry, Push, Say, Sonar, Voice,
+};
 use std::time::{Duration, Instant};
 
 /// How long a lock-step cycle waits for the robot to connect or to acknowledge its step.
@@ -29,6 +32,10 @@ pub struct Sensors<'a> {
     pub battery: Output<'a, Battery>,
     /// The serial link.
     pub link: Output<'a, Link>,
+    /// The button pusher.
+    pub arm: Output<'a, Arm>,
+    /// The speaker and display.
+    pub voice: Output<'a, Voice>,
 }
 
 /// Channels served.
@@ -36,6 +43,10 @@ pub struct Sensors<'a> {
 pub struct Channels<'a> {
     /// Translate and rotate velocity; safe command: stop.
     pub drive: Command<'a, Drive>,
+    /// The button pusher: a stroke each time `press` turns true; safe command: retracted.
+    pub push: Command<'a, Push>,
+    /// Messages to say: each new non-zero `seq` is said once; safe command: silent.
+    pub say: Command<'a, Say>,
 }
 
 /// Parameters of the device.
@@ -57,6 +68,13 @@ pub struct Denning {
     seen: Option<Instant>,
     /// Whether the last command was replaced by stop (said once per blind spell).
     blind: bool,
+    /// Whether the pusher was commanded out last cycle (a stroke is made on the rising edge).
+    pressing: bool,
+    /// The `seq` of the last message sent to be said (0: none).
+    said_seq: u32,
+    /// Strokes of the last pusher report counted, and the strokes that pressed a button.
+    strokes_seen: u16,
+    hits: u32,
 }
 
 impl Device for Denning {
@@ -138,6 +156,27 @@ impl Device for Denning {
         }
         out.barcodes.set(b);
         out.battery.set(Battery { volts: s.battery });
+        let mut arm = Arm {
+            age_ms: f64::INFINITY,
+            ..Arm::default()
+        };
+        if let Some((strokes, pressed, at)) = s.arm {
+            if strokes != self.strokes_seen {
+                self.strokes_seen = strokes;
+                self.hits += u32::from(pressed != 0);
+            }
+            arm = Arm {
+                strokes: u32::from(strokes),
+                pressed: u32::from(pressed),
+                hits: self.hits,
+                age_ms: ms(at),
+            };
+        }
+        out.arm.set(arm);
+        out.voice.set(Voice {
+            said: u32::from(s.said),
+            seq: self.said_seq,
+        });
         out.link.set(Link {
             connected: s.connected,
             age_ms: s.received.map_or(f64::INFINITY, ms),
@@ -162,6 +201,22 @@ impl Device for Denning {
         } else {
             (0.0, 0.0)
         };
+        // One-off commands go out before the cycle's drive command (and, in lock-step, its
+        // step): the robot acts on them in this cycle.
+        // (A stroke that cannot go out is tried again next cycle.)
+        if !c.push.press {
+            self.pressing = false;
+        } else if !self.pressing {
+            self.pressing = d.send(Wire::Push);
+        }
+        // (A message not sent — the robot is not connected — is tried again next cycle.)
+        if c.say.seq != 0
+            && c.say.seq != self.said_seq
+            && d.send(Wire::Say(Text::from_bytes(c.say.text())))
+        {
+            self.said_seq = c.say.seq;
+            tracing::info!(seq = c.say.seq, "message sent to be said");
+        }
         if ctx.clock.lockstep {
             // The robot advances one period with this command; the next cycle's sample is
             // what it saw meanwhile.

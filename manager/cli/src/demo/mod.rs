@@ -1,5 +1,6 @@
-//! `skillfab demo exit-lab`: the paper's experiment. A sequencer written against the client
-//! library drives the simulated Denning robot out of the lab:
+//! `skillfab demo exit-lab` and `skillfab demo deliver`: the paper's experiment and its whole
+//! mission. In `exit-lab` a sequencer written against the client library (or a plan) drives
+//! the simulated Denning robot out of the lab:
 //!
 //! 1. activate wander + avoid + barcode_track; a monitor waits for the door's barcode;
 //! 2. switch wander for home (drive to the barcode) and let door_locate look;
@@ -9,8 +10,14 @@
 //!    paper's example of parameterising a skill) and let go_through drive; when the
 //!    simulator's ground truth says the robot is outside, stop it, restore the parameter,
 //!    and report.
+//!
+//! In `deliver` a plan ([`crate::sequence`]'s format, `skills/plans/deliver.xml`) takes the
+//! robot from the lab through a simulated building — corridors, an elevator lobby with four
+//! cars, the fourth floor — to an office, where it says its message; the simulator's ground
+//! truth says whether the message was delivered there.
 
 use anyhow::{Context, bail};
+use denning_sim::building::Building;
 use denning_sim::truth::TruthRecord;
 use denning_sim::world::World;
 use serde::Serialize;
@@ -25,11 +32,40 @@ use std::time::{Duration, Instant};
 
 use crate::faults::{Faults, Kill, Killer};
 
+mod plot;
+
+/// Where a demo's robot is: a one-room world (the exit-lab experiment) or a building (the
+/// delivery mission).
+#[derive(Debug, Clone)]
+pub enum Site {
+    /// A world file (`denning-sim --world`).
+    World(PathBuf),
+    /// A building file (`denning-sim --building`).
+    Building(PathBuf),
+}
+
+impl Site {
+    /// The file.
+    pub fn path(&self) -> &Path {
+        match self {
+            Site::World(p) | Site::Building(p) => p,
+        }
+    }
+
+    /// The skills of its network (all inactive at first).
+    fn skills(&self) -> &'static [&'static str] {
+        match self {
+            Site::World(_) => &SKILLS[..EXIT_LAB_SKILLS],
+            Site::Building(_) => &SKILLS,
+        }
+    }
+}
+
 /// Options of `skillfab demo exit-lab`.
 #[derive(Debug, Clone)]
 pub struct DemoOptions {
-    /// World file.
-    pub world: PathBuf,
+    /// The world or building.
+    pub site: Site,
     /// Seed of the first run (run i uses seed + i).
     pub seed: u64,
     /// Number of runs.
@@ -50,8 +86,10 @@ pub struct DemoOptions {
     /// Record the first run here (MCAP, every topic).
     pub record: Option<PathBuf>,
     /// A plan (`skillfab sequence`'s format) that drives the robot instead of the sequencer
-    /// written in Rust here.
+    /// written in Rust here (the delivery mission needs one).
     pub plan: Option<skillfab_sequence::Plan>,
+    /// The plan's tree to run (default: its main tree).
+    pub tree: Option<String>,
 }
 
 /// One run's outcome.
@@ -61,9 +99,10 @@ pub struct RunOutcome {
     pub seed: u64,
     /// World name.
     pub world: String,
-    /// Left the lab within the limit.
+    /// Left the lab (exit-lab) or delivered the message (deliver) within the limit.
     pub success: bool,
-    /// Simulated time at the end (s): when the robot was first outside, else the last.
+    /// Simulated time at the end (s): when the robot was first outside (exit-lab) or the
+    /// message was delivered (deliver), else the last.
     pub time_s: f64,
     /// Host time the run took (s), start-up included.
     pub wall_s: f64,
@@ -133,7 +172,8 @@ impl Drop for Network {
     }
 }
 
-const SKILLS: [&str; 8] = [
+/// The skills of the networks: the exit-lab experiment's, then the delivery mission's own.
+const SKILLS: [&str; 17] = [
     "avoid",
     "wander",
     "wall_follow",
@@ -142,15 +182,38 @@ const SKILLS: [&str; 8] = [
     "door_locate",
     "go_through",
     "stop",
+    "hall_follow",
+    "intersection",
+    "door_detect",
+    "sign_read",
+    "car_watch",
+    "enter_car",
+    "leave_car",
+    "push_button",
+    "deliver",
 ];
+/// The skills with a `progress` output (remapped to `<skill>/progress`: a topic has one
+/// producer).
+const PROGRESS: [&str; 5] = [
+    "go_through",
+    "enter_car",
+    "leave_car",
+    "push_button",
+    "deliver",
+];
+/// How many of [`SKILLS`] the exit-lab network has.
+const EXIT_LAB_SKILLS: usize = 8;
 
 fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, PathBuf)> {
     let domain = Domain::new(&format!("demo-{}-{run}", std::process::id()))?;
     domain.remove_all_files();
     let dir = std::env::temp_dir().join(format!("skillfab-demo-{}-{run}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
-    let world = std::fs::canonicalize(&opts.world)
-        .with_context(|| format!("world {}", opts.world.display()))?;
+    let (site_flag, site) = match &opts.site {
+        Site::World(p) => ("--world", p),
+        Site::Building(p) => ("--building", p),
+    };
+    let site = std::fs::canonicalize(site).with_context(|| format!("{}", site.display()))?;
     let link = dir.join("robot");
     let traj = dir.join("trajectory.csv");
     let robot_state = dir.join("robot.state");
@@ -179,8 +242,8 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                 bin: text(&program("denning-sim")?),
                 registers: Some(false),
                 args: vec![
-                    "--world".into(),
-                    text(&world),
+                    site_flag.into(),
+                    text(&site),
                     "--link".into(),
                     text(&link),
                     "--seed".into(),
@@ -223,17 +286,24 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             },
         ],
     };
-    for s in SKILLS {
+    for &s in opts.site.skills() {
         let mut params = std::collections::BTreeMap::new();
         if s == "wander" {
             // The seed varies the wandering between runs (an i64 in TOML).
             params.insert("seed".to_string(), toml::Value::Integer(seed as i64));
         }
+        // Skills that report one job's progress each get a topic of their own for it.
+        let remap = if PROGRESS.contains(&s) {
+            [("progress".to_string(), format!("{s}/progress"))].into()
+        } else {
+            Default::default()
+        };
         launch.process.push(ProcessEntry {
             name: s.into(),
             bin: text(&program(s)?),
             active: Some(false),
             params,
+            remap,
             restart: if killing {
                 Restart::OnFailure
             } else {
@@ -285,18 +355,18 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     Ok((Network { child, dir, domain }, traj))
 }
 
-fn connect(net: &Network) -> anyhow::Result<Client> {
+fn connect(net: &Network, skills: &[&str]) -> anyhow::Result<Client> {
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         if let Ok(c) = Client::connect(&net.domain)
             && let Ok(list) = c.list()
-            && list.len() == SKILLS.len() + 1
+            && list.len() == skills.len() + 1
             && list.iter().all(|s| s.state != SkillState::Starting)
         {
             return Ok(c);
         }
         if Instant::now() > deadline {
-            bail!("the exit-lab network did not come up within 60 s (see the log of skillfab up)");
+            bail!("the demo's network did not come up within 60 s (see the log of skillfab up)");
         }
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -396,16 +466,20 @@ const NO_TRUTH: Duration = Duration::from_secs(30);
 /// How a run ended, by the simulator's ground truth.
 #[derive(Debug, Clone, Copy)]
 enum Verdict {
-    /// The robot is outside the lab.
+    /// The robot is outside the lab (exit-lab).
     Outside,
+    /// The message was delivered (deliver).
+    Delivered,
     /// The time limit passed.
     Limit,
 }
 
-/// How the run ended by ground truth `now`, if it has.
-fn judge(now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
-    if now.outside {
+/// How the run at `site` ended by ground truth `now`, if it has.
+fn judge(site: &Site, now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
+    if matches!(site, Site::World(_)) && now.outside {
         Some(Verdict::Outside)
+    } else if now.delivered {
+        Some(Verdict::Delivered)
     } else if now.t > limit_s {
         Some(Verdict::Limit)
     } else {
@@ -414,11 +488,11 @@ fn judge(now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
 }
 
 /// The newest ground truth into `out`; how the run ended, if it has.
-fn watch(traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
+fn watch(site: &Site, traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
     let now = latest(traj)?;
     out.time_s = now.t;
     out.collisions = now.collisions;
-    judge(&now, limit_s)
+    judge(site, &now, limit_s)
 }
 
 const NO_TRUTH_ERROR: &str =
@@ -437,6 +511,11 @@ fn verdict(
             c.activate(&["stop"])?;
             step(c, out, "outside the lab: stop");
         }
+        Verdict::Delivered => {
+            out.success = true;
+            c.activate(&["stop"])?;
+            step(c, out, "the message is delivered: stop");
+        }
         Verdict::Limit => step(c, out, "time limit reached"),
     }
     Ok(())
@@ -446,12 +525,13 @@ fn verdict(
 pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOutcome> {
     let wall = Instant::now();
     let (net, traj) = start(opts, seed, run)?;
-    let mut c = connect(&net)?;
+    let mut c = connect(&net, opts.site.skills())?;
     c.subscribe()?;
     let mut out = RunOutcome {
         seed,
         world: opts
-            .world
+            .site
+            .path()
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default(),
@@ -477,7 +557,13 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     let step = |c: &Client, out: &mut RunOutcome, what: &str| record(c, &mut out.steps, what);
     // The plan (run below), or the Rust sequencer's first step.
     let mut driver = match &opts.plan {
-        Some(plan) => Driver::Plan(skillfab_sequence::Sequencer::new(plan, None)?),
+        Some(plan) => Driver::Plan(skillfab_sequence::Sequencer::new(
+            plan,
+            opts.tree.as_deref(),
+        )?),
+        None if matches!(opts.site, Site::Building(_)) => {
+            bail!("the delivery mission runs a plan: none was given")
+        }
         None => {
             c.activate(&["wander", "avoid", "barcode_track"])?;
             step(
@@ -532,7 +618,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                     c.run()?;
                 }
             }
-            if let Some(v) = watch(&traj, &mut out, opts.limit_s) {
+            if let Some(v) = watch(&opts.site, &traj, &mut out, opts.limit_s) {
                 verdict(&c, &mut out, v, &step)?;
                 break;
             }
@@ -552,7 +638,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                     last = latest(&traj).or(last);
                 }
                 match &last {
-                    Some(now) => judge(now, opts.limit_s).is_some(),
+                    Some(now) => judge(&opts.site, now, opts.limit_s).is_some(),
                     None => started.elapsed() > NO_TRUTH,
                 }
             };
@@ -569,7 +655,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                 bail!(NO_TRUTH_ERROR);
             };
             (out.time_s, out.collisions) = (now.t, now.collisions);
-            if let Some(v) = judge(&now, opts.limit_s) {
+            if let Some(v) = judge(&opts.site, &now, opts.limit_s) {
                 verdict(&c, &mut out, v, &step)?;
             }
         }
@@ -602,13 +688,23 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         // Halted already when the run ended.
         Driver::Plan(_) => {}
     }
-    let all: Vec<&str> = SKILLS.iter().copied().filter(|s| *s != "stop").collect();
+    let all: Vec<&str> = opts
+        .site
+        .skills()
+        .iter()
+        .copied()
+        .filter(|s| *s != "stop")
+        .collect();
     c.deactivate(&all)?;
     step(&c, &mut out, "skills deactivated");
     out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
     // The robot may have gone on a little while the sequencer looked: the time it first was
-    // outside is the mission's.
-    if let Some(first) = out.trajectory.iter().find(|r| r.outside) {
+    // outside (or the message was delivered) is the mission's.
+    let done = |r: &&TruthRecord| match opts.site {
+        Site::World(_) => r.outside,
+        Site::Building(_) => r.delivered,
+    };
+    if let Some(first) = out.trajectory.iter().find(done) {
         out.time_s = first.t;
     }
     out.wall_s = wall.elapsed().as_secs_f64();
@@ -666,10 +762,10 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         let seed = opts.seed + u64::from(run);
         if opts.verbose {
             println!(
-                "run {} of {}: world {}, seed {seed}",
+                "run {} of {}: {}, seed {seed}",
                 run + 1,
                 opts.runs,
-                opts.world.display()
+                opts.site.path().display()
             );
         }
         let r = run_once(opts, seed, run)?;
@@ -685,8 +781,11 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         if run == 0
             && let Some(p) = &opts.plot
         {
-            let world = World::load(&opts.world)?;
-            std::fs::write(p, svg(&world, &r))?;
+            let picture = match &opts.site {
+                Site::World(w) => plot::svg(&World::load(w)?, &r),
+                Site::Building(b) => plot::building_svg(&Building::load(b)?, &r),
+            };
+            std::fs::write(p, picture)?;
             if opts.verbose {
                 println!("  trajectory picture: {}", p.display());
             }
@@ -705,81 +804,4 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         median_time_s: (!times.is_empty()).then(|| times[times.len() / 2]),
         runs_detail: detail,
     })
-}
-
-/// The trajectory over the world map, with the sequencer's switches marked.
-fn svg(w: &World, r: &RunOutcome) -> String {
-    // The map's top edge (m) sets the picture's; the steps are listed below the map.
-    let top = w
-        .wall
-        .iter()
-        .flat_map(|s| [s.from[1], s.to[1]])
-        .fold(0.0f64, f64::max);
-    let (sx, sy, ox, oy, h) = (50.0, 50.0, 50.0, 50.0, top + 0.5);
-    let px = |x: f64| ox + x * sx;
-    let py = |y: f64| oy + (h - y) * sy;
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
-        px(14.0),
-        py(-1.2) + 16.0 * r.steps.len() as f64
-    );
-    for seg in &w.wall {
-        s.push_str(&format!(
-            "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\" stroke-width=\"4\"/>\n",
-            px(seg.from[0]), py(seg.from[1]), px(seg.to[0]), py(seg.to[1])
-        ));
-    }
-    for seg in &w.door {
-        s.push_str(&format!(
-            "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#2a2\" stroke-width=\"2\" stroke-dasharray=\"4 3\"/>\n",
-            px(seg.from[0]), py(seg.from[1]), px(seg.to[0]), py(seg.to[1])
-        ));
-    }
-    for b in &w.boxes {
-        s.push_str(&format!(
-            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#bbb\" stroke=\"#555\"/>\n",
-            px(b.min[0]), py(b.max[1]), (b.max[0] - b.min[0]) * sx, (b.max[1] - b.min[1]) * sy
-        ));
-    }
-    for c in &w.barcode {
-        s.push_str(&format!(
-            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"8\" height=\"8\" fill=\"#d22\"/><text x=\"{:.1}\" y=\"{:.1}\">barcode {}</text>\n",
-            px(c.at[0]) - 4.0, py(c.at[1]) - 4.0, px(c.at[0]) + 8.0, py(c.at[1]) - 6.0, c.id
-        ));
-    }
-    let pts: Vec<String> = r
-        .trajectory
-        .iter()
-        .map(|p| format!("{:.1},{:.1}", px(p.x), py(p.y)))
-        .collect();
-    s.push_str(&format!(
-        "<polyline points=\"{}\" fill=\"none\" stroke=\"#15c\" stroke-width=\"2\"/>\n",
-        pts.join(" ")
-    ));
-    for (i, (what, _, t)) in r.steps.iter().enumerate() {
-        if let Some(p) = r.trajectory.iter().find(|p| p.t >= *t) {
-            s.push_str(&format!(
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"5\" fill=\"#f80\"/><text x=\"{:.1}\" y=\"{:.1}\">{}</text>\n",
-                px(p.x), py(p.y), px(p.x) + 7.0, py(p.y) + 4.0, i + 1
-            ));
-        }
-        s.push_str(&format!(
-            "<text x=\"{:.1}\" y=\"{:.1}\">{}. t={:.1}s {}</text>\n",
-            px(0.0),
-            py(-0.8) + 16.0 * i as f64,
-            i + 1,
-            t,
-            what.replace('<', "&lt;").replace('>', "&gt;")
-        ));
-    }
-    s.push_str(&format!(
-        "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"16\">{} — {} in {:.1} s (seed {})</text>\n</svg>\n",
-        px(0.0),
-        oy - 20.0,
-        r.world,
-        if r.success { "success" } else { "failure" },
-        r.time_s,
-        r.seed
-    ));
-    s
 }

@@ -1,0 +1,238 @@
+//! `enter_car`: driving into an open elevator car.
+
+use super::*;
+
+/// Parameters of [`EnterCar`].
+#[derive(Params, Debug, Clone)]
+pub struct EnterCarParams {
+    /// Forward speed to the doorway's axis (m/s): the doors close after about 8 s.
+    #[param(default = 0.5, min = 0.0, max = 1.0)]
+    pub speed: f64,
+    /// Forward speed along the axis, through the doorway (m/s).
+    #[param(default = 0.3, min = 0.0, max = 1.0)]
+    pub through: f64,
+    /// Steering gain (rad/s per rad).
+    #[param(default = 1.5, min = 0.0, max = 10.0)]
+    pub gain: f64,
+    /// Line up on the doorway's axis this far before it (m).
+    #[param(default = 1.2, min = 0.3, max = 5.0)]
+    pub approach: f64,
+    /// Stop this far past the doorway line (m): inside, clear of the doors.
+    #[param(default = 0.95, min = 0.3, max = 3.0)]
+    pub depth: f64,
+    /// Centring gain between the door posts (rad per m of imbalance).
+    #[param(default = 0.8, min = 0.0, max = 10.0)]
+    pub centre: f64,
+}
+
+/// Inputs of [`EnterCar`].
+#[derive(Inputs)]
+pub struct EnterCarIn<'a> {
+    /// The open car (car_watch).
+    pub car: Input<'a, Car>,
+    /// Odometry.
+    pub odometry: Input<'a, Odometry>,
+    /// The ring (centring between the door posts, and what is ahead).
+    pub sonar: Input<'a, Sonar>,
+}
+
+/// Outputs of movement skills with one job.
+#[derive(Outputs)]
+pub struct DriveJobOut<'a> {
+    /// The proposal.
+    pub drive: Proposal<'a, Drive>,
+    /// How far the job is.
+    pub progress: Output<'a, Progress>,
+}
+
+/// Phases of [`EnterCar`] (its `progress.phase`).
+pub mod enter_phase {
+    /// Lining up before the doorway (or waiting for a car to be open).
+    pub const LINING_UP: u32 = 0;
+    /// Driving in along the doorway's axis.
+    pub const ENTERING: u32 = 1;
+    /// Inside: turning to face the back wall; `done` once it does.
+    pub const INSIDE: u32 = 2;
+    /// The doors closed before it reached the doorway: stopped (activate it again to retry).
+    pub const LOST: u32 = 3;
+}
+use enter_phase::*;
+
+/// Something this near ahead (m, from the ring) stops the drive in: not the back wall it
+/// expects, or the doors.
+const BLOCKED: f64 = 0.15;
+/// Weight of one cycle's fit of the cabin's walls in the way to face.
+const WALL_BLEND: f64 = 0.05;
+/// Cycles for the device to bring a reading of every sonar (300 ms).
+const RING_REFRESH: u32 = 30;
+/// Cycles of wall fits before facing them counts ...
+const WALLS_SETTLED: u32 = 40;
+/// ... or cycles inside without them (a cabin whose walls the sonars do not fit).
+const NO_WALLS: u32 = 300;
+/// Within this of the approach point (m) it is lined up.
+const LINED_UP: f64 = 0.2;
+
+/// Drives into the open car. First to a point `approach` before the doorway on its axis,
+/// then along the axis (a carrot 0.6 m ahead on it) centred between the door posts by the
+/// side sonars, as go_through does; `depth` past the doorway line it stops and turns to face
+/// the back wall (the way in, squared to the cabin's side walls when they are seen), where the
+/// car's panel is. The doorway is taken from car_watch
+/// until the drive in begins, then held: the lantern goes out of view as the robot passes
+/// under it. If no car is open (car.id 0: the doors closed) before the robot's centre has
+/// passed the doorway line, it stops for good (`lost`); past the line, the light curtain
+/// keeps the doors open.
+///
+/// For a sequencer: `enter_car.progress.done == 1` (inside, facing the back wall),
+/// `enter_car.progress.phase == 3` (lost: call the car again and reactivate);
+/// `progress.value` is the distance past the doorway line (m, negative before it).
+#[derive(Default)]
+pub struct EnterCar {
+    activation: Activation,
+    phase: u32,
+    /// The doorway (x, y, way in), held from the drive in on.
+    doorway: Option<(f64, f64, f64)>,
+    /// Whether a car has been seen open since activation (only then can it be lost).
+    saw_car: bool,
+    /// Inside: the way to face, refined from the cabin's side walls, and the cycles they
+    /// were seen in and spent inside.
+    back: Option<f64>,
+    walls_seen: u32,
+    inside_for: u32,
+    /// Cycles it has stood still (translation) inside.
+    still_for: u32,
+    /// Inside and facing the back wall (kept: a later wobble does not undo it).
+    faced: bool,
+}
+
+impl Skill for EnterCar {
+    type Params = EnterCarParams;
+    type Inputs<'a> = EnterCarIn<'a>;
+    type Outputs<'a> = DriveJobOut<'a>;
+    fn compute(
+        &mut self,
+        ctx: &Ctx<EnterCarParams>,
+        i: EnterCarIn,
+        o: &mut DriveJobOut,
+    ) -> SkillResult {
+        let (car, od, s, p) = (&*i.car, &*i.odometry, &*i.sonar, ctx.params);
+        if self.activation.begins(ctx.cycle) {
+            *self = EnterCar {
+                activation: self.activation,
+                ..EnterCar::default()
+            };
+        }
+        self.saw_car |= car.id != 0;
+        let stop = Drive::default();
+        let Some((dx, dy, h)) =
+            self.doorway
+                .or((car.id != 0).then_some((car.x, car.y, car.heading)))
+        else {
+            if self.saw_car && self.phase != INSIDE {
+                self.phase = LOST;
+            }
+            o.drive.set(stop);
+            o.progress.set(Progress {
+                done: false,
+                phase: self.phase,
+                value: 0.0,
+            });
+            return Ok(());
+        };
+        let (c, sn) = (h.cos(), h.sin());
+        let along = (od.x - dx) * c + (od.y - dy) * sn;
+        let cross = -(od.x - dx) * sn + (od.y - dy) * c;
+        if car.id == 0 && along < 0.0 && self.phase != INSIDE {
+            self.phase = LOST;
+        }
+        let ahead = min_in(s, -0.5, 0.5);
+        let drive = match self.phase {
+            LINING_UP => {
+                let start = (dx - p.approach * c, dy - p.approach * sn);
+                let to_start = (start.0 - od.x).hypot(start.1 - od.y);
+                // On the axis already (a second try from inside the approach): go on.
+                let on_axis = along > -p.approach && along < 0.0 && cross.abs() < 0.1;
+                if to_start < LINED_UP || on_axis {
+                    self.phase = ENTERING;
+                    self.doorway = Some((dx, dy, h));
+                    stop
+                } else {
+                    let want = (start.1 - od.y).atan2(start.0 - od.x);
+                    let err = wrap(want - od.theta);
+                    Drive {
+                        // Slowing into the approach point, so as not to circle it.
+                        translate: if err.abs() < 0.8 {
+                            p.speed.min(p.through + to_start) * err.cos().powi(2)
+                        } else {
+                            0.0
+                        },
+                        rotate: (p.gain * err).clamp(-1.0, 1.0),
+                    }
+                }
+            }
+            ENTERING if along >= p.depth => {
+                self.phase = INSIDE;
+                stop
+            }
+            ENTERING => {
+                let carrot = along + 0.6;
+                let goal = (dx + carrot * c, dy + carrot * sn);
+                let want = (goal.1 - od.y).atan2(goal.0 - od.x);
+                let mut err = wrap(want - od.theta);
+                if (-0.6..0.6).contains(&along) {
+                    // Between the posts: steer away from the nearer one.
+                    let left = min_in(s, 0.5, 2.4).min(0.8);
+                    let right = min_in(s, -2.4, -0.5).min(0.8);
+                    err += p.centre * (left - right) / 2.0;
+                }
+                let slow = 0.05 + 0.8 * (p.depth - along);
+                Drive {
+                    translate: if err.abs() < 0.8 && ahead > BLOCKED {
+                        p.through.min(slow) * err.cos().powi(2)
+                    } else {
+                        0.0
+                    },
+                    rotate: (p.gain * err).clamp(-1.0, 1.0),
+                }
+            }
+            INSIDE => {
+                // Square to the cabin's side walls (each fit a few hundredths of a radian
+                // off: blended), the way in when they are not seen.
+                let mut back = self.back.unwrap_or(h);
+                // Only from readings all taken since it stopped: the ring refreshes each
+                // sonar every 300 ms, and those taken in the doorway see its posts.
+                self.still_for = if od.v.abs() < 0.01 {
+                    self.still_for + 1
+                } else {
+                    0
+                };
+                if self.still_for > RING_REFRESH
+                    && let Some(a) = walls_axis(s, od.theta, back)
+                {
+                    back = wrap(back + WALL_BLEND * wrap(a - back));
+                    self.walls_seen += 1;
+                }
+                self.back = Some(back);
+                self.inside_for += 1;
+                let err = wrap(back - od.theta);
+                let settled = self.walls_seen >= WALLS_SETTLED || self.inside_for >= NO_WALLS;
+                self.faced |= settled && err.abs() < 0.04;
+                Drive {
+                    translate: 0.0,
+                    rotate: if self.faced {
+                        0.0
+                    } else {
+                        turn_toward(err, p.gain, 0.6, 0.08, 0.0)
+                    },
+                }
+            }
+            _ => stop,
+        };
+        o.drive.set(drive);
+        o.progress.set(Progress {
+            done: self.faced,
+            phase: self.phase,
+            value: along,
+        });
+        Ok(())
+    }
+}

@@ -1,0 +1,287 @@
+//! `hall_follow`: driving along corridors and turning at intersections.
+
+use super::*;
+
+/// Parameters of [`HallFollow`].
+#[derive(Params, Debug, Clone)]
+pub struct HallFollowParams {
+    /// Forward speed (m/s).
+    #[param(default = 0.35, min = 0.0, max = 1.0)]
+    pub speed: f64,
+    /// Steering gain (rad/s per rad of heading error).
+    #[param(default = 1.5, min = 0.0, max = 10.0)]
+    pub gain: f64,
+    /// At the next intersection entered: 1 turn left, −1 turn right, 0 go straight through.
+    #[param(default = 0, min = -1, max = 1)]
+    pub turn: i64,
+    /// With no turn pending, a wall ahead nearer than this stops it (m, from the ring).
+    #[param(default = 1.2, min = 0.3, max = 5.0)]
+    pub stop: f64,
+    /// Turn this far past where the side sonar saw the side open (m): it sees past the
+    /// corner 0.2 m after it, so 1.0 m is the middle of a crossing 2.4 m corridor.
+    #[param(default = 1.0, min = 0.0, max = 5.0)]
+    pub after: f64,
+    /// ... or where a wall ahead is this near (m, from the ring): the middle of a 2.4 m
+    /// corridor crossing a T's stem, or entered from a door.
+    #[param(default = 0.85, min = 0.3, max = 3.0)]
+    pub middle: f64,
+    /// Steering toward the corridor's centre line (rad per m off it, at most 0.3 rad).
+    #[param(default = 0.6, min = 0.0, max = 5.0)]
+    pub centring: f64,
+}
+
+/// Inputs of [`HallFollow`].
+#[derive(Inputs)]
+pub struct HallFollowIn<'a> {
+    /// The ring.
+    pub sonar: Input<'a, Sonar>,
+    /// Odometry (the corridor's axis and the turns are held in its frame).
+    pub odometry: Input<'a, Odometry>,
+    /// Intersections (the intersection skill).
+    pub junction: Input<'a, Junction>,
+}
+
+/// What it is doing.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+enum Mode {
+    /// Along the corridor.
+    #[default]
+    Follow,
+    /// In an intersection with a turn latched (+1 left, −1 right): on to its middle, counted
+    /// from `from`, where that side opened (`None` while it has not: a staggered crossing
+    /// may open the other side first).
+    Cross { turn: f64, from: Option<(f64, f64)> },
+    /// Turning on the spot to a heading.
+    Turn { to: f64 },
+    /// Out of the intersection on the new heading, until walls are on both sides.
+    Leave,
+}
+
+/// A side reading nearer than this is a wall beside (m, from the ring).
+const SIDE_WALL: f64 = 2.0;
+/// Weight of one cycle's wall measurement in the corridor's axis: walls are fitted from
+/// readings refreshed every 300 ms with a few cm of noise, so the axis averages about two
+/// seconds of them.
+const AXIS_BLEND: f64 = 0.005;
+/// Wall measurements farther than this from the held axis (rad) are not the corridor's.
+const AXIS_GATE: f64 = 0.3;
+/// Nothing is driven into: a wall ahead this near stops translation in every mode (m).
+const TOO_CLOSE: f64 = 0.4;
+/// Most the centring turns the heading off the axis (rad).
+const CENTRING_MAX: f64 = 0.3;
+
+/// Corridor following for the building's axis-aligned corridors. It holds the corridor's
+/// axis (a heading in the odometry frame, refined from the side walls: the 60°, 90° and 120°
+/// sonars of each side fitted as one straight wall) and its centre line between the walls;
+/// with one side open (a door, a side corridor) it keeps the distance it had to the other
+/// wall; with none, it holds the axis. A wall ahead nearer than `stop` stops it.
+///
+/// Turns: when `junction.count` increases (an intersection entered; also one it is in at
+/// activation), it latches `turn`. Straight (0): on along the axis. Left or right: on to the
+/// middle of the crossing corridor (`after` past where its side sonar saw that side open, or
+/// a wall ahead at `middle`), a quarter turn on the spot (the axis ± 90°: the corridors are
+/// square to each other), then out on the new heading until walls are on both sides again.
+/// A wall ahead with a turn latched starts the turn at once; at a wall ahead with `turn` set
+/// while in an intersection whose entry it has missed, it turns too.
+///
+/// For a sequencer: it reports nothing; wait on `intersection.junction.count` and set `turn`
+/// before the intersection.
+#[derive(Default)]
+pub struct HallFollow {
+    activation: Activation,
+    mode: Mode,
+    /// The corridor's axis (odometry frame).
+    axis: Option<f64>,
+    /// The wall followed alone (+1 left, −1 right) and the distance kept to it (m).
+    keep: Option<(f64, f64)>,
+    /// The junction count seen last cycle.
+    last_count: Option<u32>,
+    /// Per side (left, right): whether the side sonar read a wall last time, and where the
+    /// side was last seen to open.
+    walled: [bool; 2],
+    opened: [Option<(f64, f64)>; 2],
+}
+
+impl HallFollow {
+    /// The heading to steer for along the axis: toward the centre line, or the kept distance
+    /// to the one wall beside.
+    fn steer(&mut self, axis: f64, walls: [Option<SideWall>; 2], centring: f64) -> f64 {
+        let off = match walls {
+            [Some(l), Some(r)] => {
+                self.keep = None;
+                // Left of the centre line by this much.
+                (r.distance - l.distance) / 2.0
+            }
+            [Some(w), None] | [None, Some(w)] => {
+                let side = if walls[0].is_some() { 1.0 } else { -1.0 };
+                let keep = match self.keep {
+                    Some((s, d)) if s == side => d,
+                    _ => w.distance,
+                };
+                self.keep = Some((side, keep));
+                side * (keep - w.distance)
+            }
+            [None, None] => 0.0,
+        };
+        axis - (centring * off).clamp(-CENTRING_MAX, CENTRING_MAX)
+    }
+}
+
+impl Skill for HallFollow {
+    type Params = HallFollowParams;
+    type Inputs<'a> = HallFollowIn<'a>;
+    type Outputs<'a> = DriveOut<'a>;
+    const PRIORITY: i32 = 3;
+    fn compute(
+        &mut self,
+        ctx: &Ctx<HallFollowParams>,
+        i: HallFollowIn,
+        o: &mut DriveOut,
+    ) -> SkillResult {
+        let (s, od, j, p) = (&*i.sonar, &*i.odometry, &*i.junction, ctx.params);
+        if self.activation.begins(ctx.cycle) {
+            *self = HallFollow {
+                activation: self.activation,
+                ..HallFollow::default()
+            };
+        }
+        let pos = (od.x, od.y);
+        let walls = [side_wall(s, 1.0), side_wall(s, -1.0)];
+        // The axis: from the walls, held while turning.
+        let measured: Vec<f64> = walls
+            .iter()
+            .flatten()
+            .map(|w| wrap(od.theta + w.tilt))
+            .collect();
+        let axis = match self.axis {
+            None => measured.first().copied().unwrap_or(od.theta),
+            Some(a) if !matches!(self.mode, Mode::Turn { .. }) => {
+                measured.iter().fold(a, |a, &m| {
+                    let d = wrap(m - a);
+                    if d.abs() < AXIS_GATE {
+                        wrap(a + AXIS_BLEND * d)
+                    } else {
+                        a
+                    }
+                })
+            }
+            Some(a) => a,
+        };
+        self.axis = Some(axis);
+        // Where each side opened: its sonar's reading leaving the wall.
+        for (k, n) in [(0, 90.0), (1, -90.0)] {
+            let Some(r) = at(s, n) else { continue };
+            let wall = r < SIDE_WALL;
+            if wall {
+                self.opened[k] = None;
+            } else if self.walled[k] {
+                self.opened[k] = Some(pos);
+            }
+            self.walled[k] = wall;
+        }
+        // An intersection entered: latch the turn. One it is in at activation counts.
+        let entered = match self.last_count {
+            Some(last) => j.count > last,
+            None => j.inside && j.count > 0,
+        };
+        self.last_count = Some(j.count);
+        let ahead = arc(s, -20.0, 20.0).map_or(0.0, |(near, _)| near);
+        if self.mode == Mode::Follow && p.turn != 0 && (entered || (j.inside && ahead < p.stop)) {
+            self.mode = Mode::Cross {
+                turn: p.turn as f64,
+                from: None,
+            };
+        }
+        let stop = Drive::default();
+        let cruise = |want: f64, limit: f64| {
+            let err = wrap(want - od.theta);
+            Drive {
+                translate: if err.abs() < 0.8 && ahead > TOO_CLOSE {
+                    limit.clamp(0.0, p.speed) * err.cos().powi(2)
+                } else {
+                    0.0
+                },
+                rotate: (p.gain * err).clamp(-0.8, 0.8),
+            }
+        };
+        let drive = match self.mode {
+            Mode::Follow => {
+                let want = self.steer(axis, walls, p.centring);
+                // With a turn pending and that side open beside, on to the middle of what
+                // may be a crossing corridor (a T's bar ahead, a corridor entered from a
+                // door): its sides open fully only there, and there the junction counts.
+                let turn_side = match p.turn {
+                    1 => Some(0),
+                    -1 => Some(1),
+                    _ => None,
+                };
+                let until = match turn_side {
+                    Some(k) if !self.walled[k] => p.middle.min(p.stop),
+                    _ => p.stop,
+                };
+                if ahead < until {
+                    stop
+                } else {
+                    cruise(want, 0.05 + 0.5 * (ahead - until))
+                }
+            }
+            Mode::Cross { turn, from } => {
+                let side = if turn > 0.0 { 0 } else { 1 };
+                // Open since before the robot saw a wall there (from a door, or at
+                // activation): counted from here.
+                let from = from
+                    .or(self.opened[side])
+                    .or((!self.walled[side]).then_some(pos));
+                self.mode = Mode::Cross { turn, from };
+                let want = self.steer(axis, walls, p.centring);
+                match from {
+                    // Never turned toward a wall: the side it was to turn to never opened.
+                    None if !j.inside => {
+                        self.mode = Mode::Follow;
+                        cruise(want, 0.05 + 0.5 * (ahead - p.stop))
+                    }
+                    None if ahead < p.stop => stop,
+                    None => cruise(want, 0.05 + 0.5 * (ahead - p.stop)),
+                    Some(from) => {
+                        let (c, sn) = (axis.cos(), axis.sin());
+                        let left = p.after - ((pos.0 - from.0) * c + (pos.1 - from.1) * sn);
+                        if left <= 0.02 || ahead <= p.middle {
+                            self.mode = Mode::Turn {
+                                to: wrap(axis + turn * FRAC_PI_2),
+                            };
+                            stop
+                        } else {
+                            cruise(want, 0.05 + left.min(ahead - p.middle))
+                        }
+                    }
+                }
+            }
+            Mode::Turn { to } => {
+                let err = wrap(to - od.theta);
+                if err.abs() < 0.03 {
+                    self.mode = Mode::Leave;
+                    self.axis = Some(to);
+                    self.keep = None;
+                    stop
+                } else {
+                    Drive {
+                        translate: 0.0,
+                        rotate: turn_toward(err, 1.2, 0.8, 0.08, 0.0),
+                    }
+                }
+            }
+            Mode::Leave => {
+                if self.walled == [true, true] {
+                    self.mode = Mode::Follow;
+                }
+                if ahead < p.stop {
+                    stop
+                } else {
+                    cruise(axis, 0.05 + 0.5 * (ahead - p.stop))
+                }
+            }
+        };
+        o.drive.set(drive);
+        Ok(())
+    }
+}

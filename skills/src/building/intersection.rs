@@ -1,0 +1,91 @@
+//! `intersection`: corridor intersections from the sonar ring.
+
+use super::*;
+
+/// Parameters of [`Intersection`].
+#[derive(Params, Debug, Clone)]
+pub struct IntersectionParams {
+    /// A way is open when its arc reads farther than this (m, from the ring). Not more than
+    /// 2.2: from the middle of a crossing 2.4 m corridor, the cones of the sonars at ±75° and
+    /// ±105° reach that corridor's far walls 2.2 m away, so a larger value never opens a side.
+    /// A 1 m door beside never opens all three cones of a side, whatever this is.
+    #[param(default = 1.7, min = 0.5, max = 10.0)]
+    pub open: f64,
+    /// Cycles a change must persist before `inside` follows it.
+    #[param(default = 10, min = 1, max = 10000)]
+    pub hold: u64,
+}
+
+/// Output of [`Intersection`].
+#[derive(Outputs)]
+pub struct JunctionOut<'a> {
+    /// Whether it is in an intersection, and how many it has entered.
+    pub junction: Output<'a, Junction>,
+}
+
+/// Corridor intersections. A side is open when the whole arc 60°..120° (−120°..−60° for the
+/// right) reads farther than `open`: the sonars at 75°, 90° and 105°, whose cones fill that
+/// arc. Ahead is open when the sonars within ±20° (cones over ±30°) read farther than `open`.
+///
+/// `inside` turns true when a side has been open for `hold` cycles, and false only when both
+/// sides are closed along their whole arcs (60°..120°, −120°..−60°: walls beside again) for
+/// `hold` cycles: turning on the spot in a crossing, the side sonars look into its corners
+/// for a moment, which must not end the intersection (and count it twice). `count` is the
+/// number of times `inside` turned true since the skill was last activated, so an
+/// intersection the robot is in at activation counts at once.
+///
+/// For a sequencer: `junction.count >= n` (the n-th intersection entered), `junction.inside`,
+/// `junction.left`/`right`/`ahead` (which ways are open now).
+#[derive(Default)]
+pub struct Intersection {
+    activation: Activation,
+    inside: bool,
+    count: u32,
+    /// Consecutive cycles the raw reading has disagreed with `inside`.
+    differs: u64,
+}
+
+impl Skill for Intersection {
+    type Params = IntersectionParams;
+    type Inputs<'a> = SonarIn<'a>;
+    type Outputs<'a> = JunctionOut<'a>;
+    fn compute(
+        &mut self,
+        ctx: &Ctx<IntersectionParams>,
+        i: SonarIn,
+        o: &mut JunctionOut,
+    ) -> SkillResult {
+        let (s, p) = (&*i.sonar, ctx.params);
+        if self.activation.begins(ctx.cycle) {
+            self.inside = false;
+            self.count = 0;
+            self.differs = 0;
+        }
+        // Open: every reading of the arc beyond `open`; closed: every reading within it.
+        let open = |a: Option<(f64, f64)>| a.is_some_and(|(near, _)| near > p.open);
+        let closed = |a: Option<(f64, f64)>| a.is_some_and(|(_, far)| far <= p.open);
+        let left = open(arc(s, 60.0 + 15.0, 120.0 - 15.0));
+        let right = open(arc(s, -120.0 + 15.0, -60.0 - 15.0));
+        let ahead = open(arc(s, -20.0, 20.0));
+        let walled = closed(arc(s, 60.0, 120.0)) && closed(arc(s, -120.0, -60.0));
+        let raw = if self.inside { !walled } else { left || right };
+        if raw == self.inside {
+            self.differs = 0;
+        } else {
+            self.differs += 1;
+            if self.differs >= p.hold {
+                self.differs = 0;
+                self.inside = raw;
+                self.count += u32::from(raw);
+            }
+        }
+        o.junction.set(Junction {
+            count: self.count,
+            inside: self.inside,
+            left,
+            right,
+            ahead,
+        });
+        Ok(())
+    }
+}

@@ -1,0 +1,158 @@
+//! `leave_car`: turning to the car's doors and driving out when they open.
+
+use super::*;
+
+/// Parameters of [`LeaveCar`].
+#[derive(Params, Debug, Clone)]
+pub struct LeaveCarParams {
+    /// 1: leave when the doors open (the sequencer sets it on the right floor); 0: hold.
+    #[param(default = 0, min = 0, max = 1)]
+    pub go: i64,
+    /// Done this far from where it started (m, along the way out).
+    #[param(default = 1.8, min = 0.3, max = 10.0)]
+    pub distance: f64,
+    /// Forward speed (m/s).
+    #[param(default = 0.3, min = 0.0, max = 1.0)]
+    pub speed: f64,
+    /// Steering gain (rad/s per rad).
+    #[param(default = 1.5, min = 0.0, max = 10.0)]
+    pub gain: f64,
+    /// The doors are open when the front sonar reads farther than this (m).
+    #[param(default = 1.5, min = 0.3, max = 5.0)]
+    pub clear: f64,
+    /// Doors closing in front make it wait while it is less than this from its start (m):
+    /// until its front is in the doorway, where the light curtain holds them open.
+    #[param(default = 0.6, min = 0.0, max = 5.0)]
+    pub doorway: f64,
+    /// Centring gain between the door posts (rad per m of imbalance).
+    #[param(default = 0.8, min = 0.0, max = 10.0)]
+    pub centre: f64,
+}
+
+/// Inputs of [`LeaveCar`].
+#[derive(Inputs)]
+pub struct LeaveCarIn<'a> {
+    /// Odometry.
+    pub odometry: Input<'a, Odometry>,
+    /// The ring (the doors ahead, the posts beside).
+    pub sonar: Input<'a, Sonar>,
+}
+
+/// Phases of [`LeaveCar`] (its `progress.phase`).
+pub mod leave_phase {
+    /// Turning on the spot to the way out.
+    pub const TURNING: u32 = 0;
+    /// Holding still until `go` is 1 and the doors ahead are open.
+    pub const WAITING: u32 = 1;
+    /// Driving out.
+    pub const LEAVING: u32 = 2;
+    /// Out: `distance` from the start, stopped.
+    pub const OUT: u32 = 3;
+}
+use leave_phase::*;
+
+/// Weight of one cycle's fit of the cabin's walls in the way out.
+const WALL_BLEND: f64 = 0.02;
+
+/// Something this near ahead (m, from the ring) stops it at once, doors or not.
+const BLOCKED: f64 = 0.3;
+
+/// Leaves the car. At activation it faces the back wall (enter_car left it so); the way out
+/// is that heading turned half round (squared to the cabin's side walls when they are seen),
+/// and it turns to it on the spot. Then it holds still
+/// until `go` is 1 and the way ahead is open (the front sonar reads farther than `clear`:
+/// the doors are open), and drives out straight along the way out, centred between the door
+/// posts by the side sonars, until `distance` from where it started; there it stops. Doors
+/// seen closing in front before it reached the doorway (`doorway` from the start) make it
+/// wait again.
+///
+/// For a sequencer: `leave_car.progress.done == 1` (out of the car, stopped),
+/// `leave_car.progress.phase == 1` (turned, waiting for `go` and the doors); `progress.value`
+/// is the distance driven along the way out (m). Set `go` to 1 on the right floor (e.g. when
+/// `sign_read.signs.floor == 4`).
+#[derive(Default)]
+pub struct LeaveCar {
+    activation: Activation,
+    phase: u32,
+    /// Where it started and the way out (odometry frame).
+    start: (f64, f64),
+    way: f64,
+}
+
+impl Skill for LeaveCar {
+    type Params = LeaveCarParams;
+    type Inputs<'a> = LeaveCarIn<'a>;
+    type Outputs<'a> = DriveJobOut<'a>;
+    fn compute(
+        &mut self,
+        ctx: &Ctx<LeaveCarParams>,
+        i: LeaveCarIn,
+        o: &mut DriveJobOut,
+    ) -> SkillResult {
+        let (od, s, p) = (&*i.odometry, &*i.sonar, ctx.params);
+        if self.activation.begins(ctx.cycle) {
+            self.phase = TURNING;
+            self.start = (od.x, od.y);
+            self.way = wrap(od.theta + PI);
+        }
+        if matches!(self.phase, TURNING | WAITING)
+            && let Some(a) = walls_axis(s, od.theta, self.way)
+        {
+            // Square to the cabin's side walls: the turn half round by odometry is off by
+            // its scale error. Blended in: each fit is a few hundredths of a radian off.
+            self.way = wrap(self.way + WALL_BLEND * wrap(a - self.way));
+        }
+        let (c, sn) = (self.way.cos(), self.way.sin());
+        let along = (od.x - self.start.0) * c + (od.y - self.start.1) * sn;
+        // The doors: the front sonar's cone alone, which fits through the doorway even from a
+        // little off its axis (the panel is beside it); the side posts are the centring's.
+        let ahead = arc(s, -5.0, 5.0).map_or(0.0, |(near, _)| near);
+        let err = wrap(self.way - od.theta);
+        if self.phase == TURNING && err.abs() < 0.04 {
+            self.phase = WAITING;
+        }
+        if self.phase == WAITING && p.go == 1 && ahead > p.clear {
+            self.phase = LEAVING;
+        }
+        if self.phase == LEAVING {
+            if along >= p.distance {
+                self.phase = OUT;
+            } else if ahead < p.clear && along < p.doorway {
+                // The doors are closing in front: wait for them to open again.
+                self.phase = WAITING;
+            }
+        }
+        let drive = match self.phase {
+            TURNING => Drive {
+                translate: 0.0,
+                rotate: turn_toward(err, p.gain, 0.8, 0.08, 0.0),
+            },
+            LEAVING => {
+                let mut steer = err;
+                if along > 0.2 && along < p.distance - 0.3 {
+                    // Between the posts: steer away from the nearer one.
+                    let left = min_in(s, 0.5, 2.4).min(0.8);
+                    let right = min_in(s, -2.4, -0.5).min(0.8);
+                    steer += p.centre * (left - right) / 2.0;
+                }
+                let slow = 0.05 + 0.8 * (p.distance - along);
+                Drive {
+                    translate: if steer.abs() < 0.8 && ahead > BLOCKED {
+                        p.speed.min(slow) * steer.cos().powi(2)
+                    } else {
+                        0.0
+                    },
+                    rotate: (p.gain * steer).clamp(-1.0, 1.0),
+                }
+            }
+            _ => Drive::default(),
+        };
+        o.drive.set(drive);
+        o.progress.set(Progress {
+            done: self.phase == OUT,
+            phase: self.phase,
+            value: along,
+        });
+        Ok(())
+    }
+}

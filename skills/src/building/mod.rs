@@ -1,0 +1,145 @@
+//! The building skills of the delivery experiment: from the basement lab's door along
+//! corridors, up in an elevator and along a corridor to an office. Movement skills propose on
+//! the `drive` channel (default priorities: enter_car 6, leave_car 6, push_button 5,
+//! hall_follow 3; `avoid` 8 and `stop` 10 run beside them), `push_button` also on `push`,
+//! `deliver` only on `say` (priority 1). Perception skills (`intersection`, `door_detect`,
+//! `sign_read`, `car_watch`) only write outputs.
+//!
+//! Every skill's outputs carry what a sequencer waits on: a count, a flag, or a [`Progress`]
+//! whose phases each skill documents. Counts and progress start afresh whenever a skill is
+//! (re)activated ([`Activation`]): a plan reuses the same instances step after step.
+//!
+//! One file per skill; the geometry they share (side walls from the ring) is here.
+
+mod car_watch;
+mod deliver;
+mod door_detect;
+mod enter_car;
+mod hall_follow;
+mod intersection;
+mod leave_car;
+mod push_button;
+mod sign_read;
+#[cfg(test)]
+mod tests;
+
+pub use car_watch::*;
+pub use deliver::*;
+pub use door_detect::*;
+pub use enter_car::*;
+pub use hall_follow::*;
+pub use intersection::*;
+pub use leave_car::*;
+pub use push_button::*;
+pub use sign_read::*;
+
+use crate::nav::{Activation, DriveOut, RING, SonarIn, min_in, range, wrap};
+use skill_sdk::prelude::*;
+use skillfab_msgs::{
+    Arm, Barcodes, Car, Doors, Drive, Junction, Odometry, Progress, Push, SONARS, Say, Signs,
+    Sonar, Target, Voice,
+};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// Half a sonar cone (rad): a reading is the nearest echo within it.
+const CONE: f64 = 15.0 * PI / 180.0;
+
+/// Camera reports older than this are not "in view" (ms), as in `barcode_track`.
+const IN_VIEW_MS: f64 = 500.0;
+
+/// The reading of the sonar whose axis is at `deg` degrees (counter-clockwise from the
+/// front; rounded to the nearest sonar); `None` if it was never read.
+fn at(s: &Sonar, deg: f64) -> Option<f64> {
+    let i = (deg / 15.0).round().rem_euclid(SONARS as f64) as usize;
+    range(s, i)
+}
+
+/// The nearest and the farthest reading among the sonars whose axes lie within `from..=to`
+/// degrees; `None` while one of them was never read (an unread ring opens nothing).
+fn arc(s: &Sonar, from: f64, to: f64) -> Option<(f64, f64)> {
+    let first = (from / 15.0).ceil() as i32;
+    let last = (to / 15.0).floor() as i32;
+    (first..=last).try_fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), k| {
+        at(s, f64::from(k) * 15.0).map(|r| (lo.min(r), hi.max(r)))
+    })
+}
+
+/// A straight wall beside the robot, from the sonars at 60°, 90° and 120° on one side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SideWall {
+    /// The wall's direction relative to the heading (rad, counter-clockwise): the heading
+    /// plus this is the corridor's axis.
+    tilt: f64,
+    /// Distance from the robot's centre to the wall (m).
+    distance: f64,
+}
+
+/// Side readings beyond this are not a corridor wall beside the robot (m, from the ring).
+const SIDE_WALL_MAX: f64 = 2.2;
+
+/// The wall on `side` (+1 left, −1 right), if the three side sonars agree on one straight
+/// wall. A cone's reading is the range along its ray nearest to the wall's normal, so for a
+/// trial tilt each reading implies a distance to the wall; the tilt is the one at which the
+/// 60° and 120° readings imply the same distance, and the 90° reading must agree with it
+/// (an open door beside, or the end of the wall, breaks the agreement: no wall then).
+fn side_wall(s: &Sonar, side: f64) -> Option<SideWall> {
+    let read = |deg: f64| at(s, side * deg).filter(|&r| r < SIDE_WALL_MAX);
+    let (r60, r90, r120) = (read(60.0)?, read(90.0)?, read(120.0)?);
+    // Distance from the centre to the wall implied by reading `r` of the sonar at `beta`,
+    // for a wall whose normal (toward it) is at `normal`.
+    let implied = |r: f64, beta: f64, normal: f64| {
+        let inc = wrap(beta - normal).abs();
+        r * (inc - CONE).max(0.0).cos() + RING * (beta - normal).cos()
+    };
+    let (b60, b90, b120) = (
+        side * 60f64.to_radians(),
+        side * FRAC_PI_2,
+        side * 120f64.to_radians(),
+    );
+    let mut best: Option<(f64, f64)> = None;
+    for k in -100..=100 {
+        let tilt = f64::from(k) * 0.005;
+        let normal = tilt + side * FRAC_PI_2;
+        let miss = (implied(r60, b60, normal) - implied(r120, b120, normal)).abs();
+        if best.is_none_or(|b| miss < b.1) {
+            best = Some((tilt, miss));
+        }
+    }
+    let (tilt, miss) = best?;
+    let normal = tilt + side * FRAC_PI_2;
+    let (d60, d90, d120) = (
+        implied(r60, b60, normal),
+        implied(r90, b90, normal),
+        implied(r120, b120, normal),
+    );
+    let pair = (d60 + d120) / 2.0;
+    (miss < 0.1 && (d90 - pair).abs() < 0.12).then_some(SideWall {
+        tilt,
+        distance: (d60 + d90 + d120) / 3.0,
+    })
+}
+
+/// The direction of the walls on both sides (odometry frame), when both are fitted and run
+/// within 0.25 rad of `near`: in a car's cabin, the way in and out, free of the odometry's
+/// turning error and of the estimate the robot came in by.
+fn walls_axis(s: &Sonar, theta: f64, near: f64) -> Option<f64> {
+    let l = side_wall(s, 1.0)?;
+    let r = side_wall(s, -1.0)?;
+    let a = wrap(theta + (l.tilt + r.tilt) / 2.0);
+    // The walls run both ways: the one near `near`.
+    [a, wrap(a + PI)]
+        .into_iter()
+        .find(|&a| wrap(a - near).abs() < 0.25)
+}
+
+/// A turn rate toward `err` (rad) with gain `gain`, at most `max`, and at least `min` while
+/// the error is above `deadband`: the robot's rotate command has a resolution, and a turn
+/// that slows to nothing never ends.
+fn turn_toward(err: f64, gain: f64, max: f64, min: f64, deadband: f64) -> f64 {
+    let w = (gain * err).clamp(-max, max);
+    if err.abs() > deadband && w.abs() < min {
+        min.copysign(err)
+    } else {
+        w
+    }
+}

@@ -1,0 +1,233 @@
+//! `push_button`: pressing a button with the pusher.
+
+use super::*;
+
+/// Parameters of [`PushButton`].
+#[derive(Params, Debug, Clone)]
+pub struct PushButtonParams {
+    /// Approach speed (m/s).
+    #[param(default = 0.15, min = 0.0, max = 0.5)]
+    pub speed: f64,
+    /// Steering gain (rad/s per rad).
+    #[param(default = 1.5, min = 0.0, max = 10.0)]
+    pub gain: f64,
+    /// Stop approaching at this range from the button (m, from the robot's centre): within
+    /// the pusher's 0.75 m with room for the stop and the estimate's error.
+    #[param(default = 0.62, min = 0.4, max = 0.75)]
+    pub reach: f64,
+    /// Stroke when the button's bearing is within this (rad): the pusher presses a button
+    /// within ±12° (0.21 rad) of the heading.
+    #[param(default = 0.04, min = 0.005, max = 0.2)]
+    pub align: f64,
+    /// Strokes tried before giving up.
+    #[param(default = 3, min = 1, max = 20)]
+    pub tries: u32,
+    /// After a miss, back off this far before trying again (m).
+    #[param(default = 0.3, min = 0.0, max = 2.0)]
+    pub back: f64,
+    /// A stroke with no report from the pusher after this long counts as a miss (ms of
+    /// fabric time).
+    #[param(default = 3000.0, min = 100.0, max = 60000.0)]
+    pub stroke_ms: f64,
+    /// After the press, back straight away this far before it is done (m; 0: done at once).
+    /// A robot that called a car waits where it sees all the cars' lanterns.
+    #[param(default = 0.0, min = 0.0, max = 6.0)]
+    pub retreat: f64,
+    /// Turn rate looking for a button not seen yet (rad/s; 0: wait for it). A button beside
+    /// the camera's field of view (a panel's end button, seen from the middle) comes into view.
+    #[param(default = 0.4, min = 0.0, max = 1.5)]
+    pub search: f64,
+    /// 0: only go to the button and face it (then retreat, if set): a landmark to line up
+    /// on, not a button to press.
+    #[param(default = 1, min = 0, max = 1)]
+    pub press: i64,
+}
+
+/// Inputs of [`PushButton`].
+#[derive(Inputs)]
+pub struct PushButtonIn<'a> {
+    /// The button (barcode_track on its barcode).
+    pub target: Input<'a, Target>,
+    /// Odometry.
+    pub odometry: Input<'a, Odometry>,
+    /// The pusher's report.
+    pub arm: Input<'a, Arm>,
+}
+
+/// Outputs of [`PushButton`].
+#[derive(Outputs)]
+pub struct PushButtonOut<'a> {
+    /// The drive proposal.
+    pub drive: Proposal<'a, Drive>,
+    /// The pusher proposal.
+    pub push: Proposal<'a, Push>,
+    /// How far the job is.
+    pub progress: Output<'a, Progress>,
+}
+
+/// Phases of [`PushButton`] (its `progress.phase`).
+pub mod push_phase {
+    /// Turning toward the button and driving to `reach` of it.
+    pub const APPROACH: u32 = 0;
+    /// Turning on the spot until the button is straight ahead.
+    pub const ALIGN: u32 = 1;
+    /// Pusher out, waiting for the stroke's report.
+    pub const STROKE: u32 = 2;
+    /// The button was pressed.
+    pub const DONE: u32 = 3;
+    /// A miss: backing off before the next try.
+    pub const BACKING: u32 = 4;
+    /// `tries` strokes missed: given up.
+    pub const FAILED: u32 = 5;
+    /// Pressed; backing away `retreat` before it is done.
+    pub const RETREAT: u32 = 6;
+}
+use push_phase::*;
+
+/// Speed backing off after a miss (m/s).
+const BACK_SPEED: f64 = 0.15;
+/// Beyond this bearing (rad) the approach turns on the spot before driving.
+const FACING: f64 = 0.2;
+/// The period assumed when the manager free-runs (no nominal period): its default.
+const FREE_RUN_PERIOD_MS: f64 = 10.0;
+
+/// Presses the tracked button: turns toward it, drives to `reach` of it, turns until it is
+/// within `align` of straight ahead, and proposes `push.press` until the pusher reports a new
+/// stroke, then releases. The stroke pressed the button when the report names the button's
+/// id (then it backs away `retreat`, if set, before it is done); a miss backs off `back` and
+/// tries again, up to `tries` strokes. A target not seen yet is looked for by turning on the
+/// spot at `search` (with `search` 0: no drive proposal, another skill may be bringing it
+/// near).
+///
+/// For a sequencer: `push_button.progress.done == 1` (pressed), `push_button.progress.phase
+/// == 5` (failed); `progress.value` is the number of strokes made. Everything starts again
+/// when reactivated.
+#[derive(Default)]
+pub struct PushButton {
+    activation: Activation,
+    phase: u32,
+    /// Strokes reported since activation, and those that missed.
+    strokes: u32,
+    misses: u32,
+    /// The pusher's stroke count when this stroke began, and the cycle it began.
+    stroke_from: Option<(u32, u64)>,
+    /// Where backing off began.
+    back_from: (f64, f64),
+}
+
+impl Skill for PushButton {
+    type Params = PushButtonParams;
+    type Inputs<'a> = PushButtonIn<'a>;
+    type Outputs<'a> = PushButtonOut<'a>;
+    fn compute(
+        &mut self,
+        ctx: &Ctx<PushButtonParams>,
+        i: PushButtonIn,
+        o: &mut PushButtonOut,
+    ) -> SkillResult {
+        let (t, od, arm, p) = (&*i.target, &*i.odometry, &*i.arm, ctx.params);
+        if self.activation.begins(ctx.cycle) {
+            *self = PushButton {
+                activation: self.activation,
+                ..PushButton::default()
+            };
+        }
+        let period_ms = ctx
+            .clock
+            .period
+            .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        let stop = Drive::default();
+        let mut press = false;
+        let mut drive = Some(stop);
+        if self.phase == APPROACH && t.seen && t.range <= p.reach {
+            self.phase = ALIGN;
+        }
+        if self.phase == ALIGN && t.range > p.reach + 0.1 {
+            // Pushed away (or a better estimate of the button): approach again.
+            self.phase = APPROACH;
+        }
+        if self.phase == ALIGN && t.bearing.abs() < p.align {
+            if p.press == 0 {
+                self.phase = if p.retreat > 0.0 { RETREAT } else { DONE };
+                self.back_from = (od.x, od.y);
+            } else {
+                self.phase = STROKE;
+                self.stroke_from = Some((arm.strokes, ctx.cycle));
+            }
+        }
+        if self.phase == STROKE
+            && let Some((from, began)) = self.stroke_from
+        {
+            let reported = arm.strokes != from;
+            let overdue = ctx.cycle.saturating_sub(began) as f64 * period_ms > p.stroke_ms;
+            if reported || overdue {
+                self.stroke_from = None;
+                self.strokes += u32::from(reported);
+                if reported && arm.pressed == t.id {
+                    self.phase = if p.retreat > 0.0 { RETREAT } else { DONE };
+                    self.back_from = (od.x, od.y);
+                } else {
+                    self.misses += 1;
+                    self.phase = if self.misses >= p.tries {
+                        FAILED
+                    } else {
+                        BACKING
+                    };
+                    self.back_from = (od.x, od.y);
+                }
+            } else {
+                press = true;
+            }
+        }
+        let backed = (od.x - self.back_from.0).hypot(od.y - self.back_from.1);
+        if self.phase == BACKING && backed >= p.back {
+            self.phase = APPROACH;
+        }
+        if self.phase == RETREAT && backed >= p.retreat {
+            self.phase = DONE;
+        }
+        match self.phase {
+            APPROACH if !t.seen && p.search == 0.0 => drive = None,
+            APPROACH if !t.seen => {
+                drive = Some(Drive {
+                    translate: 0.0,
+                    rotate: p.search,
+                });
+            }
+            APPROACH => {
+                let b = t.bearing;
+                drive = Some(Drive {
+                    translate: if b.abs() < FACING {
+                        p.speed.min(0.05 + (t.range - p.reach)) * b.cos()
+                    } else {
+                        0.0
+                    },
+                    rotate: (p.gain * b).clamp(-0.6, 0.6),
+                });
+            }
+            ALIGN => {
+                drive = Some(Drive {
+                    translate: 0.0,
+                    rotate: turn_toward(t.bearing, p.gain, 0.3, 0.05, 0.0),
+                });
+            }
+            BACKING | RETREAT => {
+                drive = Some(Drive {
+                    translate: -BACK_SPEED,
+                    rotate: 0.0,
+                });
+            }
+            _ => {}
+        }
+        if let Some(d) = drive {
+            o.drive.set(d);
+        }
+        o.push.set(Push { press });
+        o.progress.set(Progress {
+            done: self.phase == DONE,
+            phase: self.phase,
+            value: f64::from(self.strokes),
+        });
+        Ok(())
+    }
+}

@@ -37,8 +37,9 @@ const LANTERN_BASE: u32 = 810;
 const FORGET: f64 = 0.9;
 /// Closer than this (m), the button and the lantern do not give the wall's direction.
 const WALL_BASE: f64 = 0.5;
-/// The call button stands this far in front of the bank's wall (m; the building's convention).
-const BUTTON_OFF: f64 = 0.05;
+/// The lantern hangs at the doorway's centre this far into the lobby, and the call button
+/// this far in front of the bank's wall (m; the building's convention).
+const INSET: f64 = 0.05;
 /// The period assumed when the manager free-runs (no nominal period): its default.
 const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
@@ -53,13 +54,16 @@ struct Lantern {
 }
 
 /// Which car is open on this floor. A car's hall lantern (barcode 810 + k, at the centre of
-/// its doorway on the bank's wall) shows only while car k is here with its doors open. Each
+/// its doorway, 5 cm into the lobby) shows only while car k is here with its doors open. Each
 /// lantern in view is placed in the odometry frame (a running average over new sightings,
-/// nearer ones weighing more, as barcode_track does). The car is the lantern seen most
-/// recently, until none has been seen for `lost_ms`. Its doorway is the lantern's place; the
-/// way in is the bank wall's normal away from the robot, the wall being the line through the
-/// lantern and the call button's foot on the wall (or, with the button unknown or within
-/// 0.5 m of the lantern, the direction from the robot to the lantern).
+/// nearer ones weighing more, as barcode_track does). A car is open until its lantern has
+/// not been seen for `lost_ms`. The car reported stays the same while it is open (with two
+/// open, the robot may be on its way into the first); otherwise it is the lantern seen most
+/// recently. The way in is the bank wall's normal
+/// away from the robot, the wall running along the line through the lantern and the call
+/// button (both 5 cm in front of it; with the button unknown or within 0.5 m of the lantern,
+/// the direction from the robot to the lantern); the doorway's centre is 5 cm beyond the
+/// lantern that way.
 ///
 /// For a sequencer: `car.id > 0` (car `id`, 1.., is open: its doorway at `car.x`, `car.y`, the way
 /// in `car.heading`, odometry frame), `car.id == 0` (none, or its doors closed). Everything is
@@ -70,6 +74,8 @@ pub struct CarWatch {
     lanterns: Vec<Lantern>,
     /// Age of the camera report seen in the last cycle (a younger one is a new report).
     last_age_ms: Option<f64>,
+    /// The car reported (its index).
+    current: Option<usize>,
 }
 
 impl Skill for CarWatch {
@@ -81,6 +87,7 @@ impl Skill for CarWatch {
         if self.activation.begins(ctx.cycle) {
             self.lanterns.clear();
             self.last_age_ms = None;
+            self.current = None;
         }
         self.lanterns.resize(p.cars as usize, Lantern::default());
         let new = self.last_age_ms.is_none_or(|last| b.age_ms < last);
@@ -110,36 +117,50 @@ impl Skill for CarWatch {
             .clock
             .period
             .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
-        // The most recent sighting, the nearest among those of one frame.
-        let latest = self
-            .lanterns
-            .iter()
-            .enumerate()
-            .filter_map(|(n, l)| l.seen.map(|(cycle, r)| (n, cycle, r, l.sum)))
-            .filter(|&(.., sum)| sum.2 > 0.0)
-            .max_by(|a, b| a.1.cmp(&b.1).then(b.2.total_cmp(&a.2)));
+        let open = |l: &Lantern| {
+            l.sum.2 > 0.0
+                && l.seen.is_some_and(|(cycle, _)| {
+                    ctx.cycle.saturating_sub(cycle) as f64 * period_ms <= p.lost_ms
+                })
+        };
+        // The car reported last while it stays open (with two open, the camera sees one
+        // lantern, then the other: the robot may be on its way to the first); else the
+        // lantern seen most recently, the nearest among those of one frame.
+        let keep = self
+            .current
+            .filter(|&n| self.lanterns.get(n).is_some_and(&open));
+        let latest = || {
+            self.lanterns
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| open(l))
+                .filter_map(|(n, l)| l.seen.map(|(cycle, r)| (n, cycle, r)))
+                .max_by(|a, b| a.1.cmp(&b.1).then(b.2.total_cmp(&a.2)))
+                .map(|(n, ..)| n)
+        };
+        self.current = keep.or_else(latest);
         let mut car = Car::default();
-        if let Some((n, cycle, _, sum)) = latest
-            && ctx.cycle.saturating_sub(cycle) as f64 * period_ms <= p.lost_ms
+        if let Some(n) = self.current
+            && let Some(sum) = self.lanterns.get(n).map(|l| l.sum)
         {
             let (x, y) = (sum.0 / sum.2, sum.1 / sum.2);
-            let heading = if t.seen && (x - t.x).hypot(y - t.y) >= WALL_BASE {
-                // The wall's normal away from the robot, from the line through the button and
-                // the lantern; then again from the button's foot on the wall (it stands
-                // BUTTON_OFF in front of it: 3° off over a car's 0.9 m, 5 cm at the cabin).
-                let normal = |bx: f64, by: f64| {
-                    let (dx, dy) = (x - bx, y - by);
-                    let base = dx.hypot(dy).max(f64::EPSILON);
-                    let (nx, ny) = (-dy / base, dx / base);
-                    let away = nx * (x - od.x) + ny * (y - od.y);
-                    if away >= 0.0 { (nx, ny) } else { (-nx, -ny) }
-                };
-                let (nx, ny) = normal(t.x, t.y);
-                let (nx, ny) = normal(t.x + BUTTON_OFF * nx, t.y + BUTTON_OFF * ny);
-                ny.atan2(nx)
+            let (dx, dy) = (x - t.x, y - t.y);
+            let base = dx.hypot(dy);
+            let heading = if t.seen && base >= WALL_BASE {
+                // The wall's normal away from the robot: the button and the lantern stand
+                // the same INSET in front of the wall, so the line through them runs with it.
+                let (nx, ny) = (-dy / base, dx / base);
+                let away = nx * (x - od.x) + ny * (y - od.y);
+                if away >= 0.0 {
+                    ny.atan2(nx)
+                } else {
+                    (-ny).atan2(-nx)
+                }
             } else {
                 (y - od.y).atan2(x - od.x)
             };
+            // The doorway's centre: INSET beyond the lantern, in the wall's line.
+            let (x, y) = (x + INSET * heading.cos(), y + INSET * heading.sin());
             // `n` < cars ≤ 89: fits a u32.
             car = Car {
                 id: 1 + n as u32,

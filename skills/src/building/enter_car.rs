@@ -5,11 +5,12 @@ use super::*;
 /// Parameters of [`EnterCar`].
 #[derive(Params, Debug, Clone)]
 pub struct EnterCarParams {
-    /// Forward speed to the doorway's axis (m/s): the doors close after about 8 s.
-    #[param(default = 0.5, min = 0.0, max = 1.0)]
+    /// Forward speed across the lobby (m/s): a car's doors start closing 9.5 s after its
+    /// lantern lights, and the robot waits some 5 m away to see all the lanterns.
+    #[param(default = 0.7, min = 0.0, max = 1.0)]
     pub speed: f64,
-    /// Forward speed along the axis, through the doorway (m/s).
-    #[param(default = 0.3, min = 0.0, max = 1.0)]
+    /// Forward speed between the door posts (m/s; from 0.6 m before the doorway line).
+    #[param(default = 0.35, min = 0.0, max = 1.0)]
     pub through: f64,
     /// Steering gain (rad/s per rad).
     #[param(default = 1.5, min = 0.0, max = 10.0)]
@@ -53,8 +54,11 @@ pub mod enter_phase {
     pub const ENTERING: u32 = 1;
     /// Inside: turning to face the back wall; `done` once it does.
     pub const INSIDE: u32 = 2;
-    /// The doors closed before it reached the doorway: stopped (activate it again to retry).
+    /// The doors closed before it reached the doorway: stopped, backed away to `approach`
+    /// before them (activate it again to retry).
     pub const LOST: u32 = 3;
+    /// The doors closed before it reached the doorway: backing away from them (then lost).
+    pub const BACKING_OUT: u32 = 4;
 }
 use enter_phase::*;
 
@@ -70,20 +74,27 @@ const WALLS_SETTLED: u32 = 40;
 /// ... or cycles inside without them (a cabin whose walls the sonars do not fit).
 const NO_WALLS: u32 = 300;
 /// Within this of the approach point (m) it is lined up.
-const LINED_UP: f64 = 0.2;
+const LINED_UP: f64 = 0.3;
+/// Closer than this to the doorway line (m), it drives at `through`.
+const POSTS: f64 = 0.6;
+/// Speed backing away from doors that closed (m/s).
+const BACK_SPEED: f64 = 0.25;
 
 /// Drives into the open car. First to a point `approach` before the doorway on its axis,
 /// then along the axis (a carrot 0.6 m ahead on it) centred between the door posts by the
 /// side sonars, as go_through does; `depth` past the doorway line it stops and turns to face
 /// the back wall (the way in, squared to the cabin's side walls when they are seen), where the
-/// car's panel is. The doorway is taken from car_watch
-/// until the drive in begins, then held: the lantern goes out of view as the robot passes
-/// under it. If no car is open (car.id 0: the doors closed) before the robot's centre has
-/// passed the doorway line, it stops for good (`lost`); past the line, the light curtain
-/// keeps the doors open.
+/// car's panel is. The doorway is taken from car_watch until the drive in begins, then held:
+/// the lantern goes out of view as the robot passes under it. If no car is open (car.id 0:
+/// the doors closed; or another car reported: car_watch keeps reporting a car while it is
+/// open) before the robot's centre has passed the doorway line, it backs straight away to
+/// `approach` before the doorway if it faces the doors (a retry starts in the open, not
+/// against them; backing stops where something is near behind) and stops for good (`lost`);
+/// past the line, the light curtain keeps the doors open. The first car seen open since
+/// activation is the one it enters.
 ///
 /// For a sequencer: `enter_car.progress.done == 1` (inside, facing the back wall),
-/// `enter_car.progress.phase == 3` (lost: call the car again and reactivate);
+/// `enter_car.progress.phase == 3` (lost, backed away: call the car again and reactivate);
 /// `progress.value` is the distance past the doorway line (m, negative before it).
 #[derive(Default)]
 pub struct EnterCar {
@@ -91,6 +102,10 @@ pub struct EnterCar {
     phase: u32,
     /// The doorway (x, y, way in), held from the drive in on.
     doorway: Option<(f64, f64, f64)>,
+    /// The car it is entering (the first open since activation), and its doorway when last
+    /// reported open (what to back away from when its doors close).
+    chosen: Option<u32>,
+    last_car: Option<(f64, f64, f64)>,
     /// Whether a car has been seen open since activation (only then can it be lost).
     saw_car: bool,
     /// Inside: the way to face, refined from the cabin's side walls, and the cycles they
@@ -121,27 +136,39 @@ impl Skill for EnterCar {
                 ..EnterCar::default()
             };
         }
-        self.saw_car |= car.id != 0;
+        if car.id != 0 && self.chosen.is_none() {
+            self.chosen = Some(car.id);
+        }
+        // Another car reported: this one's lantern has not been seen for a while (car_watch
+        // keeps reporting a car while it is open), its doors closed.
+        let ours = car.id != 0 && self.chosen == Some(car.id);
+        self.saw_car |= ours;
+        if ours {
+            self.last_car = Some((car.x, car.y, car.heading));
+        }
         let stop = Drive::default();
-        let Some((dx, dy, h)) =
-            self.doorway
-                .or((car.id != 0).then_some((car.x, car.y, car.heading)))
+        let closed = !ours && self.saw_car;
+        let Some((dx, dy, h)) = self
+            .doorway
+            .or(ours.then_some((car.x, car.y, car.heading)))
+            .or(self.last_car.filter(|_| closed))
         else {
-            if self.saw_car && self.phase != INSIDE {
-                self.phase = LOST;
-            }
+            // No car seen open yet: wait.
             o.drive.set(stop);
-            o.progress.set(Progress {
-                done: false,
-                phase: self.phase,
-                value: 0.0,
-            });
+            o.progress.set(Progress::default());
             return Ok(());
         };
         let (c, sn) = (h.cos(), h.sin());
         let along = (od.x - dx) * c + (od.y - dy) * sn;
         let cross = -(od.x - dx) * sn + (od.y - dy) * c;
-        if car.id == 0 && along < 0.0 && self.phase != INSIDE {
+        if closed && along < 0.0 && matches!(self.phase, LINING_UP | ENTERING) {
+            self.phase = BACKING_OUT;
+        }
+        // Backing straight away from the doors only when it faces them, while nothing is
+        // near behind.
+        let facing = wrap(od.theta - h).abs() < 0.6;
+        let clear_behind = arc(s, 150.0, 210.0).is_some_and(|(near, _)| near > BLOCKED + 0.1);
+        if self.phase == BACKING_OUT && (along <= -p.approach || !facing || !clear_behind) {
             self.phase = LOST;
         }
         let ahead = min_in(s, -0.5, 0.5);
@@ -154,19 +181,17 @@ impl Skill for EnterCar {
                 if to_start < LINED_UP || on_axis {
                     self.phase = ENTERING;
                     self.doorway = Some((dx, dy, h));
-                    stop
-                } else {
-                    let want = (start.1 - od.y).atan2(start.0 - od.x);
-                    let err = wrap(want - od.theta);
-                    Drive {
-                        // Slowing into the approach point, so as not to circle it.
-                        translate: if err.abs() < 0.8 {
-                            p.speed.min(p.through + to_start) * err.cos().powi(2)
-                        } else {
-                            0.0
-                        },
-                        rotate: (p.gain * err).clamp(-1.0, 1.0),
-                    }
+                }
+                let want = (start.1 - od.y).atan2(start.0 - od.x);
+                let err = wrap(want - od.theta);
+                Drive {
+                    // Slowing into the approach point, so as not to circle it.
+                    translate: if err.abs() < 0.8 {
+                        p.speed.min(p.through + to_start) * err.cos().powi(2)
+                    } else {
+                        0.0
+                    },
+                    rotate: (p.gain * err).clamp(-1.0, 1.0),
                 }
             }
             ENTERING if along >= p.depth => {
@@ -178,22 +203,27 @@ impl Skill for EnterCar {
                 let goal = (dx + carrot * c, dy + carrot * sn);
                 let want = (goal.1 - od.y).atan2(goal.0 - od.x);
                 let mut err = wrap(want - od.theta);
-                if (-0.6..0.6).contains(&along) {
+                if (-POSTS..POSTS).contains(&along) {
                     // Between the posts: steer away from the nearer one.
                     let left = min_in(s, 0.5, 2.4).min(0.8);
                     let right = min_in(s, -2.4, -0.5).min(0.8);
                     err += p.centre * (left - right) / 2.0;
                 }
+                let limit = if along > -POSTS { p.through } else { p.speed };
                 let slow = 0.05 + 0.8 * (p.depth - along);
                 Drive {
                     translate: if err.abs() < 0.8 && ahead > BLOCKED {
-                        p.through.min(slow) * err.cos().powi(2)
+                        limit.min(slow) * err.cos().powi(2)
                     } else {
                         0.0
                     },
                     rotate: (p.gain * err).clamp(-1.0, 1.0),
                 }
             }
+            BACKING_OUT => Drive {
+                translate: -BACK_SPEED,
+                rotate: 0.0,
+            },
             INSIDE => {
                 // Square to the cabin's side walls (each fit a few hundredths of a radian
                 // off: blended), the way in when they are not seen.

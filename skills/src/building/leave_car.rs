@@ -52,17 +52,24 @@ pub mod leave_phase {
 use leave_phase::*;
 
 /// Weight of one cycle's fit of the cabin's walls in the way out.
-const WALL_BLEND: f64 = 0.02;
+const WALL_BLEND: f64 = 0.05;
+/// Cycles for the device to bring a reading of every sonar (300 ms).
+const RING_REFRESH: u32 = 30;
+/// Once squared, fits this far off the way out (rad) are ignored; nearer ones refine it.
+const SNAP: f64 = 0.15;
+/// Steering toward the cabin's centre line (rad per m off it).
+const CABIN_CENTRING: f64 = 1.5;
 
 /// Something this near ahead (m, from the ring) stops it at once, doors or not.
 const BLOCKED: f64 = 0.3;
 
-/// Leaves the car. At activation it faces the back wall (enter_car left it so); the way out
-/// is that heading turned half round (squared to the cabin's side walls when they are seen),
-/// and it turns to it on the spot. Then it holds still
+/// Leaves the car. At activation it faces the back wall, or the panel's button beside it; the
+/// way out is that heading turned half round, squared to the cabin's walls (the nearest of
+/// their directions, when the ring fits them standing still), and it turns to it on the spot. Then it holds still
 /// until `go` is 1 and the way ahead is open (the front sonar reads farther than `clear`:
-/// the doors are open), and drives out straight along the way out, centred between the door
-/// posts by the side sonars, until `distance` from where it started; there it stops. Doors
+/// the doors are open), and drives out straight along the way out, toward the cabin's centre
+/// line while its side walls are beside, then centred between the door posts by the side
+/// sonars, until `distance` from where it started; there it stops. Doors
 /// seen closing in front before it reached the doorway (`doorway` from the start) make it
 /// wait again.
 ///
@@ -77,6 +84,12 @@ pub struct LeaveCar {
     /// Where it started and the way out (odometry frame).
     start: (f64, f64),
     way: f64,
+    /// Cycles it has stood still, and whether this is the activation's first run (it
+    /// stood still before: the job before it ended standing).
+    still_for: u32,
+    fresh: bool,
+    /// Whether the way out has been squared to the cabin's walls.
+    squared: bool,
 }
 
 impl Skill for LeaveCar {
@@ -94,14 +107,39 @@ impl Skill for LeaveCar {
             self.phase = TURNING;
             self.start = (od.x, od.y);
             self.way = wrap(od.theta + PI);
+            self.still_for = 0;
+            self.fresh = true;
+            self.squared = false;
         }
+        // Fits only from readings all taken standing still: the ring refreshes each sonar
+        // every 300 ms.
+        self.still_for = if od.v.abs() < 0.02 && od.w.abs() < 0.02 {
+            self.still_for + 1
+        } else {
+            0
+        };
         if matches!(self.phase, TURNING | WAITING)
-            && let Some(a) = walls_axis(s, od.theta, self.way)
+            && (self.still_for > RING_REFRESH || self.fresh)
+            && let Some(a) = box_axis(s)
         {
-            // Square to the cabin's side walls: the turn half round by odometry is off by
-            // its scale error. Blended in: each fit is a few hundredths of a radian off.
-            self.way = wrap(self.way + WALL_BLEND * wrap(a - self.way));
+            // Square to the cabin's walls: the robot may face the panel's end button rather
+            // than the back wall, and the turn half round by odometry is off by its scale
+            // error. The cabin's direction nearest the way out it has: taken at the first fit,
+            // then refined (each fit is a few hundredths of a radian off).
+            let box_dir = wrap(od.theta + a);
+            let quarter = (wrap(self.way - box_dir) / FRAC_PI_2).round();
+            let nearest = wrap(box_dir + quarter * FRAC_PI_2);
+            let off = wrap(nearest - self.way);
+            if !self.squared {
+                // The first fit: the way out may be far off (facing the panel's end button).
+                self.way = nearest;
+                self.squared = true;
+            } else if off.abs() < SNAP {
+                self.way = wrap(self.way + WALL_BLEND * off);
+            }
+            // (A later fit far off is a bad one: some sonars straddled a corner.)
         }
+        self.fresh = false;
         let (c, sn) = (self.way.cos(), self.way.sin());
         let along = (od.x - self.start.0) * c + (od.y - self.start.1) * sn;
         // The doors: the front sonar's cone alone, which fits through the doorway even from a
@@ -110,6 +148,9 @@ impl Skill for LeaveCar {
         let err = wrap(self.way - od.theta);
         if self.phase == TURNING && err.abs() < 0.04 {
             self.phase = WAITING;
+        } else if self.phase == WAITING && err.abs() > 0.06 {
+            // The way out moved (squared to the cabin): turn to it again.
+            self.phase = TURNING;
         }
         if self.phase == WAITING && p.go == 1 && ahead > p.clear {
             self.phase = LEAVING;
@@ -129,7 +170,13 @@ impl Skill for LeaveCar {
             },
             LEAVING => {
                 let mut steer = err;
-                if along > 0.2 && along < p.distance - 0.3 {
+                if let (Some(l), Some(r)) = (side_wall(s, 1.0), side_wall(s, -1.0)) {
+                    // Between the cabin's side walls: toward its centre line, which runs
+                    // through the doorway's centre (the robot may stand off it, beside the
+                    // panel's end button).
+                    let left_of = (r.distance - l.distance) / 2.0;
+                    steer -= (CABIN_CENTRING * left_of).clamp(-0.45, 0.45);
+                } else if along > 0.2 && along < p.distance - 0.3 {
                     // Between the posts: steer away from the nearer one.
                     let left = min_in(s, 0.5, 2.4).min(0.8);
                     let right = min_in(s, -2.4, -0.5).min(0.8);

@@ -64,6 +64,15 @@ fn arc(s: &Sonar, from: f64, to: f64) -> Option<(f64, f64)> {
     })
 }
 
+/// A straight wall seen by three sonars 30° apart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Wall {
+    /// Direction of its normal, from the robot toward it, relative to the heading (rad).
+    normal: f64,
+    /// Distance from the robot's centre to the wall (m).
+    distance: f64,
+}
+
 /// A straight wall beside the robot, from the sonars at 60°, 90° and 120° on one side.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct SideWall {
@@ -74,50 +83,84 @@ struct SideWall {
     distance: f64,
 }
 
-/// Side readings beyond this are not a corridor wall beside the robot (m, from the ring).
-const SIDE_WALL_MAX: f64 = 2.2;
+/// Readings beyond this are not a wall near the robot (m, from the ring).
+const WALL_MAX: f64 = 2.2;
+/// A fitted wall's normal is within this of the middle sonar's axis (rad).
+const WALL_TILT_MAX: f64 = 0.5;
 
-/// The wall on `side` (+1 left, −1 right), if the three side sonars agree on one straight
+/// The wall the sonars at `beta` and `beta` ± 30° (rad) see, if they agree on one straight
 /// wall. A cone's reading is the range along its ray nearest to the wall's normal, so for a
-/// trial tilt each reading implies a distance to the wall; the tilt is the one at which the
-/// 60° and 120° readings imply the same distance, and the 90° reading must agree with it
-/// (an open door beside, or the end of the wall, breaks the agreement: no wall then).
-fn side_wall(s: &Sonar, side: f64) -> Option<SideWall> {
-    let read = |deg: f64| at(s, side * deg).filter(|&r| r < SIDE_WALL_MAX);
-    let (r60, r90, r120) = (read(60.0)?, read(90.0)?, read(120.0)?);
-    // Distance from the centre to the wall implied by reading `r` of the sonar at `beta`,
-    // for a wall whose normal (toward it) is at `normal`.
-    let implied = |r: f64, beta: f64, normal: f64| {
-        let inc = wrap(beta - normal).abs();
-        r * (inc - CONE).max(0.0).cos() + RING * (beta - normal).cos()
+/// trial normal each reading implies a distance to the wall; the normal is the one at which
+/// the outer two readings imply the same distance, and the middle one must agree with it (an
+/// opening, or the end of the wall, breaks the agreement: no wall then).
+fn wall_toward(s: &Sonar, beta: f64) -> Option<Wall> {
+    let side = 30f64.to_radians();
+    let read = |b: f64| at(s, b.to_degrees()).filter(|&r| r < WALL_MAX);
+    let (r0, r1, r2) = (read(beta - side)?, read(beta)?, read(beta + side)?);
+    // Distance from the centre to the wall implied by reading `r` of the sonar at `b`, for
+    // a wall whose normal (toward it) is at `normal`.
+    let implied = |r: f64, b: f64, normal: f64| {
+        let inc = wrap(b - normal).abs();
+        r * (inc - CONE).max(0.0).cos() + RING * (b - normal).cos()
     };
-    let (b60, b90, b120) = (
-        side * 60f64.to_radians(),
-        side * FRAC_PI_2,
-        side * 120f64.to_radians(),
-    );
+    let steps = 100;
     let mut best: Option<(f64, f64)> = None;
-    for k in -100..=100 {
-        let tilt = f64::from(k) * 0.005;
-        let normal = tilt + side * FRAC_PI_2;
-        let miss = (implied(r60, b60, normal) - implied(r120, b120, normal)).abs();
+    for k in -steps..=steps {
+        let normal = beta + f64::from(k) * WALL_TILT_MAX / f64::from(steps);
+        let miss = (implied(r0, beta - side, normal) - implied(r2, beta + side, normal)).abs();
         if best.is_none_or(|b| miss < b.1) {
-            best = Some((tilt, miss));
+            best = Some((normal, miss));
         }
     }
-    let (tilt, miss) = best?;
-    let normal = tilt + side * FRAC_PI_2;
-    let (d60, d90, d120) = (
-        implied(r60, b60, normal),
-        implied(r90, b90, normal),
-        implied(r120, b120, normal),
+    let (normal, miss) = best?;
+    let (d0, d1, d2) = (
+        implied(r0, beta - side, normal),
+        implied(r1, beta, normal),
+        implied(r2, beta + side, normal),
     );
-    let pair = (d60 + d120) / 2.0;
-    (miss < 0.1 && (d90 - pair).abs() < 0.12).then_some(SideWall {
-        tilt,
-        distance: (d60 + d90 + d120) / 3.0,
+    (miss < 0.1 && (d1 - (d0 + d2) / 2.0).abs() < 0.12).then_some(Wall {
+        normal: wrap(normal),
+        distance: (d0 + d1 + d2) / 3.0,
     })
 }
+
+/// The wall on `side` (+1 left, −1 right), if the three side sonars agree on one straight
+/// wall ([`wall_toward`] at ±90°).
+fn side_wall(s: &Sonar, side: f64) -> Option<SideWall> {
+    wall_toward(s, side * FRAC_PI_2).map(|w| SideWall {
+        tilt: wrap(w.normal - side * FRAC_PI_2),
+        distance: w.distance,
+    })
+}
+
+/// The orientation of the walls around the robot, modulo a quarter turn, relative to its
+/// heading (rad, −π/4..π/4): the straight walls the ring fits, in a room whose walls are
+/// square to each other (a car's cabin). Three sonars that straddle a corner can fit a wall
+/// that is not there, so the orientation is the one most fits agree on (within 3°), averaged
+/// over those; `None` unless three agree.
+fn box_axis(s: &Sonar) -> Option<f64> {
+    // Square walls: their normals agree modulo a quarter turn, so they are compared as
+    // angles four times over.
+    let quads: Vec<f64> = (0..SONARS)
+        .filter_map(|k| wall_toward(s, crate::nav::sonar_angle(k)))
+        .map(|w| wrap(4.0 * w.normal))
+        .collect();
+    let near = |a: f64, b: f64| wrap(a - b).abs() < 4.0 * BOX_AGREE;
+    let best = quads
+        .iter()
+        .max_by_key(|&&a| quads.iter().filter(|&&b| near(a, b)).count())?;
+    let (c, sn, n) = quads
+        .iter()
+        .filter(|&&b| near(*best, b))
+        .fold((0.0, 0.0, 0), |(c, s, n), &b| {
+            (c + b.cos(), s + b.sin(), n + 1)
+        });
+    (n >= 3).then(|| sn.atan2(c) / 4.0)
+}
+
+/// Wall fits within this of each other (rad, modulo a quarter turn) agree on a room's
+/// orientation.
+const BOX_AGREE: f64 = 0.05;
 
 /// The direction of the walls on both sides (odometry frame), when both are fitted and run
 /// within 0.25 rad of `near`: in a car's cabin, the way in and out, free of the odometry's

@@ -52,6 +52,9 @@ pub struct PushButtonIn<'a> {
     pub odometry: Input<'a, Odometry>,
     /// The pusher's report.
     pub arm: Input<'a, Arm>,
+    /// The ring: the button's wall (the approach keeps square enough to it) and what is
+    /// behind when backing away.
+    pub sonar: Input<'a, Sonar>,
 }
 
 /// Outputs of [`PushButton`].
@@ -86,16 +89,33 @@ use push_phase::*;
 
 /// Speed backing off after a miss (m/s).
 const BACK_SPEED: f64 = 0.15;
+/// Speed backing away after the press (m/s): a car called may come meanwhile.
+const RETREAT_SPEED: f64 = 0.35;
+/// Backing ends where something is this near behind (m, from the ring).
+const BEHIND: f64 = 0.25;
+/// The final approach comes at most this far off the button wall's normal (rad): from
+/// further aside, the robot's flank would meet the wall before the pusher reaches the
+/// button (at 0.62 m, 40° leaves 16 cm).
+const APPROACH_CONE: f64 = 40.0 * PI / 180.0;
+/// Lining up on a landmark (`press` 0), the approach comes at most this far off the normal.
+const LANDMARK_CONE: f64 = 4.0 * PI / 180.0;
+/// From outside the cone it first drives to the cone's edge this far from the button (m).
+const LINE_UP_RANGE: f64 = 1.0;
+/// The button stands this far in front of its wall (m; the building's convention).
+const INSET: f64 = 0.05;
 /// Beyond this bearing (rad) the approach turns on the spot before driving.
 const FACING: f64 = 0.2;
 /// The period assumed when the manager free-runs (no nominal period): its default.
 const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
-/// Presses the tracked button: turns toward it, drives to `reach` of it, turns until it is
-/// within `align` of straight ahead, and proposes `push.press` until the pusher reports a new
+/// Presses the tracked button: turns toward it, drives to `reach` of it (coming from within
+/// 40° of square to the button's wall, once the ring fits that wall: from further aside it
+/// first drives to the edge of that cone, 1 m out), turns until it is within `align` of
+/// straight ahead, and proposes `push.press` until the pusher reports a new
 /// stroke, then releases. The stroke pressed the button when the report names the button's
 /// id (then it backs away `retreat`, if set, before it is done); a miss backs off `back` and
-/// tries again, up to `tries` strokes. A target not seen yet is looked for by turning on the
+/// tries again, up to `tries` strokes. Backing ends early where the sonars behind see
+/// something within 0.25 m. A target not seen yet is looked for by turning on the
 /// spot at `search` (with `search` 0: no drive proposal, another skill may be bringing it
 /// near).
 ///
@@ -113,6 +133,45 @@ pub struct PushButton {
     stroke_from: Option<(u32, u64)>,
     /// Where backing off began.
     back_from: (f64, f64),
+    /// The normal of the button's wall, toward it (odometry frame), once the ring fits it.
+    normal: Option<f64>,
+}
+
+impl PushButton {
+    /// Fits the button's wall: of the walls the ring fits, the one whose distance puts the
+    /// button `INSET` in front of it (seen from aside, the sonars facing the button meet its
+    /// wall too obliquely to fit it). Its normal is kept (blended: each fit is a few
+    /// hundredths of a radian off).
+    fn fit_wall(&mut self, t: &Target, od: &Odometry, s: &Sonar) {
+        let mismatch =
+            |w: &Wall| (t.range * wrap(t.bearing - w.normal).cos() + INSET - w.distance).abs();
+        let Some(w) = (0..SONARS)
+            .filter_map(|k| wall_toward(s, crate::nav::sonar_angle(k)))
+            .filter(|w| mismatch(w) < 0.15)
+            .min_by(|a, b| mismatch(a).total_cmp(&mismatch(b)))
+        else {
+            return;
+        };
+        let n = wrap(od.theta + w.normal);
+        self.normal = Some(match self.normal {
+            Some(old) => wrap(old + 0.1 * wrap(n - old)),
+            None => n,
+        });
+    }
+
+    /// Where to go before the final approach, if the robot is outside the cone square to the
+    /// button's wall: the cone's edge on its side, `LINE_UP_RANGE` from the button.
+    fn line_up(&self, t: &Target, od: &Odometry, cone: f64) -> Option<(f64, f64)> {
+        let n = self.normal?;
+        // The robot's direction from the button, against the wall's outward normal.
+        let from = (od.y - t.y).atan2(od.x - t.x);
+        let out = wrap(n + PI);
+        let off = wrap(from - out);
+        (off.abs() > cone && t.range > 0.3).then(|| {
+            let a = out + cone.copysign(off) * 0.9;
+            (t.x + LINE_UP_RANGE * a.cos(), t.y + LINE_UP_RANGE * a.sin())
+        })
+    }
 }
 
 impl Skill for PushButton {
@@ -125,7 +184,7 @@ impl Skill for PushButton {
         i: PushButtonIn,
         o: &mut PushButtonOut,
     ) -> SkillResult {
-        let (t, od, arm, p) = (&*i.target, &*i.odometry, &*i.arm, ctx.params);
+        let (t, od, arm, s, p) = (&*i.target, &*i.odometry, &*i.arm, &*i.sonar, ctx.params);
         if self.activation.begins(ctx.cycle) {
             *self = PushButton {
                 activation: self.activation,
@@ -136,6 +195,9 @@ impl Skill for PushButton {
             .clock
             .period
             .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        if self.phase == APPROACH && t.visible {
+            self.fit_wall(t, od, s);
+        }
         let stop = Drive::default();
         let mut press = false;
         let mut drive = Some(stop);
@@ -180,10 +242,12 @@ impl Skill for PushButton {
             }
         }
         let backed = (od.x - self.back_from.0).hypot(od.y - self.back_from.1);
-        if self.phase == BACKING && backed >= p.back {
+        // Something near behind ends the backing where it is.
+        let blocked = arc(s, 150.0, 210.0).is_none_or(|(near, _)| near <= BEHIND);
+        if self.phase == BACKING && (backed >= p.back || blocked) {
             self.phase = APPROACH;
         }
-        if self.phase == RETREAT && backed >= p.retreat {
+        if self.phase == RETREAT && (backed >= p.retreat || blocked) {
             self.phase = DONE;
         }
         match self.phase {
@@ -195,14 +259,37 @@ impl Skill for PushButton {
                 });
             }
             APPROACH => {
-                let b = t.bearing;
-                drive = Some(Drive {
-                    translate: if b.abs() < FACING {
-                        p.speed.min(0.05 + (t.range - p.reach)) * b.cos()
-                    } else {
-                        0.0
-                    },
-                    rotate: (p.gain * b).clamp(-0.6, 0.6),
+                // Lining up on a landmark (no press): square to its wall, so that backing away
+                // leaves the robot on the line through it.
+                let cone = if p.press == 0 {
+                    LANDMARK_CONE
+                } else {
+                    APPROACH_CONE
+                };
+                drive = Some(match self.line_up(t, od, cone) {
+                    // To the cone's edge first.
+                    Some((gx, gy)) => {
+                        let err = wrap((gy - od.y).atan2(gx - od.x) - od.theta);
+                        Drive {
+                            translate: if err.abs() < FACING {
+                                p.speed * err.cos()
+                            } else {
+                                0.0
+                            },
+                            rotate: (p.gain * err).clamp(-0.6, 0.6),
+                        }
+                    }
+                    None => {
+                        let b = t.bearing;
+                        Drive {
+                            translate: if b.abs() < FACING {
+                                p.speed.min(0.05 + (t.range - p.reach)) * b.cos()
+                            } else {
+                                0.0
+                            },
+                            rotate: (p.gain * b).clamp(-0.6, 0.6),
+                        }
+                    }
                 });
             }
             ALIGN => {
@@ -213,7 +300,11 @@ impl Skill for PushButton {
             }
             BACKING | RETREAT => {
                 drive = Some(Drive {
-                    translate: -BACK_SPEED,
+                    translate: if self.phase == RETREAT {
+                        -RETREAT_SPEED
+                    } else {
+                        -BACK_SPEED
+                    },
                     rotate: 0.0,
                 });
             }

@@ -122,6 +122,9 @@ pub struct RunOutcome {
     /// The serial link as the device reported it last: (frames, bad frames, garbage bytes,
     /// connects).
     pub link: Option<(u64, u64, u64, u64)>,
+    /// Where the robot was at the end (ground truth): floor, x, y (m). A failed run's
+    /// first clue.
+    pub end: Option<(i32, f64, f64)>,
     #[serde(skip)]
     trajectory: Vec<TruthRecord>,
 }
@@ -495,6 +498,27 @@ fn watch(site: &Site, traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option
     judge(site, &now, limit_s)
 }
 
+/// The first ground-truth record a status period after `then` (the manager resumed if it is
+/// in lock-step), or `then` if none comes within 10 s.
+fn truth_after(
+    c: &Client,
+    traj: &Path,
+    then: TruthRecord,
+    lockstep: bool,
+) -> anyhow::Result<TruthRecord> {
+    if lockstep {
+        c.run()?;
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < deadline {
+        if let Some(now) = latest(traj).filter(|r| r.t > then.t + 0.15) {
+            return Ok(now);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(then)
+}
+
 const NO_TRUTH_ERROR: &str =
     "the simulator wrote no ground truth within 30 s (see the log of skillfab up)";
 
@@ -544,6 +568,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         max_command_gap_s: 0.0,
         max_stale_drive_s: 0.0,
         link: None,
+        end: None,
         trajectory: Vec::new(),
     };
     let record = |c: &Client, steps: &mut Vec<(String, u64, f64)>, what: &str| {
@@ -651,9 +676,15 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             if let Some(status) = ended {
                 step(&c, &mut out, &format!("the plan ended: {status:?}"));
             }
-            let Some(now) = latest(&traj).or(last) else {
+            let Some(mut now) = latest(&traj).or(last) else {
                 bail!(NO_TRUTH_ERROR);
             };
+            // A plan that ended before the ground truth says how: the simulator writes it
+            // once per status period (100 ms), and a lock-step manager stays paused when a
+            // plan ends. Let the robot's time go on until a record after the plan's end.
+            if ended.is_some() && judge(&opts.site, &now, opts.limit_s).is_none() {
+                now = truth_after(&c, &traj, now, opts.lockstep)?;
+            }
             (out.time_s, out.collisions) = (now.t, now.collisions);
             if let Some(v) = judge(&opts.site, &now, opts.limit_s) {
                 verdict(&c, &mut out, v, &step)?;
@@ -698,6 +729,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     c.deactivate(&all)?;
     step(&c, &mut out, "skills deactivated");
     out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
+    out.end = out.trajectory.last().map(|r| (r.floor, r.x, r.y));
     // The robot may have gone on a little while the sequencer looked: the time it first was
     // outside (or the message was delivered) is the mission's.
     let done = |r: &&TruthRecord| match opts.site {

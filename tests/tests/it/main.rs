@@ -8,6 +8,7 @@ mod arbitration;
 mod bridge;
 mod console;
 mod control;
+mod deliver;
 mod denning;
 mod exit_lab;
 mod fabric;

@@ -1,0 +1,82 @@
+//! The paper's whole mission end to end, in lock-step: `skillfab demo deliver` starts the
+//! building simulator on a pty, the Denning device process (drive, pusher, speaker), every
+//! skill of the mission and a manager in a private domain, and the plan takes the robot out of
+//! the basement lab, up in an elevator and to the office, where the simulator's ground truth
+//! must say the message was delivered. Lock-step makes the run a function of the seed, so
+//! this run is the one measured in docs/deliver.md.
+
+// Helpers of this test crate fail the test right where a step goes wrong.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use skillfab_tests::{TestDomain, repo_root};
+
+#[test]
+fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delivered() {
+    let t = TestDomain::new("deliver");
+    let root = repo_root();
+    let building = root.join("devices/denning-sim/buildings/building-a.toml");
+    let plan = root.join("skills/plans/deliver.xml");
+    let picture = t.dir.join("deliver.svg");
+    let out = t
+        .command("skillfab")
+        .current_dir(&root)
+        .args(["demo", "deliver", "--lockstep", "--seed", "1", "--json"])
+        .arg("--building")
+        .arg(&building)
+        .arg("--plan")
+        .arg(&plan)
+        .arg("--plot")
+        .arg(&picture)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
+    let run = &summary["runs_detail"][0];
+    assert_eq!(summary["successes"], 1, "{run}");
+    assert_eq!(run["collisions"], 0, "{run}");
+    // It ended on the fourth floor, at the office door (goal: (9.5, 18.2), radius 2 m).
+    let end = &run["end"];
+    assert_eq!(end[0], 4, "{run}");
+    let (x, y) = (end[1].as_f64().unwrap(), end[2].as_f64().unwrap());
+    assert!((x - 9.5).hypot(y - 18.2) < 2.0, "{run}");
+    // The mission's steps, in order, at increasing cycles.
+    let steps: Vec<(String, u64)> = run["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s[0].as_str().unwrap().to_string(), s[1].as_u64().unwrap()))
+        .collect();
+    let at = |what: &str| {
+        steps
+            .iter()
+            .position(|(s, _)| s.starts_with(what))
+            .unwrap_or_else(|| panic!("no step '{what}' in {steps:?}"))
+    };
+    let order = [
+        at("the lab door's barcode seen"),
+        at("through the door"),
+        at("the call button in view"),
+        at("the call button pressed"),
+        at("a car is open"),
+        at("inside the car"),
+        at("4 pressed"),
+        at("the indicator says 4"),
+        at("out of the car"),
+        at("its door on the right"),
+        at("the message said"),
+        at("the message is delivered"),
+    ];
+    assert!(order.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+    assert!(
+        order.windows(2).all(|w| steps[w[0]].1 <= steps[w[1]].1),
+        "cycles increase: {steps:?}"
+    );
+    // The picture has a map of each floor the robot was on: the basement and the fourth.
+    let svg = std::fs::read_to_string(&picture).unwrap();
+    assert!(svg.contains(">floor 0<") && svg.contains(">floor 4 (the office: room 405)<"));
+}

@@ -160,20 +160,20 @@ fn draw(maps: &[Map], r: &RunOutcome) -> String {
             MARGIN - 8.0,
             m.title
         );
-        for seg in &m.walls {
+        let walls = m
+            .walls
+            .iter()
+            .map(|seg| (seg, "stroke=\"black\" stroke-width=\"4\""));
+        let doors = m.doors.iter().map(|seg| {
+            (
+                seg,
+                "stroke=\"#2a2\" stroke-width=\"2\" stroke-dasharray=\"4 3\"",
+            )
+        });
+        for (seg, style) in walls.chain(doors) {
             let _ = writeln!(
                 s,
-                "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\" stroke-width=\"4\"/>",
-                px(seg.from[0]),
-                py(seg.from[1]),
-                px(seg.to[0]),
-                py(seg.to[1])
-            );
-        }
-        for seg in &m.doors {
-            let _ = writeln!(
-                s,
-                "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#2a2\" stroke-width=\"2\" stroke-dasharray=\"4 3\"/>",
+                "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" {style}/>",
                 px(seg.from[0]),
                 py(seg.from[1]),
                 px(seg.to[0]),

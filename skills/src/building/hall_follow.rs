@@ -74,7 +74,8 @@ const CENTRING_MAX: f64 = 0.3;
 /// axis (a heading in the odometry frame, refined from the side walls: the 60°, 90° and 120°
 /// sonars of each side fitted as one straight wall) and its centre line between the walls;
 /// with one side open (a door, a side corridor) it keeps the distance it had to the other
-/// wall; with none, it holds the axis. A wall ahead nearer than `stop` stops it.
+/// wall; with none (a lobby, a crossing), it holds the axis, turned toward the middle of a
+/// corridor's mouth ahead when its edges show in the front cones. A wall ahead nearer than `stop` stops it.
 ///
 /// Turns: when `junction.count` increases (an intersection entered; also one it is in at
 /// activation), it latches `turn`. Straight (0): on along the axis. Left or right: on to the
@@ -126,6 +127,21 @@ impl HallFollow {
         axis - (centring * off).clamp(-CENTRING_MAX, CENTRING_MAX)
     }
 }
+
+/// Steering into a corridor's mouth from open space (rad, counter-clockwise, at most
+/// [`CENTRING_MAX`]): off its centre line, the near edge of the mouth shows first in the cone
+/// of the sonar at 15° on that side while the one at 15° on the other side still sees down the
+/// corridor, so the robot turns toward the side that reads farther. Centred (or far from any
+/// mouth, or before a flat wall) the two read alike and it holds the axis.
+fn mouth_steer(s: &Sonar) -> f64 {
+    let read = |deg: f64| at(s, deg).unwrap_or(MOUTH_CAP).min(MOUTH_CAP);
+    (MOUTH_GAIN * (read(15.0) - read(-15.0))).clamp(-CENTRING_MAX, CENTRING_MAX)
+}
+
+/// Readings farther than this count as open in [`mouth_steer`] (m, from the ring).
+const MOUTH_CAP: f64 = 3.0;
+/// [`mouth_steer`]'s gain (rad per m of difference).
+const MOUTH_GAIN: f64 = 0.3;
 
 impl Skill for HallFollow {
     type Params = HallFollowParams;
@@ -206,7 +222,16 @@ impl Skill for HallFollow {
         };
         let drive = match self.mode {
             Mode::Follow => {
-                let want = self.steer(axis, walls, p.centring);
+                let mut want = self.steer(axis, walls, p.centring);
+                // No wall beside on either side (a lobby, a crossing): toward the middle of a
+                // corridor's mouth ahead, and only the sonar straight ahead stops it, so the
+                // wall beside the mouth, seen by the outer cones, does not.
+                let open_space = walls == [None, None];
+                let mut ahead = ahead;
+                if open_space && p.turn == 0 {
+                    want = wrap(want + mouth_steer(s));
+                    ahead = at(s, 0.0).unwrap_or(0.0);
+                }
                 // With a turn pending and that side open beside, on to the middle of what
                 // may be a crossing corridor (a T's bar ahead, a corridor entered from a
                 // door): its sides open fully only there, and there the junction counts.

@@ -14,6 +14,21 @@ pub struct IntersectionParams {
     /// Cycles a change must persist before `inside` follows it.
     #[param(default = 10, min = 1, max = 10000)]
     pub hold: u64,
+    /// Walls on both sides end an intersection only once the robot has moved this far with
+    /// them there (m): turning on the spot in a crossing or a doorway's exit, the side cones
+    /// can find walls on both sides for longer than `hold`, and an intersection that ended
+    /// there would count again when the turn is over.
+    #[param(default = 0.3, min = 0.0, max = 5.0)]
+    pub leave: f64,
+}
+
+/// Inputs of [`Intersection`].
+#[derive(Inputs)]
+pub struct IntersectionIn<'a> {
+    /// The ring.
+    pub sonar: Input<'a, Sonar>,
+    /// Odometry (how far it has moved with walls beside).
+    pub odometry: Input<'a, Odometry>,
 }
 
 /// Output of [`Intersection`].
@@ -29,8 +44,9 @@ pub struct JunctionOut<'a> {
 ///
 /// `inside` turns true when a side has been open for `hold` cycles, and false only when both
 /// sides are closed along their whole arcs (60°..120°, −120°..−60°: walls beside again) for
-/// `hold` cycles: turning on the spot in a crossing, the side sonars look into its corners
-/// for a moment, which must not end the intersection (and count it twice). `count` is the
+/// `hold` cycles and over `leave` metres of travel: turning on the spot in a crossing, the
+/// side sonars look into its corners, which must not end the intersection (and count it
+/// twice). `count` is the
 /// number of times `inside` turned true since the skill was last activated, so an
 /// intersection the robot is in at activation counts at once.
 ///
@@ -43,23 +59,26 @@ pub struct Intersection {
     count: u32,
     /// Consecutive cycles the raw reading has disagreed with `inside`.
     differs: u64,
+    /// Where the raw reading began to disagree with `inside` (odometry).
+    since: Option<(f64, f64)>,
 }
 
 impl Skill for Intersection {
     type Params = IntersectionParams;
-    type Inputs<'a> = SonarIn<'a>;
+    type Inputs<'a> = IntersectionIn<'a>;
     type Outputs<'a> = JunctionOut<'a>;
     fn compute(
         &mut self,
         ctx: &Ctx<IntersectionParams>,
-        i: SonarIn,
+        i: IntersectionIn,
         o: &mut JunctionOut,
     ) -> SkillResult {
-        let (s, p) = (&*i.sonar, ctx.params);
+        let (s, od, p) = (&*i.sonar, &*i.odometry, ctx.params);
         if self.activation.begins(ctx.cycle) {
             self.inside = false;
             self.count = 0;
             self.differs = 0;
+            self.since = None;
         }
         // Open: every reading of the arc beyond `open`; closed: every reading within it.
         let open = |a: Option<(f64, f64)>| a.is_some_and(|(near, _)| near > p.open);
@@ -71,10 +90,14 @@ impl Skill for Intersection {
         let raw = if self.inside { !walled } else { left || right };
         if raw == self.inside {
             self.differs = 0;
+            self.since = None;
         } else {
             self.differs += 1;
-            if self.differs >= p.hold {
+            let (x0, y0) = *self.since.get_or_insert((od.x, od.y));
+            let moved = (od.x - x0).hypot(od.y - y0);
+            if self.differs >= p.hold && (raw || moved >= p.leave) {
                 self.differs = 0;
+                self.since = None;
                 self.inside = raw;
                 self.count += u32::from(raw);
             }

@@ -386,7 +386,9 @@ struct Corridor {
 
 impl Corridor {
     fn cycle(&mut self, r: &mut Robot) -> Drive {
-        self.intersection.input("sonar", r.sonar);
+        self.intersection
+            .input("sonar", r.sonar)
+            .input("odometry", r.odometry);
         self.junction = *self
             .intersection
             .step()
@@ -421,7 +423,7 @@ fn a_side_corridor_opens_a_side_and_a_door_does_not() {
     let mut opened_at = Vec::new();
     let mut j = Junction::default();
     while r.sim.pose[0] < 16.0 {
-        h.input("sonar", r.sonar);
+        h.input("sonar", r.sonar).input("odometry", r.odometry);
         j = *h.step().unwrap().output::<Junction>("junction").unwrap();
         if j.left {
             opened_at.push(r.sim.pose[0]);
@@ -665,10 +667,20 @@ fn intersection_and_door_detect_count_afresh_when_reactivated() {
     let open_left = ring(|a| if (0.9..2.2).contains(&a) { 6.0 } else { 0.84 });
     let walls = ring(|_| 0.84);
     let mut j = Gapped::<Intersection>::new();
+    // Driving on at 5 cm a cycle.
     let count = |j: &mut Gapped<Intersection>, s: Sonar, from: u64, to: u64| {
-        j.input("sonar", s);
         (from..to)
-            .map(|c| j.step_at::<Junction>(c, "junction").unwrap())
+            .map(|c| {
+                let x = c as f64 * 0.05;
+                j.input("sonar", s).input(
+                    "odometry",
+                    Odometry {
+                        x,
+                        ..Odometry::default()
+                    },
+                );
+                j.step_at::<Junction>(c, "junction").unwrap()
+            })
             .last()
             .unwrap()
     };
@@ -684,6 +696,29 @@ fn intersection_and_door_detect_count_afresh_when_reactivated() {
         "held for `hold` cycles first"
     );
     assert_eq!(count(&mut j, open_left, 105, 120).count, 1);
+
+    // Walls on both sides while turning on the spot (no travel) do not end an intersection.
+    let mut j = Gapped::<Intersection>::new();
+    assert_eq!(count(&mut j, open_left, 1, 20).count, 1);
+    j.input(
+        "odometry",
+        Odometry {
+            x: 1.0,
+            ..Odometry::default()
+        },
+    );
+    j.input("sonar", walls);
+    let k = (20..80)
+        .map(|c| j.step_at::<Junction>(c, "junction").unwrap())
+        .last()
+        .unwrap();
+    assert_eq!((k.count, k.inside), (1, true), "turning on the spot");
+    let k = count(&mut j, walls, 80, 100);
+    assert_eq!(
+        (k.count, k.inside),
+        (1, false),
+        "moved on with walls beside"
+    );
 
     let mut d = Gapped::<DoorDetect>::new();
     let at = |d: &mut Gapped<DoorDetect>, cycle: u64, x: f64, left: f64| {
@@ -1075,6 +1110,101 @@ fn leave_car_waits_again_when_the_doors_close_in_front_of_it() {
         leave_phase::WAITING
     );
     assert_eq!(*step.output::<Drive>("drive").unwrap(), Drive::default());
+}
+
+/// Building A's route from the lab door to the elevator lobby (devices/denning-sim/buildings/
+/// building-a.toml): out of the door left into the corridor, straight over the crossing,
+/// right at the T, on until the call button is in view; the plan's corridor legs, turn set
+/// before each junction as the junction count goes up.
+#[test]
+fn hall_follow_takes_building_a_from_the_lab_door_to_the_lobby() {
+    for seed in 1..=4 {
+        // Just through the lab door (go_through stops 0.8 m past it), facing east.
+        let mut r = Robot::in_building("building-a.toml", seed, 0, [10.8, 4.0, 0.05]);
+        let mut c = Corridor::default();
+        c.hall.set_param("turn=1").unwrap();
+        let mut track = Harness::<BarcodeTrack>::new();
+        track.set_param("id=850").unwrap();
+        let mut seen = None;
+        for k in 0..40_000 {
+            c.cycle(&mut r);
+            let turn = match c.junction.count {
+                0 => "turn=1",
+                1 => "turn=0",
+                2 => "turn=-1",
+                _ => "turn=0",
+            };
+            c.hall.set_param(turn).unwrap();
+            track
+                .input("barcodes", r.barcodes)
+                .input("odometry", r.odometry);
+            if track
+                .step()
+                .unwrap()
+                .output::<Target>("target")
+                .unwrap()
+                .visible
+            {
+                seen = Some(k);
+                break;
+            }
+        }
+        let [x, y, _] = r.sim.pose;
+        assert_eq!(r.sim.collisions, 0, "seed {seed}: {:?}", r.sim.pose);
+        assert!(
+            seen.is_some(),
+            "seed {seed}: the call button never in view, at {x}, {y}"
+        );
+        assert!(c.junction.count >= 3, "seed {seed}: {:?}", c.junction);
+    }
+}
+
+/// Out of a fourth-floor lobby: lined up on the call button and turned round, the robot is
+/// only roughly on the corridor's centre line and square to the bank; hall_follow, with no
+/// wall beside in the open lobby, must still find the corridor's mouth (in both shipped
+/// buildings the corridor out of the lobby faces the call button) and go in without
+/// stopping at the wall beside it.
+#[test]
+fn hall_follow_finds_the_corridor_out_of_an_open_lobby() {
+    // Building, start on the corridor's centre line, and how far along it the robot is well
+    // inside the corridor (m).
+    let cases = [
+        ("building-a.toml", [26.0, 18.2, PI], 10.0),
+        ("building-b.toml", [19.2, -8.5, FRAC_PI_2], 7.0),
+    ];
+    for (file, [x0, y0, th0], inside) in cases {
+        for (k, (off, tilt)) in [
+            (0.5, 0.06),
+            (-0.5, -0.06),
+            (0.45, -0.05),
+            (-0.3, 0.08),
+            (0.7, -0.1),
+            (-0.7, 0.1),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            // Sideways from the axis by `off` (to the left of the heading).
+            let pose = [x0 - off * th0.sin(), y0 + off * th0.cos(), wrap(th0 + tilt)];
+            let mut r = Robot::in_building(file, k as u64 + 1, 4, pose);
+            let mut c = Corridor::default();
+            let mut reached = false;
+            for _ in 0..6000 {
+                c.cycle(&mut r);
+                let [x, y, _] = r.sim.pose;
+                if (x - x0) * th0.cos() + (y - y0) * th0.sin() > inside {
+                    reached = true;
+                    break;
+                }
+            }
+            assert_eq!(r.sim.collisions, 0, "{file} {pose:?}: {:?}", r.sim.pose);
+            assert!(
+                reached,
+                "{file} from {pose:?}: into the corridor, not stuck at {:?}",
+                r.sim.pose
+            );
+        }
+    }
 }
 
 /// After calling a car, back away from the call button to 5 m from the bank's wall, where

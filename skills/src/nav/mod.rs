@@ -1,12 +1,13 @@
 //! The standard navigation skills of the exit-lab experiment. Movement skills propose on the
 //! `drive` channel; default priorities: stop 10, avoid 8, go_through 6, home 4, wall_follow 3,
-//! wander 2 (higher wins).
+//! wander 2, explore 2 (higher wins).
 //!
 //! One file per skill; the helpers they share (sonar geometry, the drive output) are here.
 
 mod avoid;
 mod barcode_track;
 mod door_locate;
+mod explore;
 mod go_through;
 mod home;
 mod stop;
@@ -18,6 +19,7 @@ mod wander;
 pub use avoid::*;
 pub use barcode_track::*;
 pub use door_locate::*;
+pub use explore::*;
 pub use go_through::*;
 pub use home::*;
 pub use stop::*;

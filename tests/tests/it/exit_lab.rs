@@ -107,7 +107,7 @@ fn the_sequencer_drives_the_robot_out_of_the_room() {
             .unwrap_or_else(|| panic!("no step '{what}' in {steps:?}"))
     };
     let order = [
-        at("activate wander"),
+        at("activate explore"),
         at("barcode seen"),
         at("door located"),
         at("outside the lab"),
@@ -130,7 +130,7 @@ fn ctrl_c_leaves_no_process_or_shared_memory_behind() {
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         let line = lines.next().expect("demo output").unwrap();
-        if line.contains("activate wander") {
+        if line.contains("activate explore") {
             break;
         }
         assert!(Instant::now() < deadline, "the sequencer did not start");

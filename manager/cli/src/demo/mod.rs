@@ -2,8 +2,8 @@
 //! mission. In `exit-lab` a sequencer written against the client library (or a plan) drives
 //! the simulated Denning robot out of the lab:
 //!
-//! 1. activate wander + avoid + barcode_track; a monitor waits for the door's barcode;
-//! 2. switch wander for home (drive to the barcode) and let door_locate look;
+//! 1. activate explore + avoid + barcode_track; a monitor waits for the door's barcode;
+//! 2. switch explore for home (drive to the barcode) and let door_locate look;
 //! 3. near the barcode, follow its wall (on the left; after 4 m without a door, home again
 //!    and follow it the other way) while door_locate gathers evidence;
 //! 4. once the door is located, lower `avoid.safe_distance` for the tight passage (the
@@ -181,7 +181,7 @@ impl Drop for Network {
 /// The skills of the networks: the exit-lab experiment's, then the delivery mission's own.
 const SKILLS: [&str; 17] = [
     "avoid",
-    "wander",
+    "explore",
     "wall_follow",
     "barcode_track",
     "home",
@@ -293,11 +293,6 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         ],
     };
     for &s in opts.site.skills() {
-        let mut params = std::collections::BTreeMap::new();
-        if s == "wander" {
-            // The seed varies the wandering between runs (an i64 in TOML).
-            params.insert("seed".to_string(), toml::Value::Integer(seed as i64));
-        }
         // Skills that report one job's progress each get a topic of their own for it.
         let remap = if PROGRESS.contains(&s) {
             [("progress".to_string(), format!("{s}/progress"))].into()
@@ -308,7 +303,6 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             name: s.into(),
             bin: text(&program(s)?),
             active: Some(false),
-            params,
             remap,
             restart: if killing {
                 Restart::OnFailure
@@ -512,11 +506,11 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             bail!("the delivery mission runs a plan: none was given")
         }
         None => {
-            c.activate(&["wander", "avoid", "barcode_track"])?;
+            c.activate(&["explore", "avoid", "barcode_track"])?;
             step(
                 &c,
                 &mut out,
-                "activate wander + avoid + barcode_track; monitor the door's barcode",
+                "activate explore + avoid + barcode_track; monitor the door's barcode",
             );
             Driver::Code(Sequencer {
                 phase: Phase::Search,

@@ -20,7 +20,7 @@ pub(super) enum Phase {
 }
 
 /// The exit-lab sequencer: which skills run in each phase, and the monitor that ends it.
-/// Barcode seen: wander -> home (and door_locate looks). Near the barcode: follow the wall
+/// Barcode seen: explore -> home (and door_locate looks). Near the barcode: follow the wall
 /// with it on the left; 4 m away without a door, home again and follow it on the right. Door
 /// located (in any phase): lower `avoid.safe_distance` for the tight passage, go_through.
 pub(super) struct Sequencer {
@@ -47,12 +47,12 @@ impl Sequencer {
             }
             Phase::Search if id == self.seen => {
                 self.phase = Phase::Home;
-                c.deactivate(&["wander"])?;
+                c.deactivate(&["explore"])?;
                 c.activate(&["home", "door_locate"])?;
                 self.near = Some(near_code(c)?);
                 self.found =
                     Some(c.add_monitor("door_locate.door.found == 1", MonitorMode::Once, 0)?);
-                "barcode seen: wander -> home; door_locate looks".to_string()
+                "barcode seen: explore -> home; door_locate looks".to_string()
             }
             Phase::Home | Phase::Return if Some(id) == self.near => {
                 let side = if self.phase == Phase::Home { -1 } else { 1 };

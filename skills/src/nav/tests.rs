@@ -294,6 +294,37 @@ fn a_restarted_wander_keeps_its_visit_map_and_draws_on() {
 }
 
 #[test]
+fn a_restarted_explore_keeps_its_grid_and_the_places_it_looked_from() {
+    let mut h = Harness::<Explore>::new();
+    // Walls 2 m away all round, each reading new every cycle; a full look round on the spot.
+    let mut s = ring(|_| 2.0);
+    for k in 0..1000 {
+        s.age_ms = [f64::from(k % 2) * 5.0; SONARS];
+        h.input("sonar", s).input(
+            "odometry",
+            Odometry {
+                theta: wrap(0.008 * f64::from(k)),
+                ..Odometry::default()
+            },
+        );
+        h.step().unwrap();
+    }
+    let kept = h.skill().snapshot().unwrap();
+    assert!(
+        kept.len() > 8 + 4 + 16 + 12 * 100,
+        "a grid and a place looked from"
+    );
+    let mut again = Explore::default();
+    again.restore(&kept);
+    assert_eq!(again.snapshot().unwrap(), kept, "the same grid and places");
+    let mut fresh = Explore::default();
+    fresh.restore(b"explore0 something else");
+    assert_eq!(fresh.snapshot(), Explore::default().snapshot());
+    fresh.restore(b"explore1\xff\xff");
+    assert_eq!(fresh.snapshot(), Explore::default().snapshot(), "cut short");
+}
+
+#[test]
 fn a_restarted_door_locate_keeps_its_readings_and_its_door() {
     let mut d = DoorLocate::default();
     d.restore(b"nonsense");

@@ -11,6 +11,12 @@ pub struct CarWatchParams {
     /// No lantern seen for this long: no car is open (ms of fabric time: cycles × period).
     #[param(default = 1500.0, min = 0.0, max = 60000.0)]
     pub lost_ms: f64,
+    /// A lantern out of the camera's view (the robot turned away, or too near the bank to
+    /// see it) is taken to be still lit for this long after it was last seen (ms of fabric
+    /// time): a car's doors stay open 8 s after they finish opening, longer for a call or
+    /// a robot in the doorway.
+    #[param(default = 8000.0, min = 0.0, max = 60000.0)]
+    pub unseen_ms: f64,
 }
 
 /// Inputs of [`CarWatch`].
@@ -40,6 +46,11 @@ const WALL_BASE: f64 = 0.5;
 /// The lantern hangs at the doorway's centre this far into the lobby, and the call button
 /// this far in front of the bank's wall (m; the building's convention).
 const INSET: f64 = 0.05;
+/// A lantern is in the camera's view within this of its axis (rad; the camera sees ±30°) ...
+const VIEW_HALF: f64 = 27.0 * PI / 180.0;
+/// ... and this near (m; it sees 6 m).
+const VIEW_RANGE: f64 = 5.6;
+
 /// The period assumed when the manager free-runs (no nominal period): its default.
 const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
@@ -57,7 +68,8 @@ struct Lantern {
 /// its doorway, 5 cm into the lobby) shows only while car k is here with its doors open. Each
 /// lantern in view is placed in the odometry frame (a running average over new sightings,
 /// nearer ones weighing more, as barcode_track does). A car is open until its lantern has
-/// not been seen for `lost_ms`. The car reported stays the same while it is open (with two
+/// not been seen for `lost_ms` while it should have been (where it was seen is within the
+/// camera's view), or for `unseen_ms` while it could not be. The car reported stays the same while it is open (with two
 /// open, the robot may be on its way into the first); otherwise it is the lantern seen most
 /// recently. The way in is the bank wall's normal
 /// away from the robot, the wall running along the line through the lantern and the call
@@ -117,11 +129,17 @@ impl Skill for CarWatch {
             .clock
             .period
             .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        // Open: seen within `lost_ms`; or, while where it was seen is out of the camera's
+        // view, within `unseen_ms`.
         let open = |l: &Lantern| {
-            l.sum.2 > 0.0
-                && l.seen.is_some_and(|(cycle, _)| {
-                    ctx.cycle.saturating_sub(cycle) as f64 * period_ms <= p.lost_ms
-                })
+            let Some((cycle, _)) = l.seen.filter(|_| l.sum.2 > 0.0) else {
+                return false;
+            };
+            let (x, y) = (l.sum.0 / l.sum.2, l.sum.1 / l.sum.2);
+            let bearing = wrap((y - od.y).atan2(x - od.x) - od.theta);
+            let in_view = bearing.abs() < VIEW_HALF && (x - od.x).hypot(y - od.y) < VIEW_RANGE;
+            let unseen = ctx.cycle.saturating_sub(cycle) as f64 * period_ms;
+            unseen <= p.lost_ms || (!in_view && unseen <= p.unseen_ms)
         };
         // The car reported last while it stays open (with two open, the camera sees one
         // lantern, then the other: the robot may be on its way to the first); else the

@@ -24,6 +24,12 @@ pub struct EnterCarParams {
     /// Centring gain between the door posts (rad per m of imbalance).
     #[param(default = 0.8, min = 0.0, max = 10.0)]
     pub centre: f64,
+    /// Give up on a car whose doorway's light curtain is not reached this long after the car
+    /// was first seen open (ms of fabric time): its doors start closing 9.5 s after its
+    /// lantern lights (1.5 s opening, 8 s open), and closing doors meet a robot that comes
+    /// into the curtain too late to hold them.
+    #[param(default = 9000.0, min = 0.0, max = 600000.0)]
+    pub open_ms: f64,
 }
 
 /// Inputs of [`EnterCar`].
@@ -79,6 +85,22 @@ const LINED_UP: f64 = 0.3;
 const POSTS: f64 = 0.6;
 /// Speed backing away from doors that closed (m/s).
 const BACK_SPEED: f64 = 0.25;
+/// Doors shut are looked for from this far before the doorway line (m) ...
+const SHUT_FROM: f64 = 0.9;
+/// ... to this far (nearer, the doors are in the light curtain's reach) ...
+const SHUT_TO: f64 = 0.25;
+/// ... within this of the axis (m) and of its heading (rad), where the straight-ahead cone
+/// (±15°) lies within the 1.1 m doorway ...
+const SHUT_CROSS: f64 = 0.15;
+const SHUT_SQUARE: f64 = 0.15;
+/// ... and read when the reading ends within this beyond the doorway's line (m; an open car
+/// reads its cabin, 1.7 m deep).
+const SHUT_MARGIN: f64 = 0.6;
+/// Within this of the doorway line (m) the robot's centre is in the doors' light curtain
+/// (0.51 m).
+const CURTAIN: f64 = 0.45;
+/// The period assumed when the manager free-runs (no nominal period): its default.
+const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
 /// Drives into the open car. First to a point `approach` before the doorway on its axis,
 /// then along the axis (a carrot 0.6 m ahead on it) centred between the door posts by the
@@ -90,8 +112,11 @@ const BACK_SPEED: f64 = 0.25;
 /// open) before the robot's centre has passed the doorway line, it backs straight away to
 /// `approach` before the doorway if it faces the doors (a retry starts in the open, not
 /// against them; backing stops where something is near behind) and stops for good (`lost`);
-/// past the line, the light curtain keeps the doors open. The first car seen open since
-/// activation is the one it enters.
+/// past the line, the light curtain keeps the doors open. Doors seen shut by the sonar
+/// straight ahead (lined up, 0.25–0.9 m before the doorway: it reads the doorway's line, not
+/// the cabin) count as closed too, and so does a car whose light curtain it has not reached
+/// `open_ms` after it first saw it open. The first car seen open since activation is the one it
+/// enters.
 ///
 /// For a sequencer: `enter_car.progress.done == 1` (inside, facing the back wall),
 /// `enter_car.progress.phase == 3` (lost, backed away: call the car again and reactivate);
@@ -106,8 +131,10 @@ pub struct EnterCar {
     /// reported open (what to back away from when its doors close).
     chosen: Option<u32>,
     last_car: Option<(f64, f64, f64)>,
-    /// Whether a car has been seen open since activation (only then can it be lost).
+    /// Whether a car has been seen open since activation (only then can it be lost), and the
+    /// cycle it first was.
     saw_car: bool,
+    first_seen: Option<u64>,
     /// Inside: the way to face, refined from the cabin's side walls, and the cycles they
     /// were seen in and spent inside.
     back: Option<f64>,
@@ -161,7 +188,14 @@ impl Skill for EnterCar {
         let (c, sn) = (h.cos(), h.sin());
         let along = (od.x - dx) * c + (od.y - dy) * sn;
         let cross = -(od.x - dx) * sn + (od.y - dy) * c;
-        if closed && along < 0.0 && matches!(self.phase, LINING_UP | ENTERING) {
+        let period_ms = ctx
+            .clock
+            .period
+            .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        let first = *self.first_seen.get_or_insert(ctx.cycle);
+        let late =
+            ctx.cycle.saturating_sub(first) as f64 * period_ms > p.open_ms && along < -CURTAIN;
+        if (closed && along < 0.0 || late) && matches!(self.phase, LINING_UP | ENTERING) {
             self.phase = BACKING_OUT;
         }
         // Backing straight away from the doors only when it faces them, while nothing is
@@ -170,6 +204,15 @@ impl Skill for EnterCar {
         let clear_behind = arc(s, 150.0, 210.0).is_some_and(|(near, _)| near > BLOCKED + 0.1);
         if self.phase == BACKING_OUT && (along <= -p.approach || !facing || !clear_behind) {
             self.phase = LOST;
+        }
+        // Doors shut in front: on the axis short of the doorway and facing it, the cone of
+        // the sonar straight ahead lies within the doorway and reads the doorway's line
+        // instead of the cabin behind it. car_watch may still call the car open (its lantern
+        // out of the camera's view on the way here).
+        let square = wrap(od.theta - h).abs() < SHUT_SQUARE && cross.abs() < SHUT_CROSS;
+        let shut = at(s, 0.0).is_some_and(|r| r < -along - RING + SHUT_MARGIN);
+        if self.phase == ENTERING && (-SHUT_FROM..-SHUT_TO).contains(&along) && square && shut {
+            self.phase = BACKING_OUT;
         }
         let ahead = min_in(s, -0.5, 0.5);
         let drive = match self.phase {

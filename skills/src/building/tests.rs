@@ -1237,7 +1237,7 @@ enum Ride {
 /// reactivated skill.
 #[test]
 fn a_ride_calls_a_car_boards_it_presses_four_and_leaves_on_the_fourth_floor() {
-    for seed in 1..=3 {
+    for seed in 1..=6 {
         let mut r = Robot::in_building("building-a.toml", seed, 0, [24.5, 18.0, 0.1]);
         let mut stage = Ride::Call;
         let mut log = vec![(0.0, stage)];
@@ -1346,6 +1346,7 @@ fn a_ride_calls_a_car_boards_it_presses_four_and_leaves_on_the_fourth_floor() {
             }
             let (jp, jd) = job.map_or((0, None), |(p, d)| (p, Some(d)));
             r.cycle(arbitrate(&[(8, a), (jp, jd)]), press, silent());
+
             if let Some(n) = next {
                 log.push((r.sim.time, n));
                 since = k;

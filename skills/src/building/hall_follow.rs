@@ -245,7 +245,9 @@ impl Skill for HallFollow {
                     _ => p.stop,
                 };
                 if ahead < until {
-                    stop
+                    // Stopped, but still turning to the axis: come out of a door askew, the
+                    // front cones see the side wall as a wall ahead.
+                    cruise(want, 0.0)
                 } else {
                     cruise(want, 0.05 + 0.5 * (ahead - until))
                 }

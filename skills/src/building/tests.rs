@@ -1207,6 +1207,21 @@ fn hall_follow_finds_the_corridor_out_of_an_open_lobby() {
     }
 }
 
+/// Out of the lab door askew (building B, seed 3 of the delivery runs: 15° to the left of the
+/// corridor's axis), the front cones see the side wall within `stop`: hall_follow must turn
+/// to the axis and go on, not stand there.
+#[test]
+fn hall_follow_out_of_a_door_askew_turns_to_the_axis_and_goes_on() {
+    let mut r = Robot::in_building("building-b.toml", 3, 0, [11.05, 4.24, 0.256]);
+    let mut c = Corridor::default();
+    c.hall.set_param("turn=-1").unwrap();
+    for _ in 0..3000 {
+        c.cycle(&mut r);
+    }
+    assert_eq!(r.sim.collisions, 0);
+    assert!(r.sim.pose[0] > 14.0, "along the corridor: {:?}", r.sim.pose);
+}
+
 /// After calling a car, back away from the call button to 5 m from the bank's wall, where
 /// the camera sees all four lanterns (from 4.6 m the outer ones are at 30.3°, just outside).
 const CALL_RETREAT: &str = "retreat=4.35";

@@ -108,13 +108,15 @@ pub struct Explore {
 
 impl Explore {
     fn free(&self, c: Cell) -> bool {
-        self.grid.get(&c).is_some_and(|e| e.free > 2 * e.occupied)
+        self.grid
+            .get(&c)
+            .is_some_and(|e| u32::from(e.free) > 2 * u32::from(e.occupied))
     }
 
     fn occupied(&self, c: Cell) -> bool {
         self.grid
             .get(&c)
-            .is_some_and(|e| e.occupied > 0 && 2 * e.occupied >= e.free)
+            .is_some_and(|e| e.occupied > 0 && 2 * u32::from(e.occupied) >= u32::from(e.free))
     }
 
     /// Takes in the ring's new readings.
@@ -194,6 +196,22 @@ impl Explore {
             }
         }
         None
+    }
+
+    /// The next goal from here: the nearest ground not covered; with none, the room is
+    /// covered: start over (forget the places looked from and the goals given up).
+    fn next(&mut self, od: &Odometry, p: &ExploreParams, cycle: u64) -> Mode {
+        let from = cell(od.x, od.y);
+        let path = self.frontier(from, p).or_else(|| {
+            self.looked.clear();
+            self.abandoned.clear();
+            self.frontier(from, p)
+        });
+        match path {
+            Some(path) => Mode::Go { path, since: cycle },
+            // Nothing passable known around (hemmed in, or no readings yet): look again.
+            None => Mode::Look { left: TAU },
+        }
     }
 }
 
@@ -339,21 +357,3 @@ impl Skill for Explore {
 
 /// First bytes of an explore snapshot (its layout's version).
 const SNAPSHOT_TAG: &[u8; 8] = b"explore1";
-
-impl Explore {
-    /// The next goal from here: the nearest ground not covered; with none, the room is
-    /// covered: start over (forget the places looked from and the goals given up).
-    fn next(&mut self, od: &Odometry, p: &ExploreParams, cycle: u64) -> Mode {
-        let from = cell(od.x, od.y);
-        let path = self.frontier(from, p).or_else(|| {
-            self.looked.clear();
-            self.abandoned.clear();
-            self.frontier(from, p)
-        });
-        match path {
-            Some(path) => Mode::Go { path, since: cycle },
-            // Nothing passable known around (hemmed in, or no readings yet): look again.
-            None => Mode::Look { left: TAU },
-        }
-    }
-}

@@ -337,7 +337,7 @@ fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered
     let text = include_str!("../../../skills/plans/exit-lab.xml");
     let p = Plan::parse(text, "exit-lab.xml").unwrap();
     let skills = [
-        "wander",
+        "explore",
         "avoid",
         "barcode_track",
         "home",
@@ -356,7 +356,7 @@ fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered
         assert_eq!(seq.tick(f).unwrap(), Status::Running);
     };
     step(&mut f, &mut seq, None);
-    assert_eq!(f.on(), ["avoid", "barcode_track", "wander"]);
+    assert_eq!(f.on(), ["avoid", "barcode_track", "explore"]);
     step(&mut f, &mut seq, Some("barcode_track.target.seen == 1"));
     assert_eq!(f.on(), ["avoid", "barcode_track", "door_locate", "home"]);
     step(&mut f, &mut seq, Some("barcode_track.target.range < 1.7"));

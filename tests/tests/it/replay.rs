@@ -105,7 +105,7 @@ fn a_recorded_lockstep_mission_replays_identically_and_a_changed_default_is_name
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let skills = ["--skills", "avoid,wander,barcode_track,home"];
+    let skills = ["--skills", "avoid,explore,barcode_track,home"];
     let (r, out) = replay(&t, &rec, &skills);
     assert!(out.status.success(), "{r}");
     assert_eq!(r["divergence"], Json::Null, "{r}");
@@ -120,7 +120,7 @@ fn a_recorded_lockstep_mission_replays_identically_and_a_changed_default_is_name
     // that passes it, in a directory of its own.
     let bins = t.dir.join("rebuilt");
     std::fs::create_dir_all(&bins).unwrap();
-    for b in ["avoid", "wander", "barcode_track"] {
+    for b in ["avoid", "explore", "barcode_track"] {
         std::os::unix::fs::symlink(bin(b), bins.join(b)).unwrap();
     }
     let wrapper = bins.join("home");

@@ -384,6 +384,28 @@ pub fn skill<'a>(report: &'a serde_json::Value, name: &str) -> &'a serde_json::V
         .unwrap_or_else(|| panic!("no skill '{name}' in report {report}"))
 }
 
+/// Where each of `whats` stands in a demo run's step list (`run["steps"]`: name, cycle,
+/// time), as (index, cycle) of the first step whose name starts with it; panics with the list
+/// when one is missing.
+pub fn steps_at(run: &serde_json::Value, whats: &[&str]) -> Vec<(usize, u64)> {
+    let steps: Vec<(&str, u64)> = run["steps"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no steps in {run}"))
+        .iter()
+        .map(|s| (s[0].as_str().unwrap(), s[1].as_u64().unwrap()))
+        .collect();
+    whats
+        .iter()
+        .map(|what| {
+            steps
+                .iter()
+                .position(|(s, _)| s.starts_with(what))
+                .map(|k| (k, steps[k].1))
+                .unwrap_or_else(|| panic!("no step '{what}' in {steps:?}"))
+        })
+        .collect()
+}
+
 /// A TCP port on 127.0.0.1 nobody listens on now (a bridge binds it a moment later).
 pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")

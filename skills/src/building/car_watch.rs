@@ -51,9 +51,6 @@ const VIEW_HALF: f64 = 27.0 * PI / 180.0;
 /// ... and this near (m; it sees 6 m).
 const VIEW_RANGE: f64 = 5.6;
 
-/// The period assumed when the manager free-runs (no nominal period): its default.
-const FREE_RUN_PERIOD_MS: f64 = 10.0;
-
 /// One car's lantern in the odometry frame.
 #[derive(Debug, Default, Clone, Copy)]
 struct Lantern {
@@ -125,10 +122,7 @@ impl Skill for CarWatch {
                 }
             }
         }
-        let period_ms = ctx
-            .clock
-            .period
-            .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        let period_ms = period_ms(ctx);
         // Open: seen within `lost_ms`; or, while where it was seen is out of the camera's
         // view, within `unseen_ms`.
         let open = |l: &Lantern| {

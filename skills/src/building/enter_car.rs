@@ -99,8 +99,6 @@ const SHUT_MARGIN: f64 = 0.6;
 /// Within this of the doorway line (m) the robot's centre is in the doors' light curtain
 /// (0.51 m).
 const CURTAIN: f64 = 0.45;
-/// The period assumed when the manager free-runs (no nominal period): its default.
-const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
 /// Drives into the open car. First to a point `approach` before the doorway on its axis,
 /// then along the axis (a carrot 0.6 m ahead on it) centred between the door posts by the
@@ -188,10 +186,7 @@ impl Skill for EnterCar {
         let (c, sn) = (h.cos(), h.sin());
         let along = (od.x - dx) * c + (od.y - dy) * sn;
         let cross = -(od.x - dx) * sn + (od.y - dy) * c;
-        let period_ms = ctx
-            .clock
-            .period
-            .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        let period_ms = period_ms(ctx);
         let first = *self.first_seen.get_or_insert(ctx.cycle);
         let late =
             ctx.cycle.saturating_sub(first) as f64 * period_ms > p.open_ms && along < -CURTAIN;

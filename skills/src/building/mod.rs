@@ -33,7 +33,7 @@ pub use leave_car::*;
 pub use push_button::*;
 pub use sign_read::*;
 
-use crate::nav::{Activation, DriveOut, RING, min_in, range, wrap};
+use crate::nav::{Activation, DriveOut, RING, min_in, period_ms, range, wrap};
 use skill_sdk::prelude::*;
 use skillfab_msgs::{
     Arm, Barcodes, Car, Doors, Drive, Junction, Odometry, Progress, Push, SONARS, Say, Signs,

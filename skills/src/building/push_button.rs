@@ -105,8 +105,6 @@ const LINE_UP_RANGE: f64 = 1.0;
 const INSET: f64 = 0.05;
 /// Beyond this bearing (rad) the approach turns on the spot before driving.
 const FACING: f64 = 0.2;
-/// The period assumed when the manager free-runs (no nominal period): its default.
-const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
 /// Presses the tracked button: turns toward it, drives to `reach` of it (coming from within
 /// 40° of square to the button's wall, once the ring fits that wall: from further aside it
@@ -191,10 +189,7 @@ impl Skill for PushButton {
                 ..PushButton::default()
             };
         }
-        let period_ms = ctx
-            .clock
-            .period
-            .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0);
+        let period_ms = period_ms(ctx);
         if self.phase == APPROACH && t.visible {
             self.fit_wall(t, od, s);
         }

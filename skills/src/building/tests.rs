@@ -205,6 +205,13 @@ impl Robot {
         self.cycle(drive, Push::default(), silent());
     }
 
+    /// What barcode_track (`h`) makes of this cycle's camera report.
+    fn track(&self, h: &mut Harness<BarcodeTrack>) -> Target {
+        h.input("barcodes", self.barcodes)
+            .input("odometry", self.odometry);
+        *h.step().unwrap().output::<Target>("target").unwrap()
+    }
+
     /// A world point in the odometry frame (odometry starts at the world's start, same
     /// heading; drift aside).
     fn to_odom(&self, x: f64, y: f64) -> (f64, f64) {
@@ -798,15 +805,7 @@ impl Watch {
     }
 
     fn cycle(&mut self, r: &Robot) {
-        self.track
-            .input("barcodes", r.barcodes)
-            .input("odometry", r.odometry);
-        self.target = *self
-            .track
-            .step()
-            .unwrap()
-            .output::<Target>("target")
-            .unwrap();
+        self.target = r.track(&mut self.track);
         self.watch
             .input("barcodes", r.barcodes)
             .input("odometry", r.odometry)
@@ -1135,16 +1134,7 @@ fn hall_follow_takes_building_a_from_the_lab_door_to_the_lobby() {
                 _ => "turn=0",
             };
             c.hall.set_param(turn).unwrap();
-            track
-                .input("barcodes", r.barcodes)
-                .input("odometry", r.odometry);
-            if track
-                .step()
-                .unwrap()
-                .output::<Target>("target")
-                .unwrap()
-                .visible
-            {
+            if r.track(&mut track).visible {
                 seen = Some(k);
                 break;
             }
@@ -1276,10 +1266,7 @@ fn a_ride_calls_a_car_boards_it_presses_four_and_leaves_on_the_fourth_floor() {
         avoid.set_param("safe_distance=0.15").unwrap();
         let mut since = 0u64;
         for k in 0..60_000u64 {
-            track
-                .input("barcodes", r.barcodes)
-                .input("odometry", r.odometry);
-            let target = *track.step().unwrap().output::<Target>("target").unwrap();
+            let target = r.track(&mut track);
             avoid.input("sonar", r.sonar);
             let a = avoid.step().unwrap().output::<Drive>("drive").copied();
             let (mut job, mut press) = (None, Push::default());
@@ -1417,10 +1404,7 @@ fn push_button_presses_the_call_button_on_the_wall_coming_square_to_it() {
         let mut push = Harness::<PushButton>::new();
         let mut progress = Progress::default();
         for _ in 0..4000 {
-            track
-                .input("barcodes", r.barcodes)
-                .input("odometry", r.odometry);
-            let t = *track.step().unwrap().output::<Target>("target").unwrap();
+            let t = r.track(&mut track);
             push.input("target", t)
                 .input("odometry", r.odometry)
                 .input("arm", r.arm)
@@ -1759,16 +1743,7 @@ fn search(file: &str, seed: u64, limit: u64) -> (Option<u64>, u64) {
         avoid.input("sonar", r.sonar);
         let away = avoid.step().unwrap().output::<Drive>("drive").copied();
         r.drive(arbitrate(&[(8, away), (2, go)]));
-        track
-            .input("barcodes", r.barcodes)
-            .input("odometry", r.odometry);
-        if track
-            .step()
-            .unwrap()
-            .output::<Target>("target")
-            .unwrap()
-            .seen
-        {
+        if r.track(&mut track).seen {
             return (Some(k), r.sim.collisions);
         }
     }

@@ -46,8 +46,6 @@ const OCCUPIED_MAX: f64 = 3.0;
 const REACHED: f64 = 0.35;
 /// The waypoint followed is this far along the path (cells).
 const LOOKAHEAD: usize = 4;
-/// The period assumed when the manager free-runs (no nominal period): its default.
-const FREE_RUN_PERIOD_MS: f64 = 10.0;
 
 type Cell = (i32, i32);
 
@@ -132,21 +130,17 @@ impl Explore {
             let (c, sn) = (a.cos(), a.sin());
             let hit = r + RING;
             let free_to = (hit - CELL).min(FREE_MAX);
+            // The cell `d` along the sonar's axis.
+            let along = |d: f64| cell(od.x + d * c, od.y + d * sn);
             // From the centre: the robot's own ground is free.
             let mut d = 0.0;
             while d < free_to {
-                let e = self
-                    .grid
-                    .entry(cell(od.x + d * c, od.y + d * sn))
-                    .or_default();
+                let e = self.grid.entry(along(d)).or_default();
                 e.free = e.free.saturating_add(1);
                 d += CELL / 2.0;
             }
             if r < OCCUPIED_MAX {
-                let e = self
-                    .grid
-                    .entry(cell(od.x + hit * c, od.y + hit * sn))
-                    .or_default();
+                let e = self.grid.entry(along(hit)).or_default();
                 e.occupied = e.occupied.saturating_add(2);
             }
         }
@@ -233,10 +227,7 @@ impl Skill for Explore {
             .last_theta
             .replace(od.theta)
             .map_or(0.0, |t| wrap(od.theta - t).abs());
-        let period_s = ctx
-            .clock
-            .period
-            .map_or(FREE_RUN_PERIOD_MS / 1000.0, |d| d.as_secs_f64());
+        let period_s = period_ms(ctx) / 1000.0;
         let mode = match self.mode.take() {
             None => Mode::Look { left: TAU },
             Some(Mode::Look { left }) if left - turned <= 0.0 => {

@@ -57,6 +57,17 @@ pub(crate) fn min_in(s: &Sonar, from: f64, to: f64) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The cycle period (ms) a skill times things in, counting cycles: the manager's nominal
+/// period, or its default (10 ms) when it free-runs without one.
+pub(crate) fn period_ms<P>(ctx: &Ctx<'_, P>) -> f64 {
+    ctx.clock
+        .period
+        .map_or(FREE_RUN_PERIOD_MS, |d| d.as_secs_f64() * 1000.0)
+}
+
+/// The period assumed when the manager free-runs (no nominal period): its default.
+const FREE_RUN_PERIOD_MS: f64 = 10.0;
+
 /// Output of every movement skill.
 #[derive(Outputs)]
 pub struct DriveOut<'a> {

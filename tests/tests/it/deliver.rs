@@ -45,36 +45,27 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
     let (x, y) = (end[1].as_f64().unwrap(), end[2].as_f64().unwrap());
     assert!((x - 9.5).hypot(y - 18.2) < 2.0, "{run}");
     // The mission's steps, in order, at increasing cycles.
-    let steps: Vec<(String, u64)> = run["steps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| (s[0].as_str().unwrap().to_string(), s[1].as_u64().unwrap()))
-        .collect();
-    let at = |what: &str| {
-        steps
-            .iter()
-            .position(|(s, _)| s.starts_with(what))
-            .unwrap_or_else(|| panic!("no step '{what}' in {steps:?}"))
-    };
-    let order = [
-        at("the lab door's barcode seen"),
-        at("through the door"),
-        at("the call button in view"),
-        at("the call button pressed"),
-        at("a car is open"),
-        at("inside the car"),
-        at("4 pressed"),
-        at("the indicator says 4"),
-        at("out of the car"),
-        at("its door on the right"),
-        at("the message said"),
-        at("the message is delivered"),
-    ];
-    assert!(order.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+    let order = skillfab_tests::steps_at(
+        run,
+        &[
+            "the lab door's barcode seen",
+            "through the door",
+            "the call button in view",
+            "the call button pressed",
+            "a car is open",
+            "inside the car",
+            "4 pressed",
+            "the indicator says 4",
+            "out of the car",
+            "its door on the right",
+            "the message said",
+            "the message is delivered",
+        ],
+    );
+    assert!(order.windows(2).all(|w| w[0].0 < w[1].0), "{run}");
     assert!(
-        order.windows(2).all(|w| steps[w[0]].1 <= steps[w[1]].1),
-        "cycles increase: {steps:?}"
+        order.windows(2).all(|w| w[0].1 <= w[1].1),
+        "cycles increase: {run}"
     );
     // The picture has a map of each floor the robot was on: the basement and the fourth.
     let svg = std::fs::read_to_string(&picture).unwrap();

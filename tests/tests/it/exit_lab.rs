@@ -94,28 +94,19 @@ fn the_sequencer_drives_the_robot_out_of_the_room() {
     assert!(t_out > 5.0 && t_out < 150.0, "{run}");
     assert_eq!(summary["median_time_s"].as_f64(), Some(t_out));
     // The paper's sequence, in order, each at a later cycle.
-    let steps: Vec<(String, u64)> = run["steps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| (s[0].as_str().unwrap().to_string(), s[1].as_u64().unwrap()))
-        .collect();
-    let at = |what: &str| {
-        steps
-            .iter()
-            .position(|(s, _)| s.starts_with(what))
-            .unwrap_or_else(|| panic!("no step '{what}' in {steps:?}"))
-    };
-    let order = [
-        at("activate explore"),
-        at("barcode seen"),
-        at("door located"),
-        at("outside the lab"),
-    ];
-    assert!(order.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+    let order = skillfab_tests::steps_at(
+        run,
+        &[
+            "activate explore",
+            "barcode seen",
+            "door located",
+            "outside the lab",
+        ],
+    );
+    assert!(order.windows(2).all(|w| w[0].0 < w[1].0), "{run}");
     assert!(
-        order.windows(2).all(|w| steps[w[0]].1 < steps[w[1]].1),
-        "cycles increase: {steps:?}"
+        order.windows(2).all(|w| w[0].1 < w[1].1),
+        "cycles increase: {run}"
     );
     assert_nothing_left(pid);
 }

@@ -51,8 +51,10 @@ enum Mode {
     /// from `from`, where that side opened (`None` while it has not: a staggered crossing
     /// may open the other side first).
     Cross { turn: f64, from: Option<(f64, f64)> },
-    /// Turning on the spot to a heading.
-    Turn { to: f64 },
+    /// Turning on the spot to a heading; `slide`: turned along a wall that stopped it in
+    /// Leave, to cross into the mouth that opens in it and turn this way (+1 left, −1 right)
+    /// into it, as at a T.
+    Turn { to: f64, slide: Option<f64> },
     /// Out of the intersection on the new heading, until walls are on both sides.
     Leave,
 }
@@ -83,7 +85,11 @@ const CENTRING_MAX: f64 = 0.3;
 /// a wall ahead at `middle`), a quarter turn on the spot (the axis ± 90°: the corridors are
 /// square to each other), then out on the new heading until walls are on both sides again.
 /// A wall ahead with a turn latched starts the turn at once; at a wall ahead with `turn` set
-/// while in an intersection whose entry it has missed, it turns too.
+/// while in an intersection whose entry it has missed, it turns too. Out on the new heading
+/// in a lobby, the corridor's mouth may be off the line it turned on: in open space the front
+/// cones steer it into a mouth ahead; stopped square to a wall across the way with a mouth
+/// opening in it to one side (that side's diagonal sonars read down it), it turns along the
+/// wall and crosses into the mouth as into a T's stem.
 ///
 /// For a sequencer: it reports nothing; wait on `intersection.junction.count` and set `turn`
 /// before the intersection.
@@ -137,6 +143,41 @@ fn mouth_steer(s: &Sonar) -> f64 {
     let read = |deg: f64| at(s, deg).unwrap_or(MOUTH_CAP).min(MOUTH_CAP);
     (MOUTH_GAIN * (read(15.0) - read(-15.0))).clamp(-CENTRING_MAX, CENTRING_MAX)
 }
+
+/// With no wall beside on either side (a lobby, a crossing): the heading `want` turned toward
+/// the middle of a corridor's mouth ahead ([`mouth_steer`]), and only the sonar straight ahead
+/// as the distance ahead, so the wall beside the mouth, seen by the outer cones, does not stop
+/// the robot. With a wall beside, `want` and `ahead` as they are.
+fn into_a_mouth(s: &Sonar, walls: [Option<SideWall>; 2], want: f64, ahead: f64) -> (f64, f64) {
+    if walls == [None, None] {
+        (wrap(want + mouth_steer(s)), at(s, 0.0).unwrap_or(0.0))
+    } else {
+        (want, ahead)
+    }
+}
+
+/// Stopped by a wall across the way: the side (+1 left, −1 right) where a corridor's mouth
+/// opens in that wall beside the robot, when that side's sonars at 45° and 60° read past
+/// [`SIDE_WALL`] and [`MOUTH_MARGIN`] farther than the other side's; 0 when neither does (a
+/// closed corner, a plain wall: the inner edge of the 60° sonar's cone sees the wall ahead).
+fn mouth_beside(s: &Sonar) -> f64 {
+    let side = |k: f64| {
+        let read = |deg: f64| at(s, k * deg).unwrap_or(0.0);
+        read(45.0).max(read(60.0))
+    };
+    let (l, r) = (side(1.0), side(-1.0));
+    if l.max(r) <= SIDE_WALL || (l - r).abs() <= MOUTH_MARGIN {
+        0.0
+    } else {
+        (l - r).signum()
+    }
+}
+
+/// How much farther one side must read than the other for [`mouth_beside`] (m).
+const MOUTH_MARGIN: f64 = 1.0;
+
+/// Facing the axis within this (rad): a wall ahead then is across the way out.
+const SQUARE: f64 = 0.15;
 
 /// Readings farther than this count as open in [`mouth_steer`] (m, from the ring).
 const MOUTH_CAP: f64 = 3.0;
@@ -223,14 +264,9 @@ impl Skill for HallFollow {
         let drive = match self.mode {
             Mode::Follow => {
                 let mut want = self.steer(axis, walls, p.centring);
-                // No wall beside on either side (a lobby, a crossing): toward the middle of a
-                // corridor's mouth ahead, and only the sonar straight ahead stops it, so the
-                // wall beside the mouth, seen by the outer cones, does not.
-                let open_space = walls == [None, None];
                 let mut ahead = ahead;
-                if open_space && p.turn == 0 {
-                    want = wrap(want + mouth_steer(s));
-                    ahead = at(s, 0.0).unwrap_or(0.0);
+                if p.turn == 0 {
+                    (want, ahead) = into_a_mouth(s, walls, want, ahead);
                 }
                 // With a turn pending and that side open beside, on to the middle of what
                 // may be a crossing corridor (a T's bar ahead, a corridor entered from a
@@ -275,6 +311,7 @@ impl Skill for HallFollow {
                         if left <= 0.02 || ahead <= p.middle {
                             self.mode = Mode::Turn {
                                 to: wrap(axis + turn * FRAC_PI_2),
+                                slide: None,
                             };
                             stop
                         } else {
@@ -283,10 +320,13 @@ impl Skill for HallFollow {
                     }
                 }
             }
-            Mode::Turn { to } => {
+            Mode::Turn { to, slide } => {
                 let err = wrap(to - od.theta);
                 if err.abs() < 0.03 {
-                    self.mode = Mode::Leave;
+                    self.mode = match slide {
+                        Some(turn) => Mode::Cross { turn, from: None },
+                        None => Mode::Leave,
+                    };
                     self.axis = Some(to);
                     self.keep = None;
                     stop
@@ -301,10 +341,22 @@ impl Skill for HallFollow {
                 if self.walled == [true, true] {
                     self.mode = Mode::Follow;
                 }
-                if ahead < p.stop {
+                // Turned in a lobby toward the corridor out of its side: the mouth may be
+                // off the line the robot turned on. Near it, the front cones steer into it;
+                // stopped by the wall it opens in, the robot turns along that wall toward
+                // the side that reads open and crosses into the mouth as into a T's stem.
+                let (want, near) = into_a_mouth(s, walls, axis, ahead);
+                let side = mouth_beside(s);
+                if near < p.stop && wrap(axis - od.theta).abs() < SQUARE && side != 0.0 {
+                    self.mode = Mode::Turn {
+                        to: wrap(axis + side * FRAC_PI_2),
+                        slide: Some(-side),
+                    };
                     stop
+                } else if near < p.stop {
+                    cruise(want, 0.0)
                 } else {
-                    cruise(axis, 0.05 + 0.5 * (ahead - p.stop))
+                    cruise(want, 0.05 + 0.5 * (near - p.stop))
                 }
             }
         };

@@ -1197,6 +1197,58 @@ fn hall_follow_finds_the_corridor_out_of_an_open_lobby() {
     }
 }
 
+/// Turned in a lobby toward the corridor out of its side (as in a plan: out of the car, turn
+/// left): the line the robot turned on may pass beside the corridor's mouth, not into it.
+/// The lobby is 12 m wide and 7 m deep in front of the bank's wall (y = 0); the corridor
+/// leaves its east side between y = −4.6 and −2.2 (centre −3.4), 10 m long.
+#[test]
+fn hall_follow_turned_in_a_lobby_finds_the_corridor_out_of_its_side() {
+    let walls = [
+        [-6.0, 0.0, 6.0, 0.0],
+        [-6.0, -7.0, 6.0, -7.0],
+        [-6.0, -7.0, -6.0, 0.0],
+        [6.0, -2.2, 6.0, 0.0],
+        [6.0, -7.0, 6.0, -4.6],
+        [6.0, -2.2, 16.0, -2.2],
+        [6.0, -4.6, 16.0, -4.6],
+        [16.0, -4.6, 16.0, -2.2],
+    ];
+    // Facing away from the bank; the robot turns some 0.8 m on, so on lines from 2 m above
+    // the mouth's centre to 2.4 m below it (1.2 m past its edge). Mirrored (`m` = −1: the
+    // corridor leaves the west side), it turns right.
+    let cases = [-2.2, -2.8, -3.4, -4.0, -4.5, -5.0];
+    for (k, (m, y0)) in [1.0, -1.0]
+        .into_iter()
+        .flat_map(|m| cases.map(|y0| (m, y0)))
+        .enumerate()
+    {
+        let walls: Vec<[f64; 4]> = walls
+            .iter()
+            .map(|w| [m * w[0], w[1], m * w[2], w[3]])
+            .collect();
+        let start = [m * 0.3, y0, -FRAC_PI_2];
+        let mut r = Robot::new(&world(start, &walls, ""), k as u64 + 1);
+        let mut c = Corridor::default();
+        c.hall
+            .set_param(if m > 0.0 { "turn=1" } else { "turn=-1" })
+            .unwrap();
+        let mut reached = false;
+        for _ in 0..8000 {
+            c.cycle(&mut r);
+            if m * r.sim.pose[0] > 10.0 {
+                reached = true;
+                break;
+            }
+        }
+        assert_eq!(r.sim.collisions, 0, "from {start:?}: {:?}", r.sim.pose);
+        assert!(
+            reached,
+            "from {start:?}: into the corridor, not stuck at {:?}",
+            r.sim.pose
+        );
+    }
+}
+
 /// Out of the lab door askew (building B, seed 3 of the delivery runs: 15° to the left of the
 /// corridor's axis), the front cones see the side wall within `stop`: hall_follow must turn
 /// to the axis and go on, not stand there.

@@ -361,6 +361,7 @@ mod tests {
             "building-a.toml",
             "building-b.toml",
             "heldout/building-c.toml",
+            "heldout/building-d.toml",
         ] {
             let b = building(file);
             let segs = b.segments(b.start_floor);

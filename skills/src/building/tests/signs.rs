@@ -1,0 +1,109 @@
+//! Signs and the message: sign_read reading the floor and room signs, deliver saying the
+//! message near its room.
+
+use super::*;
+
+fn frame(signs: &[(u32, f64, f64)], age_ms: f64) -> Barcodes {
+    let mut b = Barcodes {
+        age_ms,
+        ..Barcodes::default()
+    };
+    for (k, &(id, range, bearing)) in signs.iter().enumerate() {
+        b.id[k] = id;
+        b.range[k] = range;
+        b.bearing[k] = bearing;
+        b.count += 1;
+    }
+    b
+}
+
+#[test]
+fn sign_read_reads_the_floor_and_the_nearest_room_and_forgets_the_floor_when_reactivated() {
+    let mut g = Gapped::<SignRead>::new();
+    g.input("barcodes", frame(&[], f64::INFINITY));
+    let s = g.step_at::<Signs>(1, "signs").unwrap();
+    assert!(!s.floor_known && s.room == 0);
+    g.input(
+        "barcodes",
+        frame(&[(403, 3.0, 0.2), (904, 1.0, 0.0), (405, 2.0, -0.1)], 20.0),
+    );
+    let s = g.step_at::<Signs>(2, "signs").unwrap();
+    assert!(s.floor_known && s.floor == 4, "{s:?}");
+    assert_eq!((s.room, s.room_range, s.room_bearing), (405, 2.0, -0.1));
+    g.input("barcodes", frame(&[(403, 3.0, 0.2)], 700.0));
+    let s = g.step_at::<Signs>(3, "signs").unwrap();
+    assert!(s.floor_known && s.floor == 4, "the floor is kept");
+    assert_eq!(s.room, 0, "no room sign in view");
+    let s = g.step_at::<Signs>(30, "signs").unwrap();
+    assert!(!s.floor_known, "reactivated: read it again");
+}
+
+#[test]
+fn deliver_says_the_message_once_near_its_room() {
+    // Along a corridor past room 403's sign, to room 405's.
+    let walls = [[-1.0, 1.2, 20.0, 1.2], [-1.0, -1.2, 20.0, -1.2]];
+    let signs = barcode(403, 5.0, 1.15) + &barcode(405, 10.0, 1.15);
+    let mut r = Robot::new(&world([0.0, 0.0, 0.0], &walls, &signs), 11);
+    let mut read = Harness::<SignRead>::new();
+    let mut deliver = Harness::<Deliver>::new();
+    let mut decided_at = None;
+    let mut progress = Progress::default();
+    while r.sim.pose[0] < 9.5 {
+        read.input("barcodes", r.barcodes);
+        let s = *read.step().unwrap().output::<Signs>("signs").unwrap();
+        deliver.input("signs", s).input("voice", r.voice);
+        let step = deliver.step().unwrap();
+        progress = *step.output::<Progress>("progress").unwrap();
+        let say = step.output::<Say>("say").copied().unwrap_or_else(silent);
+        if say.seq != 0 && decided_at.is_none() {
+            decided_at = Some((r.sim.pose[0], s));
+            assert_eq!(say.text(), MESSAGE.as_bytes());
+        }
+        r.cycle(
+            Drive {
+                translate: 0.2,
+                rotate: 0.0,
+            },
+            Push::default(),
+            say,
+        );
+    }
+    let (x, signs) = decided_at.expect("it spoke");
+    assert!(x > 7.0, "at 405, not at 403: {x}");
+    assert!(signs.room == 405 && signs.room_range <= 2.5, "{signs:?}");
+    assert_eq!(r.voice.said, 1, "said once");
+    assert!(progress.done, "{progress:?}");
+}
+
+#[test]
+fn deliver_counts_only_what_is_said_after_activation() {
+    let mut h = Harness::<Deliver>::new();
+    let near = Signs {
+        room: 405,
+        room_range: 2.0,
+        ..Signs::default()
+    };
+    h.input("signs", Signs::default())
+        .input("voice", Voice { said: 3, seq: 9 });
+    let step = h.step().unwrap();
+    assert!(step.output::<Say>("say").is_none(), "nothing to say yet");
+    h.input("signs", near);
+    let step = h.step().unwrap();
+    let say = *step.output::<Say>("say").unwrap();
+    assert_ne!(say.seq, 0);
+    assert!(!step.output::<Progress>("progress").unwrap().done);
+    h.input(
+        "voice",
+        Voice {
+            said: 4,
+            seq: say.seq,
+        },
+    );
+    let step = h.step().unwrap();
+    assert_eq!(
+        step.output::<Say>("say").unwrap().seq,
+        say.seq,
+        "the same message"
+    );
+    assert!(step.output::<Progress>("progress").unwrap().done);
+}

@@ -156,21 +156,8 @@ enum DemoCmd {
         /// World file.
         #[arg(long, default_value = "devices/denning-sim/worlds/exit-lab.toml")]
         world: PathBuf,
-        /// Seed of the first run (run i uses seed + i).
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Number of runs.
-        #[arg(long, default_value_t = 1)]
-        runs: u32,
-        /// Simulated seconds per real second.
-        #[arg(long, default_value_t = 4.0)]
-        time_factor: f64,
-        /// Write the first run's trajectory picture (SVG).
-        #[arg(long)]
-        plot: Option<PathBuf>,
-        /// Print one JSON object: runs, successes, median time, each run.
-        #[arg(long)]
-        json: bool,
+        #[command(flatten)]
+        run: DemoRuns,
         /// Simulated seconds before a run counts as failed.
         #[arg(long, default_value_t = 300.0)]
         limit_s: f64,
@@ -182,19 +169,12 @@ enum DemoCmd {
         /// restarted and resumes the robot where it was, the device reconnects.
         #[arg(long, value_name = "SECONDS")]
         kill_sim_every: Option<f64>,
-        /// Fault injection: share of the serial bytes with a flipped bit (0..1).
+        /// Fault injection: share of the serial bytes with a flipped bit (0..=0.5).
         #[arg(long, default_value_t = 0.0)]
         corrupt_rate: f64,
-        /// Fault injection: share of the serial bytes dropped (0..1).
+        /// Fault injection: share of the serial bytes dropped (0..=0.5).
         #[arg(long, default_value_t = 0.0)]
         drop_rate: f64,
-        /// Lock-step: the simulator advances 10 ms per cycle and cycles run back to back, as
-        /// fast as the host allows; the same seed gives the same run (--time-factor ignored).
-        #[arg(long)]
-        lockstep: bool,
-        /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
-        #[arg(long, value_name = "FILE.mcap")]
-        record: Option<PathBuf>,
         /// Drive the robot with this plan (`skillfab sequence`'s format, e.g.
         /// skills/plans/exit-lab.xml) instead of the sequencer written in Rust.
         #[arg(long, value_name = "FILE.xml")]
@@ -218,33 +198,67 @@ enum DemoCmd {
         /// `building-a`: the route through that building).
         #[arg(long)]
         tree: Option<String>,
-        /// Seed of the first run (run i uses seed + i): the robot's start, the sensors' noise,
-        /// the elevators' schedules.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Number of runs.
-        #[arg(long, default_value_t = 1)]
-        runs: u32,
-        /// Simulated seconds per real second (real time; ignored with --lockstep).
-        #[arg(long, default_value_t = 4.0)]
-        time_factor: f64,
-        /// Write the first run's picture (SVG: a map per floor it was on, and the steps).
-        #[arg(long)]
-        plot: Option<PathBuf>,
-        /// Print one JSON object: runs, successes, median time, each run.
-        #[arg(long)]
-        json: bool,
+        #[command(flatten)]
+        run: DemoRuns,
         /// Simulated seconds before a run counts as failed (20 minutes).
         #[arg(long, default_value_t = 1200.0)]
         limit_s: f64,
-        /// Lock-step: the simulator advances 10 ms per cycle, cycles run back to back; the
-        /// same seed gives the same run.
-        #[arg(long)]
-        lockstep: bool,
-        /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
-        #[arg(long, value_name = "FILE.mcap")]
-        record: Option<PathBuf>,
     },
+}
+
+/// How the demos run: the arguments `demo exit-lab` and `demo deliver` share.
+#[derive(clap::Args, Debug)]
+struct DemoRuns {
+    /// Seed of the first run (run i uses seed + i): the robot's start, the sensors' noise, the
+    /// elevators' schedules.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Number of runs.
+    #[arg(long, default_value_t = 1)]
+    runs: u32,
+    /// Simulated seconds per real second (real time; ignored with --lockstep).
+    #[arg(long, default_value_t = 4.0)]
+    time_factor: f64,
+    /// Write the first run's picture (SVG: a map per floor it was on, and the steps).
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Print one JSON object: runs, successes, median time, each run.
+    #[arg(long)]
+    json: bool,
+    /// Lock-step: the simulator advances 10 ms per cycle and cycles run back to back, as fast
+    /// as the host allows; the same seed gives the same run (--time-factor ignored).
+    #[arg(long)]
+    lockstep: bool,
+    /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
+    #[arg(long, value_name = "FILE.mcap")]
+    record: Option<PathBuf>,
+}
+
+impl DemoRuns {
+    /// The demo's options for these runs, `site` and `limit_s` given; faults and plan none.
+    fn options(self, site: demo::Site, limit_s: f64) -> anyhow::Result<demo::DemoOptions> {
+        let t = self.time_factor;
+        if !(t > 0.0 && t <= 50.0) {
+            anyhow::bail!("--time-factor must be in (0, 50], got {t}");
+        }
+        Ok(demo::DemoOptions {
+            site,
+            seed: self.seed,
+            runs: self.runs.max(1),
+            time_factor: t,
+            plot: self.plot,
+            verbose: !self.json,
+            limit_s,
+            faults: faults::Faults {
+                seed: self.seed,
+                ..faults::Faults::default()
+            },
+            lockstep: self.lockstep,
+            record: self.record.map(std::path::absolute).transpose()?,
+            plan: None,
+            tree: None,
+        })
+    }
 }
 
 #[derive(Subcommand, Debug)]
@@ -380,18 +394,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             which:
                 DemoCmd::ExitLab {
                     world,
-                    seed,
-                    runs,
-                    time_factor,
-                    plot,
-                    json,
+                    run,
                     limit_s,
                     kill_every,
                     kill_sim_every,
                     corrupt_rate,
                     drop_rate,
-                    lockstep,
-                    record,
                     plan,
                 },
         } => {
@@ -408,35 +416,22 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     anyhow::bail!("{name} must be in [0, 0.5], got {r}");
                 }
             }
-            if lockstep && (kill_every.is_some() || kill_sim_every.is_some()) {
+            if run.lockstep && (kill_every.is_some() || kill_sim_every.is_some()) {
                 anyhow::bail!(
                     "--kill-every and --kill-sim-every time their kills on the host's clock; \
                      they do not go with --lockstep"
                 );
             }
-            if !(time_factor > 0.0 && time_factor <= 50.0) {
-                anyhow::bail!("--time-factor must be in (0, 50], got {time_factor}");
-            }
-            let opts = demo::DemoOptions {
-                site: demo::Site::World(world),
-                seed,
-                runs: runs.max(1),
-                time_factor,
-                plot,
-                verbose: !json,
-                limit_s,
-                faults: faults::Faults {
-                    kill_every_s: kill_every,
-                    kill_sim_every_s: kill_sim_every,
-                    corrupt_rate,
-                    drop_rate,
-                    seed,
-                },
-                lockstep,
-                record: record.map(std::path::absolute).transpose()?,
-                plan: plan.as_deref().map(sequence::read_plan).transpose()?,
-                tree: None,
+            let json = run.json;
+            let mut opts = run.options(demo::Site::World(world), limit_s)?;
+            opts.faults = faults::Faults {
+                kill_every_s: kill_every,
+                kill_sim_every_s: kill_sim_every,
+                corrupt_rate,
+                drop_rate,
+                seed: opts.seed,
             };
+            opts.plan = plan.as_deref().map(sequence::read_plan).transpose()?;
             let summary = demo::demo(&opts)?;
             report(&summary, json, "left the lab")?;
             if summary.successes == 0 {
@@ -450,40 +445,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     building,
                     plan,
                     tree,
-                    seed,
-                    runs,
-                    time_factor,
-                    plot,
-                    json,
+                    run,
                     limit_s,
-                    lockstep,
-                    record,
                 },
         } => {
-            if !(time_factor > 0.0 && time_factor <= 50.0) {
-                anyhow::bail!("--time-factor must be in (0, 50], got {time_factor}");
-            }
             let stem = building
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            let opts = demo::DemoOptions {
-                site: demo::Site::Building(building),
-                seed,
-                runs: runs.max(1),
-                time_factor,
-                plot,
-                verbose: !json,
-                limit_s,
-                faults: faults::Faults {
-                    seed,
-                    ..faults::Faults::default()
-                },
-                lockstep,
-                record: record.map(std::path::absolute).transpose()?,
-                plan: Some(sequence::read_plan(&plan)?),
-                tree: Some(tree.unwrap_or(stem)),
-            };
+            let json = run.json;
+            let mut opts = run.options(demo::Site::Building(building), limit_s)?;
+            opts.plan = Some(sequence::read_plan(&plan)?);
+            opts.tree = Some(tree.unwrap_or(stem));
             let summary = demo::demo(&opts)?;
             report(&summary, json, "delivered the message")?;
             if summary.successes == 0 {

@@ -156,25 +156,27 @@ fn into_a_mouth(s: &Sonar, walls: [Option<SideWall>; 2], want: f64, ahead: f64) 
     }
 }
 
-/// Stopped by a wall across the way: the side (+1 left, −1 right) where a corridor's mouth
-/// opens in that wall beside the robot, when that side's sonars at 45° and 60° read past
-/// [`SIDE_WALL`] and [`MOUTH_MARGIN`] farther than the other side's; 0 when neither does (a
-/// closed corner, a plain wall: the inner edge of the 60° sonar's cone sees the wall ahead).
-fn mouth_beside(s: &Sonar) -> f64 {
-    let side = |k: f64| {
-        let read = |deg: f64| at(s, k * deg).unwrap_or(0.0);
-        read(45.0).max(read(60.0))
+/// Stopped by a wall across the way `ahead` (m, from the ring): the side (+1 left, −1 right)
+/// where a corridor's mouth opens in that wall beside the robot, or 0. Before a flat wall
+/// the sonar at φ reads it first along its cone's inner edge, ahead / cos(φ − 15°); a side
+/// opens where its sonar at 45° or at 60° reads [`MOUTH_MARGIN`] past that (a corner near on
+/// that side reads nearer). Only one side may open.
+fn mouth_beside(s: &Sonar, ahead: f64) -> f64 {
+    let open = |k: f64| {
+        [45.0f64, 60.0].into_iter().any(|deg| {
+            let flat = ahead / (deg - 15.0).to_radians().cos();
+            at(s, k * deg).is_some_and(|r| r > flat + MOUTH_MARGIN)
+        })
     };
-    let (l, r) = (side(1.0), side(-1.0));
-    if l.max(r) <= SIDE_WALL || (l - r).abs() <= MOUTH_MARGIN {
-        0.0
-    } else {
-        (l - r).signum()
+    match (open(1.0), open(-1.0)) {
+        (true, false) => 1.0,
+        (false, true) => -1.0,
+        _ => 0.0,
     }
 }
 
-/// How much farther one side must read than the other for [`mouth_beside`] (m).
-const MOUTH_MARGIN: f64 = 1.0;
+/// How much farther than a flat wall a side's sonar must read for [`mouth_beside`] (m).
+const MOUTH_MARGIN: f64 = 0.5;
 
 /// Facing the axis within this (rad): a wall ahead then is across the way out.
 const SQUARE: f64 = 0.15;
@@ -346,7 +348,7 @@ impl Skill for HallFollow {
                 // stopped by the wall it opens in, the robot turns along that wall toward
                 // the side that reads open and crosses into the mouth as into a T's stem.
                 let (want, near) = into_a_mouth(s, walls, axis, ahead);
-                let side = mouth_beside(s);
+                let side = mouth_beside(s, near);
                 if near < p.stop && wrap(axis - od.theta).abs() < SQUARE && side != 0.0 {
                     self.mode = Mode::Turn {
                         to: wrap(axis + side * FRAC_PI_2),

@@ -555,6 +555,43 @@ fn hall_follow_turned_in_a_lobby_finds_the_corridor_out_of_its_side() {
     }
 }
 
+/// Building C's fourth-floor lobby (seed 14 of the delivery runs): lined up on the call
+/// button, turned round and turned left, the robot went east 0.1 m south of the corridor's
+/// mouth and stopped 1.2 m before the lobby's east wall. The lobby's south-east corner is
+/// near enough there that a fixed difference between the two sides' diagonal sonars showed
+/// the mouth in some runs and not in others. From lines 0.1 to 0.6 m south of the mouth, with
+/// six seeds' noise, it must turn along the wall and into the corridor.
+#[test]
+fn hall_follow_stopped_beside_building_cs_corridor_mouth_goes_in() {
+    for (seed, south) in (1..=6).flat_map(|k| [0.1, 0.35, 0.6].map(|d| (k, d))) {
+        // 1 m from here it turns east (hall_follow's `after`).
+        let start = [30.19, -5.0 - south, -FRAC_PI_2];
+        let mut r = Robot::in_building("heldout/building-c.toml", seed, 4, start);
+        let mut c = Corridor::default();
+        c.hall.set_param("turn=1").unwrap();
+        for k in 0..6000 {
+            c.cycle(&mut r);
+            if k == 10 {
+                // As the plan: the turn taken, straight on from here.
+                c.hall.set_param("turn=0").unwrap();
+            }
+            if r.sim.pose[0] > 37.0 {
+                break;
+            }
+        }
+        assert_eq!(
+            r.sim.collisions, 0,
+            "seed {seed} from {start:?}: {:?}",
+            r.sim.pose
+        );
+        assert!(
+            r.sim.pose[0] > 37.0,
+            "seed {seed} from {start:?}: into the corridor, not stuck at {:?}",
+            r.sim.pose
+        );
+    }
+}
+
 /// Out of the lab door askew (building B, seed 3 of the delivery runs: 15° to the left of the
 /// corridor's axis), the front cones see the side wall within `stop`: hall_follow must turn
 /// to the axis and go on, not stand there.

@@ -48,6 +48,14 @@ struct Corridor {
 }
 
 impl Corridor {
+    /// Cycles until `there` holds of the robot, at most `cycles`; whether it got there.
+    fn until(&mut self, r: &mut Robot, cycles: u32, there: impl Fn(&Robot) -> bool) -> bool {
+        (0..cycles).any(|_| {
+            self.cycle(r);
+            there(r)
+        })
+    }
+
     fn cycle(&mut self, r: &mut Robot) -> Drive {
         self.intersection
             .input("sonar", r.sonar)
@@ -484,15 +492,10 @@ fn hall_follow_finds_the_corridor_out_of_an_open_lobby() {
             let pose = [x0 - off * th0.sin(), y0 + off * th0.cos(), wrap(th0 + tilt)];
             let mut r = Robot::in_building(file, k as u64 + 1, 4, pose);
             let mut c = Corridor::default();
-            let mut reached = false;
-            for _ in 0..6000 {
-                c.cycle(&mut r);
+            let reached = c.until(&mut r, 6000, |r| {
                 let [x, y, _] = r.sim.pose;
-                if (x - x0) * th0.cos() + (y - y0) * th0.sin() > inside {
-                    reached = true;
-                    break;
-                }
-            }
+                (x - x0) * th0.cos() + (y - y0) * th0.sin() > inside
+            });
             assert_eq!(r.sim.collisions, 0, "{file} {pose:?}: {:?}", r.sim.pose);
             assert!(
                 reached,
@@ -538,14 +541,7 @@ fn hall_follow_turned_in_a_lobby_finds_the_corridor_out_of_its_side() {
         c.hall
             .set_param(if m > 0.0 { "turn=1" } else { "turn=-1" })
             .unwrap();
-        let mut reached = false;
-        for _ in 0..8000 {
-            c.cycle(&mut r);
-            if m * r.sim.pose[0] > 10.0 {
-                reached = true;
-                break;
-            }
-        }
+        let reached = c.until(&mut r, 8000, |r| m * r.sim.pose[0] > 10.0);
         assert_eq!(r.sim.collisions, 0, "from {start:?}: {:?}", r.sim.pose);
         assert!(
             reached,
@@ -569,16 +565,10 @@ fn hall_follow_stopped_beside_building_cs_corridor_mouth_goes_in() {
         let mut r = Robot::in_building("heldout/building-c.toml", seed, 4, start);
         let mut c = Corridor::default();
         c.hall.set_param("turn=1").unwrap();
-        for k in 0..6000 {
-            c.cycle(&mut r);
-            if k == 10 {
-                // As the plan: the turn taken, straight on from here.
-                c.hall.set_param("turn=0").unwrap();
-            }
-            if r.sim.pose[0] > 37.0 {
-                break;
-            }
-        }
+        c.until(&mut r, 11, |_| false);
+        // As the plan: the turn taken, straight on from here.
+        c.hall.set_param("turn=0").unwrap();
+        c.until(&mut r, 6000 - 11, |r| r.sim.pose[0] > 37.0);
         assert_eq!(
             r.sim.collisions, 0,
             "seed {seed} from {start:?}: {:?}",

@@ -38,6 +38,10 @@ pub struct Harness<S: Skill> {
     output_names: Vec<String>,
     inputs: Vec<Option<(Box<dyn Any>, u64)>>,
     outputs: Vec<ErasedOutput>,
+    /// Restart the skill before every this many steps ([`Harness::restarting`]); 0: never.
+    restart_every: u64,
+    /// The activation number the steps run in ([`Harness::reactivate`]).
+    activation: u32,
 }
 
 /// What one step produced.
@@ -116,7 +120,46 @@ impl<S: Skill> Harness<S> {
             input_names,
             output_names,
             outputs,
+            restart_every: 0,
+            activation: 1,
         }
+    }
+
+    /// What a sequencer's deactivate + activate does: the next step belongs to a new
+    /// activation ([`Ctx::activation`]).
+    pub fn reactivate(&mut self) -> &mut Self {
+        self.activation += 1;
+        self
+    }
+
+    /// Restarts the skill ([`Harness::restart`]) before every `every`-th step: a closed-loop
+    /// test run so shows whether the skill goes on as if its process had never died.
+    pub fn restarting(&mut self, every: u64) -> &mut Self {
+        self.restart_every = every;
+        self
+    }
+
+    /// What a restart after `kill -9` does to the skill, here between two steps: the value is
+    /// replaced by a new instance given the state of the last completed run, encoded and
+    /// decoded as the runtime keeps it ([`Skill::STATE`]; a skill that keeps nothing starts
+    /// from `Default`). Parameters and inputs stay, as the manager and the producers keep
+    /// them.
+    ///
+    /// # Panics
+    /// If the state does not survive its own encoding (the mistake a test is there to find).
+    pub fn restart(&mut self) -> &mut Self {
+        let mut bytes = Vec::new();
+        #[allow(clippy::expect_used)]
+        let kept = S::STATE
+            .encode(&self.skill, &mut bytes)
+            .expect("the state encodes");
+        self.skill = if kept {
+            #[allow(clippy::expect_used)]
+            S::STATE.decode(&bytes).expect("the kept state decodes")
+        } else {
+            S::default()
+        };
+        self
     }
 
     /// Applies `name=value`, checked like `--param`.
@@ -165,6 +208,10 @@ impl<S: Skill> Harness<S> {
 
     /// Runs one cycle: the body on the current inputs. An error from the body is returned.
     pub fn step(&mut self) -> Result<Step, SkillError> {
+        if self.restart_every > 0 && self.cycle > 0 && self.cycle.is_multiple_of(self.restart_every)
+        {
+            self.restart();
+        }
         self.cycle += 1;
         let cycle = self.cycle;
         let src = Scripted {
@@ -185,11 +232,14 @@ impl<S: Skill> Harness<S> {
                 params: &self.params,
                 cycle,
                 name: "harness",
+                activation: self.activation,
                 clock: Self::clock(cycle),
             };
             self.skill.compute(&ctx, input, &mut out)
         };
         let values = self.outputs.iter_mut().map(|o| o.take_memory()).collect();
+        // Unlike the runtime, a failed step is not undone: the test sees the error and the
+        // value as the body left it.
         result?;
         Ok(Step {
             names: self.output_names.clone(),

@@ -3,7 +3,8 @@
 //! Everything a skillfab skill is written with, and the client side of the fabric.
 //!
 //! ## Layout
-//! - [`skill`]: the [`Skill`](skill::Skill) trait a skill author implements.
+//! - [`skill`]: the [`Skill`](skill::Skill) trait a skill author implements; [`state`]: what
+//!   of a skill the runtime keeps across the deaths of its process.
 //! - [`ports`], [`params`], [`schema`], [`msg`]: inputs/outputs, typed parameters, message
 //!   layouts, and the shared message types.
 //! - [`runtime`]: turns a `Skill` into a process (registration, cycles, shutdown); [`main`]
@@ -45,6 +46,7 @@ pub mod params;
 pub mod ports;
 mod runtime;
 pub mod skill;
+pub mod state;
 
 // The wire types the SDK is built on, under the names its modules use.
 pub(crate) use skillfab_proto::{board, decl, domain, header, names, schema, services, value};
@@ -123,6 +125,7 @@ pub mod prelude {
     pub use crate::params::{NoParams, Params};
     pub use crate::ports::{Input, Output, Proposal};
     pub use crate::skill::{Clock, Ctx, Skill, SkillError, SkillResult};
+    pub use crate::state::State;
     pub use skill_sdk_macros::{Inputs, Message, Outputs, Params};
 }
 

@@ -3,6 +3,7 @@
 use crate::decl::Mode;
 use crate::params::Params;
 use crate::ports::{InputSet, OutputSet};
+pub use crate::state::State;
 pub use skillfab_proto::board::Clock;
 use std::fmt;
 
@@ -57,18 +58,12 @@ pub trait Skill: Default + 'static {
     ) -> SkillResult;
 
     /// What this instance must not lose if its process dies — its memory: a map of where the
-    /// robot has been, an estimate built over many cycles — as bytes. The runtime keeps the
-    /// newest in the domain (taken at most once a second, on the liveness tick, never within a
-    /// run) and gives it to the next instance of the same name before its first run
-    /// ([`Skill::restore`]); an instance that leaves cleanly drops it, so the next one starts
-    /// afresh. `None` (the default): nothing to keep.
-    fn snapshot(&self) -> Option<Vec<u8>> {
-        None
-    }
-
-    /// Takes back what an earlier instance of this name kept ([`Skill::snapshot`]). Bytes it
-    /// cannot read should be ignored (a new version of the skill may have another layout).
-    fn restore(&mut self, _snapshot: &[u8]) {}
+    /// robot has been, an estimate built over many cycles, the phase of a manoeuvre.
+    /// [`State::kept`] (the skill derives serde's `Serialize` and `Deserialize`): the runtime
+    /// keeps the whole value as of its last completed run in the domain's shared memory and
+    /// gives it to the next process of the same name before its first run; a failed run is
+    /// undone. [`State::NONE`] (the default): nothing kept. See [`crate::state`].
+    const STATE: State<Self> = State::NONE;
 }
 
 /// What a run knows besides its inputs.
@@ -80,6 +75,11 @@ pub struct Ctx<'a, P> {
     pub cycle: u64,
     /// The instance name.
     pub name: &'a str,
+    /// Which activation of this skill the run belongs to: a number the manager raises each
+    /// time a client (a sequencer) activates the skill, and gives unchanged to a restarted
+    /// process of it. A skill that starts afresh when activated compares it with the last
+    /// run's; a gap in cycles is not a new activation (a restart, a missing input).
+    pub activation: u32,
     /// The cycle's time, period and mode. A skill that needs the time reads `clock.time`, never
     /// the wall clock, and draws random numbers from [`Ctx::rng`]: then a recorded run replays
     /// identically (docs/replay.md, "Determinism rules").
@@ -89,8 +89,8 @@ pub struct Ctx<'a, P> {
 impl<P> Ctx<'_, P> {
     /// A random generator for this run, seeded by the instance name and the cycle: the same
     /// numbers in a replay, after a restart, and from any cycle on. (A skill that wants one
-    /// stream over many cycles keeps its own generator, seeded by a parameter, and keeps its
-    /// state in [`Skill::snapshot`].)
+    /// stream over many cycles keeps its own generator, seeded by a parameter, in its
+    /// [`Skill::STATE`].)
     pub fn rng(&self) -> CycleRng {
         // FNV-1a of the name, mixed with the cycle.
         let h = self.name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
@@ -100,8 +100,9 @@ impl<P> Ctx<'_, P> {
     }
 }
 
-/// A small seeded generator (splitmix64), from [`Ctx::rng`].
-#[derive(Debug, Clone)]
+/// A small seeded generator (splitmix64), from [`Ctx::rng`]; a skill may keep one in its
+/// [`Skill::STATE`].
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct CycleRng(u64);
 
 impl CycleRng {

@@ -516,27 +516,40 @@ pub struct CounterOut<'a> {
 }
 
 /// Sync, no inputs: counts its runs, and keeps the count across restarts of its process
-/// ([`Skill::snapshot`]).
-#[derive(Default)]
+/// ([`Skill::STATE`]). Its `dwell_ms` holds each run inside its body that long (a process to
+/// kill in the middle of a run); `panic_every` makes runs fail after counting.
+#[derive(Default, serde::Serialize, serde::Deserialize)]
 pub struct Counter {
     runs: u64,
 }
 
+/// Parameters of [`Counter`].
+#[derive(Params, Debug, Clone)]
+pub struct CounterParams {
+    /// Time each run spends in its body after counting (ms).
+    #[param(default = 0, min = 0, max = 10_000)]
+    pub dwell_ms: u64,
+    /// Panic, after counting, in every cycle divisible by this; 0: never (the count of a run
+    /// that fails is undone by the runtime).
+    #[param(default = 0, min = 0)]
+    pub panic_every: u64,
+}
+
 impl Skill for Counter {
-    type Params = NoParams;
+    type Params = CounterParams;
     type Inputs<'a> = ();
     type Outputs<'a> = CounterOut<'a>;
-    fn compute(&mut self, _: &Ctx<NoParams>, _: (), o: &mut CounterOut) -> SkillResult {
+    const STATE: State<Self> = State::kept(1);
+    fn compute(&mut self, c: &Ctx<CounterParams>, _: (), o: &mut CounterOut) -> SkillResult {
         self.runs += 1;
         o.count.set(skillfab_msgs::Tick { value: self.runs });
+        // A test's way to be inside a run when it kills the process (never in a real skill).
+        std::thread::sleep(std::time::Duration::from_millis(c.params.dwell_ms));
+        let every = c.params.panic_every;
+        assert!(
+            every == 0 || !c.cycle.is_multiple_of(every),
+            "counter: panic_every"
+        );
         Ok(())
-    }
-    fn snapshot(&self) -> Option<Vec<u8>> {
-        Some(self.runs.to_le_bytes().to_vec())
-    }
-    fn restore(&mut self, snapshot: &[u8]) {
-        if let Ok(b) = snapshot.try_into() {
-            self.runs = u64::from_le_bytes(b);
-        }
     }
 }

@@ -20,7 +20,11 @@ impl Manager {
                 Ok(s) => s,
                 Err(away) => {
                     tracing::info!(skill = %away, active, "activation kept for its return");
-                    self.skills.keep(&away).active = Some(active);
+                    let kept = self.skills.keep(&away);
+                    if active && kept.active != Some(true) {
+                        kept.activations += 1;
+                    }
+                    kept.active = Some(active);
                     continue;
                 }
             };
@@ -34,7 +38,11 @@ impl Manager {
             // skill deactivated mid-cycle still finishes the run the cycle counts on.
             e.active = active;
             let skill = e.decl.name.clone();
-            self.skills.keep(&skill).active = Some(active);
+            let kept = self.skills.keep(&skill);
+            kept.active = Some(active);
+            if active {
+                kept.activations += 1;
+            }
             self.dirty = true;
             tracing::info!(%skill, active, "activation changed");
             self.record_control(

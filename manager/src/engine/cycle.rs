@@ -101,7 +101,10 @@ impl Manager {
         }
         for (s, e) in self.skills.in_order() {
             let slot = self.board.slot(s);
-            slot.active.store(u32::from(e.active), Ordering::Release);
+            slot.active.store(
+                self.skills.activation(&e.decl.name, e.active),
+                Ordering::Release,
+            );
             slot.priority.store(e.decl.priority, Ordering::Release);
             // Whom each of its outputs wakes: every registered unit reading that topic.
             for (o, out) in e.decl.outputs.iter().enumerate().take(MAX_OUTPUTS) {

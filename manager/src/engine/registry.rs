@@ -112,7 +112,10 @@ impl Manager {
                 Err(e) => tracing::warn!(skill = %decl.name, error = %e, "parameters not restored"),
             }
         }
-        slot.active.store(u32::from(active), Ordering::Release);
+        slot.active.store(
+            self.skills.activation(&decl.name, active),
+            Ordering::Release,
+        );
         slot.set_state(SlotState::Accepted);
         slot.bell.ring();
         tracing::info!(

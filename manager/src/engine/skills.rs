@@ -17,6 +17,9 @@ pub(crate) struct Kept {
     pub(crate) params: Vec<(String, ParamValue)>,
     /// Priority, once a client changed it.
     pub(crate) priority: Option<i32>,
+    /// Activations by clients so far: the activation number on the board is one more (the
+    /// first, from the launch, is 1). A restarted process of the name gets the same number.
+    pub(crate) activations: u32,
 }
 
 /// The manager's registry of skills.
@@ -90,6 +93,15 @@ impl Skills {
     /// What clients set for `name`, to change (a client sets something).
     pub(crate) fn keep(&mut self, name: &str) -> &mut Kept {
         self.kept.entry(name.to_string()).or_default()
+    }
+
+    /// What the board says for `name`'s activation: 0 inactive, or its activation number.
+    pub(crate) fn activation(&self, name: &str, active: bool) -> u32 {
+        if active {
+            1 + self.kept(name).map_or(0, |k| k.activations)
+        } else {
+            0
+        }
     }
 
     /// What clients set for `name`, if anything.

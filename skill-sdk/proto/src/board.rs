@@ -162,7 +162,9 @@ pub struct Slot {
     pub pid: AtomicU32,
     /// Bumped by the manager each time the slot is (re)accepted, so stats can tell instances apart.
     pub generation: AtomicU32,
-    /// 1 when active (written by the manager).
+    /// 0 when inactive; when active, which activation of the skill's name this is (written by
+    /// the manager: raised each time a client activates the name, the same for a restarted
+    /// process of it, so a skill tells a new activation from a restart, `Ctx::activation`).
     pub active: AtomicU32,
     /// The cycle in which the manager expects this (sync) skill to run; a skill only runs
     /// for cycle k when this says k, so an unexpected run never counts toward completion.

@@ -75,6 +75,12 @@ pub fn board(prefix: &str) -> String {
     format!("/{prefix}board")
 }
 
+/// Shared-memory object holding the state of skill instance `name` as of its last completed
+/// run (the SDK's `state` module), kept across the deaths of its process.
+pub fn state(prefix: &str, name: &str) -> String {
+    format!("/{prefix}state_{name}")
+}
+
 /// Checks a skill or topic name: 1 to 64 of `[A-Za-z0-9_-]`, `/` allowed inside a topic.
 pub fn check_name(what: &str, name: &str, allow_slash: bool) -> Result<(), crate::Error> {
     let ok_char =

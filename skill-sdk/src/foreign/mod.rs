@@ -548,7 +548,9 @@ impl Unit for ForeignUnit {
             io,
             common,
             *mode,
-            |src, outputs, ctx: &Ctx<'_, ForeignParams>| {
+            // A foreign skill's memory is its own (C, C++, Python): nothing kept by the runtime.
+            &mut (),
+            |(), src, outputs, ctx: &Ctx<'_, ForeignParams>| {
                 // As for a Rust skill, a run needs a sample on every input.
                 if (0..inputs.len()).any(|i| src.get(i).is_none()) {
                     return crate::board::RunStatus::Skipped;
@@ -582,6 +584,7 @@ impl Unit for ForeignUnit {
                     Ok(())
                 })
             },
+            |(), _, _, _| {},
         );
     }
 }

@@ -48,6 +48,7 @@ impl<D: Device> DeviceUnit<D> {
                 params: &common.params,
                 cycle: k,
                 name: &common.name,
+                activation: me.active.load(Ordering::Acquire),
                 clock: link.board.header().clock(),
             };
             let device = &mut self.device;
@@ -78,6 +79,7 @@ impl<D: Device> DeviceUnit<D> {
                         params: &common.params,
                         cycle: k,
                         name: &common.name,
+                        activation: link.board.slot(link.idx).active.load(Ordering::Acquire),
                         clock: link.board.header().clock(),
                     };
                     let device = &mut self.device;

@@ -27,6 +27,7 @@
 
 mod arbiter;
 mod device_unit;
+mod kept;
 mod serve;
 mod skill_unit;
 mod waker;
@@ -45,8 +46,10 @@ use crate::params::Params;
 use crate::ports::{ErasedInput, ErasedOutput, PortMaker};
 use crate::services;
 use crate::skill::Skill;
+use crate::state::StateError;
 use clap::Parser;
 use device_unit::DeviceUnit;
+use kept::{Found, Kept};
 pub(crate) use serve::Link;
 use serve::{End, Registration, register, serve, wait_for_board};
 use skill_unit::SkillUnit;
@@ -212,68 +215,18 @@ pub(crate) trait Unit: 'static {
     fn init(&mut self) -> Result<(), SdkError> {
         Ok(())
     }
-    /// What the unit keeps across restarts of its process ([`crate::Skill::snapshot`]).
-    fn snapshot(&self) -> Option<Vec<u8>> {
+    /// The fingerprint of the state the unit keeps across the deaths of its process
+    /// ([`crate::skill::Skill::STATE`]); `None`: it keeps none.
+    fn state_fingerprint(&self) -> Option<u64> {
         None
     }
-    /// Takes back what an earlier instance kept.
-    fn restore(&mut self, _snapshot: &[u8]) {}
+    /// Takes back the state an earlier instance of this name kept.
+    fn restore_state(&mut self, _bytes: &[u8]) -> Result<(), StateError> {
+        Ok(())
+    }
     /// What other threads wake the unit with, if they may.
     fn waker(&self) -> Option<Waker> {
         None
-    }
-}
-
-/// Where a unit's snapshot is kept: `<domain root>/skills/<name>/snapshot` (the root is the
-/// user's own, 0700; the file goes with the domain).
-pub(crate) struct Snapshots {
-    path: std::path::PathBuf,
-    /// What was last written (a snapshot that did not change is not written again).
-    written: Vec<u8>,
-}
-
-impl Snapshots {
-    fn new(domain: &Domain, name: &str) -> Snapshots {
-        Snapshots {
-            path: domain
-                .root_path()
-                .join("skills")
-                .join(name)
-                .join("snapshot"),
-            written: Vec::new(),
-        }
-    }
-
-    /// What an earlier instance kept, if anything.
-    fn load(&mut self) -> Option<Vec<u8>> {
-        let bytes = std::fs::read(&self.path).ok()?;
-        self.written = bytes.clone();
-        Some(bytes)
-    }
-
-    /// Keeps `unit`'s snapshot if it changed: written to a temporary file and renamed, so a
-    /// process killed while writing leaves the previous one.
-    pub(crate) fn keep<U: Unit>(&mut self, unit: &U) {
-        let Some(bytes) = unit.snapshot() else { return };
-        if bytes == self.written {
-            return;
-        }
-        let tmp = self.path.with_extension("new");
-        let written = self
-            .path
-            .parent()
-            .map_or(Ok(()), std::fs::create_dir_all)
-            .and_then(|()| std::fs::write(&tmp, &bytes))
-            .and_then(|()| std::fs::rename(&tmp, &self.path));
-        match written {
-            Ok(()) => self.written = bytes,
-            Err(e) => tracing::warn!(error = %e, "snapshot not kept"),
-        }
-    }
-
-    /// An instance that leaves on purpose: the next one starts afresh.
-    fn drop_file(&self) {
-        let _ = std::fs::remove_file(&self.path);
     }
 }
 
@@ -285,8 +238,12 @@ pub(crate) struct Common<P> {
     /// Last cycle this unit finished (ran, skipped or failed) for.
     last_cycle: u64,
     name: String,
-    /// The unit's snapshot across restarts.
-    snapshots: Snapshots,
+    /// The unit's state object, if it keeps state (and it could be opened).
+    kept: Option<Kept>,
+    /// The state of the run just made, encoded (reused from run to run).
+    state_buf: Vec<u8>,
+    /// Whether a failure to keep the state was logged already (logged once, not every run).
+    state_warned: bool,
     /// Wakes from other threads (a gateway's).
     waker: Option<Waker>,
 }
@@ -387,20 +344,17 @@ fn run<U: Unit>(
     let node = services::node(&domain, &decl.name)?;
     let mut io: Option<Io> = None;
     unit.init()?;
-    let mut snapshots = Snapshots::new(&domain, &decl.name);
-    if let Some(bytes) = snapshots.load() {
-        tracing::info!(
-            bytes = bytes.len(),
-            "restored what an earlier instance kept"
-        );
-        unit.restore(&bytes);
-    }
+    let kept = unit
+        .state_fingerprint()
+        .and_then(|fp| take_back(&mut unit, &names::state(&domain.prefix(), &decl.name), fp));
     let mut common = Common {
         params,
         param_gen: 0,
         last_cycle: 0,
         name: decl.name.clone(),
-        snapshots,
+        kept,
+        state_buf: Vec::new(),
+        state_warned: false,
         waker: unit.waker(),
     };
     let mut decl = decl;
@@ -465,7 +419,9 @@ fn run<U: Unit>(
                     board.ring_manager();
                 }
                 tracing::info!("leaving");
-                common.snapshots.drop_file();
+                if let Some(kept) = common.kept.take() {
+                    kept.remove();
+                }
                 return Ok(());
             }
             End::ManagerGone => {
@@ -473,4 +429,39 @@ fn run<U: Unit>(
             }
         }
     }
+}
+
+/// Opens the state object `name` of a unit that keeps state and gives the unit what an
+/// earlier instance of its name kept, saying in the log which of the four cases it was.
+fn take_back<U: Unit>(unit: &mut U, name: &str, fingerprint: u64) -> Option<Kept> {
+    let (kept, found) = match Kept::open(name, fingerprint) {
+        Ok(k) => k,
+        Err(e) => {
+            tracing::warn!(error = %e, "the state cannot be kept: a restart will start afresh");
+            return None;
+        }
+    };
+    match found {
+        Found::Nothing => {}
+        Found::State { bytes, cycle } => match unit.restore_state(&bytes) {
+            Ok(()) => tracing::info!(
+                bytes = bytes.len(),
+                cycle,
+                "restored the state of the last completed run"
+            ),
+            Err(e) => tracing::warn!(
+                error = %e,
+                "the kept state does not decode: starting afresh"
+            ),
+        },
+        Found::OtherVersion { fingerprint: old } => tracing::warn!(
+            kept = format_args!("{old:016x}"),
+            this = format_args!("{fingerprint:016x}"),
+            "the kept state is another version's: starting afresh"
+        ),
+        Found::Unreadable => {
+            tracing::warn!("the state object holds no whole state: starting afresh");
+        }
+    }
+    Some(kept)
 }

@@ -128,7 +128,6 @@ pub(super) fn serve<U: Unit>(
         // A closed board is checked at once: its manager left, or died and was replaced.
         if now >= next_tick || !board.is_open() {
             next_tick = now + LIVENESS_TICK;
-            common.snapshots.keep(&*unit);
             if !board.manager_alive()
                 || slot.state() != SlotState::Ready
                 || slot.pid.load(Ordering::Acquire) != me

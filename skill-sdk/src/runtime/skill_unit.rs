@@ -12,6 +12,7 @@ use crate::ports::{
     ErasedInput, ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker,
 };
 use crate::skill::{Ctx, Skill, SkillResult};
+use crate::state::StateError;
 use std::any::Any;
 use std::sync::atomic::Ordering;
 
@@ -144,11 +145,12 @@ pub(crate) fn finish_run(link: &Link<'_>, r: RunRecord) {
 
 impl<S: Skill> Unit for SkillUnit<S> {
     type Params = S::Params;
-    fn snapshot(&self) -> Option<Vec<u8>> {
-        self.0.snapshot()
+    fn state_fingerprint(&self) -> Option<u64> {
+        S::STATE.fingerprint()
     }
-    fn restore(&mut self, snapshot: &[u8]) {
-        self.0.restore(snapshot);
+    fn restore_state(&mut self, bytes: &[u8]) -> Result<(), StateError> {
+        self.0 = S::STATE.decode(bytes)?;
+        Ok(())
     }
     fn mode(&self) -> Mode {
         S::MODE
@@ -173,16 +175,55 @@ impl<S: Skill> Unit for SkillUnit<S> {
     }
 
     fn step(&mut self, link: &Link<'_>, io: &mut Io, common: &mut Common<S::Params>) {
-        let skill = &mut self.0;
-        step_skill(link, io, common, S::MODE, |src, outputs, ctx| {
-            match <S::Inputs<'_> as InputSet<'_>>::fetch(src) {
+        step_skill(
+            link,
+            io,
+            common,
+            S::MODE,
+            &mut self.0,
+            |skill, src, outputs, ctx| match <S::Inputs<'_> as InputSet<'_>>::fetch(src) {
                 None => RunStatus::Skipped,
                 Some(input) => {
                     let mut out = <S::Outputs<'_> as OutputSet<'_>>::bind(outputs);
                     guarded(ctx.cycle, || skill.compute(ctx, input, &mut out))
                 }
+            },
+            keep_state,
+        );
+    }
+}
+
+/// After a run: the state of a completed run is kept (committed to the state object before
+/// the run is stamped, so a run the manager counts as done is never lost); a failed run is
+/// undone, the skill taken back to the state of the last completed one, as its outputs are
+/// dropped (a panic half-way through a body leaves nothing half-changed).
+fn keep_state<S: Skill>(skill: &mut S, status: RunStatus, common: &mut Common<S::Params>, k: u64) {
+    let Some(kept) = common.kept.as_mut() else {
+        return;
+    };
+    match status {
+        RunStatus::Ok => {
+            let error = match S::STATE.encode(skill, &mut common.state_buf) {
+                Ok(_) => kept
+                    .commit(&common.state_buf, k)
+                    .err()
+                    .map(|e| format!("{e:?}")),
+                Err(e) => Some(format!("{e:?}")),
+            };
+            if let Some(error) = error
+                && !common.state_warned
+            {
+                common.state_warned = true;
+                tracing::warn!(cycle = k, %error, "the state of a run could not be kept (said once)");
             }
-        });
+        }
+        RunStatus::Failed => {
+            *skill = kept
+                .last()
+                .and_then(|bytes| S::STATE.decode(&bytes).ok())
+                .unwrap_or_default();
+        }
+        _ => {}
     }
 }
 
@@ -190,12 +231,14 @@ impl<S: Skill> Unit for SkillUnit<S> {
 /// k and every same-cycle input carries cycle k; an async one when an input changed (or once
 /// per cycle without inputs). `run` runs the body on the inputs and outputs; the outputs of a
 /// successful run are sent, the run stamped, and proposals not made are announced.
-pub(crate) fn step_skill<P: Params>(
+pub(crate) fn step_skill<P: Params, B>(
     link: &Link<'_>,
     io: &mut Io,
     common: &mut Common<P>,
     mode: Mode,
-    run: impl FnOnce(&dyn InputSource, &mut [ErasedOutput], &Ctx<'_, P>) -> RunStatus,
+    body: &mut B,
+    run: impl FnOnce(&mut B, &dyn InputSource, &mut [ErasedOutput], &Ctx<'_, P>) -> RunStatus,
+    keep: impl FnOnce(&mut B, RunStatus, &mut Common<P>, u64),
 ) {
     let board = link.board;
     let slot = board.slot(link.idx);
@@ -229,9 +272,10 @@ pub(crate) fn step_skill<P: Params>(
             params: &common.params,
             cycle: k,
             name: &common.name,
+            activation: slot.active.load(Ordering::Acquire),
             clock: link.board.header().clock(),
         };
-        run(&src, &mut io.outputs, &ctx)
+        run(body, &src, &mut io.outputs, &ctx)
     };
     let end = now_ns();
     let header = SampleHeader {
@@ -241,6 +285,7 @@ pub(crate) fn step_skill<P: Params>(
         reserved: 0,
     };
     let mask = commit_outputs(link, &mut io.outputs, status, header);
+    keep(body, status, common, k);
     for i in io.inputs.iter_mut() {
         i.consume();
     }

@@ -1,6 +1,7 @@
 //! `car_watch`: which elevator car is open on this floor, from the hall lanterns.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`CarWatch`].
 #[derive(Params, Debug, Clone)]
@@ -52,7 +53,7 @@ const VIEW_HALF: f64 = 27.0 * PI / 180.0;
 const VIEW_RANGE: f64 = 5.6;
 
 /// One car's lantern in the odometry frame.
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Default, Clone, Copy, Serialize, Deserialize)]
 struct Lantern {
     /// Weighted sums of x, y and the weights (a running average that forgets).
     sum: (f64, f64, f64),
@@ -77,7 +78,7 @@ struct Lantern {
 /// For a sequencer: `car.id > 0` (car `id`, 1.., is open: its doorway at `car.x`, `car.y`, the way
 /// in `car.heading`, odometry frame), `car.id == 0` (none, or its doors closed). Everything is
 /// forgotten when reactivated: a lantern must be seen again.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct CarWatch {
     activation: Activation,
     lanterns: Vec<Lantern>,
@@ -91,9 +92,10 @@ impl Skill for CarWatch {
     type Params = CarWatchParams;
     type Inputs<'a> = CarWatchIn<'a>;
     type Outputs<'a> = CarOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(&mut self, ctx: &Ctx<CarWatchParams>, i: CarWatchIn, o: &mut CarOut) -> SkillResult {
         let (b, od, t, p) = (&*i.barcodes, &*i.odometry, &*i.target, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             self.lanterns.clear();
             self.last_age_ms = None;
             self.current = None;

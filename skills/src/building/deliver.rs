@@ -1,6 +1,7 @@
 //! `deliver`: saying the message at the office.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`Deliver`].
 #[derive(Params, Debug, Clone)]
@@ -53,7 +54,7 @@ use deliver_phase::*;
 ///
 /// For a sequencer: `deliver.progress.done == 1` (said); `progress.value` is the range of the
 /// room's sign when last in view (m; 0 before).
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct Deliver {
     activation: Activation,
     /// Messages said when activated.
@@ -67,6 +68,7 @@ impl Skill for Deliver {
     type Params = DeliverParams;
     type Inputs<'a> = DeliverIn<'a>;
     type Outputs<'a> = DeliverOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(
         &mut self,
         ctx: &Ctx<DeliverParams>,
@@ -74,7 +76,7 @@ impl Skill for Deliver {
         o: &mut DeliverOut,
     ) -> SkillResult {
         let (signs, voice, p) = (&*i.signs, &*i.voice, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             self.said_before = voice.said;
             self.seq = None;
             self.range = 0.0;

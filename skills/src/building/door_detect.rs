@@ -1,6 +1,7 @@
 //! `door_detect`: side doors passed along a corridor, from the sonar ring.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`DoorDetect`].
 #[derive(Params, Debug, Clone)]
@@ -36,7 +37,7 @@ pub struct DoorsOut<'a> {
 }
 
 /// An opening beside the robot, from where it began.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Opening {
     /// Pose where the side sonar first saw through it.
     x: f64,
@@ -47,7 +48,7 @@ struct Opening {
 }
 
 /// What one side has seen.
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Default, Clone, Copy, Serialize, Deserialize)]
 struct Side {
     /// The wall's last range (m); `None` until a wall has been seen.
     wall: Option<f64>,
@@ -101,7 +102,7 @@ impl Side {
 ///
 /// For a sequencer: `doors.left >= n`, `doors.right >= n` (doors passed on each side since
 /// activation), `doors.beside` (1 left, −1 right, 0 none: an opening beside now; left if both).
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct DoorDetect {
     activation: Activation,
     /// Left, right.
@@ -117,6 +118,7 @@ impl Skill for DoorDetect {
     type Params = DoorDetectParams;
     type Inputs<'a> = DoorDetectIn<'a>;
     type Outputs<'a> = DoorsOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(
         &mut self,
         ctx: &Ctx<DoorDetectParams>,
@@ -124,7 +126,7 @@ impl Skill for DoorDetect {
         o: &mut DoorsOut,
     ) -> SkillResult {
         let (s, od, p) = (&*i.sonar, &*i.odometry, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             self.sides = [Side::default(); 2];
             self.ages = [f64::INFINITY; 2];
         }

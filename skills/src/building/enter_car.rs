@@ -1,6 +1,7 @@
 //! `enter_car`: driving into an open elevator car.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`EnterCar`].
 #[derive(Params, Debug, Clone)]
@@ -119,7 +120,7 @@ const CURTAIN: f64 = 0.45;
 /// For a sequencer: `enter_car.progress.done == 1` (inside, facing the back wall),
 /// `enter_car.progress.phase == 3` (lost, backed away: call the car again and reactivate);
 /// `progress.value` is the distance past the doorway line (m, negative before it).
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct EnterCar {
     activation: Activation,
     phase: u32,
@@ -148,6 +149,7 @@ impl Skill for EnterCar {
     type Params = EnterCarParams;
     type Inputs<'a> = EnterCarIn<'a>;
     type Outputs<'a> = DriveJobOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(
         &mut self,
         ctx: &Ctx<EnterCarParams>,
@@ -155,7 +157,7 @@ impl Skill for EnterCar {
         o: &mut DriveJobOut,
     ) -> SkillResult {
         let (car, od, s, p) = (&*i.car, &*i.odometry, &*i.sonar, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             *self = EnterCar {
                 activation: self.activation,
                 ..EnterCar::default()

@@ -1,6 +1,7 @@
 //! `hall_follow`: driving along corridors and turning at intersections.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`HallFollow`].
 #[derive(Params, Debug, Clone)]
@@ -42,7 +43,7 @@ pub struct HallFollowIn<'a> {
 }
 
 /// What it is doing.
-#[derive(Debug, Default, Clone, Copy, PartialEq)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize)]
 enum Mode {
     /// Along the corridor.
     #[default]
@@ -93,7 +94,7 @@ const CENTRING_MAX: f64 = 0.3;
 ///
 /// For a sequencer: it reports nothing; wait on `intersection.junction.count` and set `turn`
 /// before the intersection.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct HallFollow {
     activation: Activation,
     mode: Mode,
@@ -190,6 +191,7 @@ impl Skill for HallFollow {
     type Params = HallFollowParams;
     type Inputs<'a> = HallFollowIn<'a>;
     type Outputs<'a> = DriveOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 3;
     fn compute(
         &mut self,
@@ -198,7 +200,7 @@ impl Skill for HallFollow {
         o: &mut DriveOut,
     ) -> SkillResult {
         let (s, od, j, p) = (&*i.sonar, &*i.odometry, &*i.junction, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             *self = HallFollow {
                 activation: self.activation,
                 ..HallFollow::default()

@@ -1,6 +1,7 @@
 //! `intersection`: corridor intersections from the sonar ring.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`Intersection`].
 #[derive(Params, Debug, Clone)]
@@ -52,7 +53,7 @@ pub struct JunctionOut<'a> {
 ///
 /// For a sequencer: `junction.count >= n` (the n-th intersection entered), `junction.inside`,
 /// `junction.left`/`right`/`ahead` (which ways are open now).
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct Intersection {
     activation: Activation,
     inside: bool,
@@ -67,6 +68,7 @@ impl Skill for Intersection {
     type Params = IntersectionParams;
     type Inputs<'a> = IntersectionIn<'a>;
     type Outputs<'a> = JunctionOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(
         &mut self,
         ctx: &Ctx<IntersectionParams>,
@@ -74,7 +76,7 @@ impl Skill for Intersection {
         o: &mut JunctionOut,
     ) -> SkillResult {
         let (s, od, p) = (&*i.sonar, &*i.odometry, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             self.inside = false;
             self.count = 0;
             self.differs = 0;

@@ -1,6 +1,7 @@
 //! `leave_car`: turning to the car's doors and driving out when they open.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`LeaveCar`].
 #[derive(Params, Debug, Clone)]
@@ -77,7 +78,7 @@ const BLOCKED: f64 = 0.3;
 /// `leave_car.progress.phase == 1` (turned, waiting for `go` and the doors); `progress.value`
 /// is the distance driven along the way out (m). Set `go` to 1 on the right floor (e.g. when
 /// `sign_read.signs.floor == 4`).
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct LeaveCar {
     activation: Activation,
     phase: u32,
@@ -96,6 +97,7 @@ impl Skill for LeaveCar {
     type Params = LeaveCarParams;
     type Inputs<'a> = LeaveCarIn<'a>;
     type Outputs<'a> = DriveJobOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(
         &mut self,
         ctx: &Ctx<LeaveCarParams>,
@@ -103,7 +105,7 @@ impl Skill for LeaveCar {
         o: &mut DriveJobOut,
     ) -> SkillResult {
         let (od, s, p) = (&*i.odometry, &*i.sonar, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             self.phase = TURNING;
             self.start = (od.x, od.y);
             self.way = wrap(od.theta + PI);

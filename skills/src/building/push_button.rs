@@ -1,6 +1,7 @@
 //! `push_button`: pressing a button with the pusher.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`PushButton`].
 #[derive(Params, Debug, Clone)]
@@ -120,7 +121,7 @@ const FACING: f64 = 0.2;
 /// For a sequencer: `push_button.progress.done == 1` (pressed), `push_button.progress.phase
 /// == 5` (failed); `progress.value` is the number of strokes made. Everything starts again
 /// when reactivated.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct PushButton {
     activation: Activation,
     phase: u32,
@@ -176,6 +177,7 @@ impl Skill for PushButton {
     type Params = PushButtonParams;
     type Inputs<'a> = PushButtonIn<'a>;
     type Outputs<'a> = PushButtonOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(
         &mut self,
         ctx: &Ctx<PushButtonParams>,
@@ -183,7 +185,7 @@ impl Skill for PushButton {
         o: &mut PushButtonOut,
     ) -> SkillResult {
         let (t, od, arm, s, p) = (&*i.target, &*i.odometry, &*i.arm, &*i.sonar, ctx.params);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             *self = PushButton {
                 activation: self.activation,
                 ..PushButton::default()

@@ -1,6 +1,7 @@
 //! `sign_read`: floor and room signs from the camera.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Input of [`SignRead`].
 #[derive(Inputs)]
@@ -29,7 +30,7 @@ const ROOMS: std::ops::RangeInclusive<u32> = 100..=799;
 /// For a sequencer: `signs.floor_known == 1 && signs.floor == 4` (the car's indicator says
 /// floor 4; `floor_known` is false again after a reactivation, so an indicator read on another
 /// ride does not count), `signs.room == 405 && signs.room_range < 2.0`.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct SignRead {
     activation: Activation,
     /// The floor last read, if one was read since activation.
@@ -40,9 +41,10 @@ impl Skill for SignRead {
     type Params = NoParams;
     type Inputs<'a> = SignIn<'a>;
     type Outputs<'a> = SignsOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(&mut self, ctx: &Ctx<NoParams>, i: SignIn, o: &mut SignsOut) -> SkillResult {
         let b = &*i.barcodes;
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             self.floor = None;
         }
         let mut signs = Signs::default();

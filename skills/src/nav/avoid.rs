@@ -1,6 +1,7 @@
 //! `avoid`: obstacle avoidance from the sonar ring.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`Avoid`].
 #[derive(Params, Debug, Clone)]
@@ -25,7 +26,7 @@ pub struct SonarIn<'a> {
 
 /// Obstacle avoidance from the sonar ring: when something is closer than `safe_distance`
 /// in the front arc, turn toward the freer side; otherwise propose nothing.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct Avoid {
     /// Side chosen while an obstacle persists (stops dithering): +1 left, −1 right.
     side: f64,
@@ -35,6 +36,7 @@ impl Skill for Avoid {
     type Params = AvoidParams;
     type Inputs<'a> = SonarIn<'a>;
     type Outputs<'a> = DriveOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 8;
     fn compute(&mut self, ctx: &Ctx<AvoidParams>, i: SonarIn, o: &mut DriveOut) -> SkillResult {
         let p = ctx.params;

@@ -1,6 +1,7 @@
 //! `barcode_track`: barcode tracking in the odometry frame.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`BarcodeTrack`].
 #[derive(Params, Debug, Clone)]
@@ -33,7 +34,7 @@ pub struct TrackOut<'a> {
 /// would smear the estimate. A new `id`, or a new activation, starts from nothing: one
 /// tracker serves a plan's successive targets (a door, a button, a sign), and the old
 /// target's place must not leak into the new one's.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct BarcodeTrack {
     sum: (f64, f64, f64),
     /// Age of the report seen in the last cycle (a younger one is a new report).
@@ -50,10 +51,11 @@ impl Skill for BarcodeTrack {
     type Params = TrackParams;
     type Inputs<'a> = TrackIn<'a>;
     type Outputs<'a> = TrackOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(&mut self, ctx: &Ctx<TrackParams>, i: TrackIn, o: &mut TrackOut) -> SkillResult {
         let od = *i.odometry;
         let b = *i.barcodes;
-        let begins = self.activation.begins(ctx.cycle);
+        let begins = self.activation.begins(ctx);
         if begins || self.tracking != Some(ctx.params.id) {
             self.sum = (0.0, 0.0, 0.0);
             self.tracking = Some(ctx.params.id);

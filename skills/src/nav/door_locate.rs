@@ -1,6 +1,7 @@
 //! `door_locate`: door location from the sonar ring.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`DoorLocate`].
 #[derive(Params, Debug, Clone)]
@@ -72,7 +73,7 @@ const REFIT_STEP: f64 = 0.25f64.to_radians();
 const REFIT_STEPS: i32 = 24;
 
 /// One sonar reading placed in the odometry frame: ring point, direction, range (∞: no echo).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Ray {
     o: (f64, f64),
     a: f64,
@@ -81,7 +82,7 @@ struct Ray {
 
 /// A wall line `x cos φ + y sin φ = ρ`, its normal pointing from the robot's side into it;
 /// positions along it are measured from the barcode's foot on it.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Wall {
     phi: f64,
     rho: f64,
@@ -137,7 +138,7 @@ impl Wall {
 /// first. The door is the widest open run next to the barcode with wall on both sides, its
 /// edges halfway between the last open and the first wall evidence; the way through is the
 /// wall's normal. Each reading is used once, placed from the pose it was taken at.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct DoorLocate {
     /// Age of each sonar's reading in the last cycle (a younger one is a new reading).
     ages: Vec<f64>,
@@ -149,11 +150,20 @@ pub struct DoorLocate {
     /// Cycle of the last refit of the wall.
     fitted: u64,
     /// The newest estimate.
+    #[serde(with = "DoorState")]
     found: Door,
 }
 
-/// First bytes of a door_locate snapshot (its layout's version).
-const SNAPSHOT_TAG: &[u8; 8] = b"door-v1\0";
+/// How the door estimate is kept (the message type itself has no serde).
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Door")]
+struct DoorState {
+    found: bool,
+    x: f64,
+    y: f64,
+    heading: f64,
+    width: f64,
+}
 
 /// Readings kept for refitting the wall and rebuilding the evidence.
 const HISTORY: usize = 6000;
@@ -333,6 +343,7 @@ impl Skill for DoorLocate {
     type Params = DoorParams;
     type Inputs<'a> = DoorIn<'a>;
     type Outputs<'a> = DoorOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     fn compute(&mut self, ctx: &Ctx<DoorParams>, i: DoorIn, o: &mut DoorOut) -> SkillResult {
         let (od, t, s, p) = (*i.odometry, *i.target, *i.sonar, ctx.params);
         if self.ages.is_empty() {
@@ -400,62 +411,5 @@ impl Skill for DoorLocate {
         }
         o.door.set(self.found);
         Ok(())
-    }
-
-    /// The readings gathered, the wall and the door found: a restarted door_locate goes on
-    /// from its evidence instead of searching again (the odometry frame survives device
-    /// restarts, so they stay in place). The evidence bins are rebuilt at the next refit.
-    fn snapshot(&self) -> Option<Vec<u8>> {
-        let mut b = Vec::with_capacity(96 + 32 * self.history.len());
-        b.extend(SNAPSHOT_TAG);
-        let mut f = |x: f64| b.extend(x.to_le_bytes());
-        let d = self.found;
-        for x in [f64::from(u8::from(d.found)), d.x, d.y, d.heading, d.width] {
-            f(x);
-        }
-        match self.wall {
-            Some(w) => [1.0, w.phi, w.rho, w.anchor.0, w.anchor.1]
-                .into_iter()
-                .for_each(&mut f),
-            None => [0.0; 5].into_iter().for_each(&mut f),
-        }
-        for r in &self.history {
-            [r.o.0, r.o.1, r.a, r.r].into_iter().for_each(&mut f);
-        }
-        Some(b)
-    }
-
-    fn restore(&mut self, snapshot: &[u8]) {
-        let Some(rest) = snapshot.strip_prefix(SNAPSHOT_TAG.as_slice()) else {
-            return;
-        };
-        let v: Vec<f64> = rest
-            .chunks_exact(8)
-            .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
-            .collect();
-        if v.len() < 10 || !(v.len() - 10).is_multiple_of(4) {
-            return;
-        }
-        self.found = Door {
-            found: v[0] != 0.0,
-            x: v[1],
-            y: v[2],
-            heading: v[3],
-            width: v[4],
-        };
-        self.wall = (v[5] != 0.0).then_some(Wall {
-            phi: v[6],
-            rho: v[7],
-            anchor: (v[8], v[9]),
-        });
-        self.history = v[10..]
-            .chunks_exact(4)
-            .map(|r| Ray {
-                o: (r[0], r[1]),
-                a: r[2],
-                r: r[3],
-            })
-            .collect();
-        self.fitted = 0;
     }
 }

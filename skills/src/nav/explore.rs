@@ -1,6 +1,7 @@
 //! `explore`: a systematic search of a room — frontier coverage over an occupancy grid.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, VecDeque};
 
 /// Parameters of [`Explore`].
@@ -58,14 +59,14 @@ fn centre(c: Cell) -> (f64, f64) {
 }
 
 /// Evidence for one cell: rays that crossed it, echoes from it.
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Default, Clone, Copy, Serialize, Deserialize)]
 struct Evidence {
     free: u16,
     occupied: u16,
 }
 
 /// What it is doing.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 enum Mode {
     /// Turning once round on the spot (rad still to turn), the camera sweeping the room.
     Look { left: f64 },
@@ -89,7 +90,7 @@ enum Mode {
 ///
 /// Unlike `wander`, which draws legs through the least visited ground, every part of a
 /// closed room is looked at from within `cover` after a bounded drive, whatever the seed.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct Explore {
     activation: Activation,
     grid: HashMap<Cell, Evidence>,
@@ -213,10 +214,11 @@ impl Skill for Explore {
     type Params = ExploreParams;
     type Inputs<'a> = ExploreIn<'a>;
     type Outputs<'a> = DriveOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 2;
     fn compute(&mut self, ctx: &Ctx<ExploreParams>, i: ExploreIn, o: &mut DriveOut) -> SkillResult {
         let (p, s, od) = (ctx.params, &*i.sonar, &*i.odometry);
-        if self.activation.begins(ctx.cycle) {
+        if self.activation.begins(ctx) {
             // The grid stays (the room is the same); the search starts with a look round.
             self.mode = None;
             self.last_theta = None;
@@ -288,63 +290,4 @@ impl Skill for Explore {
         o.drive.set(drive);
         Ok(())
     }
-
-    /// The grid and the places looked from: a restarted explore goes on covering the room
-    /// instead of starting its search again (the odometry frame survives device restarts).
-    fn snapshot(&self) -> Option<Vec<u8>> {
-        let mut b = Vec::with_capacity(16 + 12 * self.grid.len() + 16 * self.looked.len());
-        b.extend(SNAPSHOT_TAG);
-        b.extend((self.looked.len() as u32).to_le_bytes());
-        for &(x, y) in &self.looked {
-            b.extend(x.to_le_bytes());
-            b.extend(y.to_le_bytes());
-        }
-        let mut cells: Vec<_> = self.grid.iter().collect();
-        cells.sort_unstable_by_key(|(c, _)| **c);
-        for (&(x, y), e) in cells {
-            b.extend(x.to_le_bytes());
-            b.extend(y.to_le_bytes());
-            b.extend(e.free.to_le_bytes());
-            b.extend(e.occupied.to_le_bytes());
-        }
-        Some(b)
-    }
-
-    fn restore(&mut self, snapshot: &[u8]) {
-        let Some(rest) = snapshot.strip_prefix(SNAPSHOT_TAG.as_slice()) else {
-            return;
-        };
-        let Some(n) = rest
-            .get(..4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        else {
-            return;
-        };
-        let places = 4 + 16 * n as usize;
-        let (Some(looked), Some(cells)) = (rest.get(4..places), rest.get(places..)) else {
-            return;
-        };
-        let f = |b: &[u8]| f64::from_le_bytes(b.try_into().unwrap_or_default());
-        self.looked = looked
-            .chunks_exact(16)
-            .map(|c| (f(&c[..8]), f(&c[8..])))
-            .collect();
-        self.grid = cells
-            .chunks_exact(12)
-            .map(|c| {
-                let i = |b: &[u8]| i32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                let u = |b: &[u8]| u16::from_le_bytes([b[0], b[1]]);
-                (
-                    (i(&c[0..]), i(&c[4..])),
-                    Evidence {
-                        free: u(&c[8..]),
-                        occupied: u(&c[10..]),
-                    },
-                )
-            })
-            .collect();
-    }
 }
-
-/// First bytes of an explore snapshot (its layout's version).
-const SNAPSHOT_TAG: &[u8; 8] = b"explore1";

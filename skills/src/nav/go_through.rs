@@ -1,6 +1,7 @@
 //! `go_through`: driving through a located opening.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`GoThrough`].
 #[derive(Params, Debug, Clone)]
@@ -47,7 +48,7 @@ pub struct GoOut<'a> {
 /// Drive through a located opening: to a point `approach` before it on its axis, then along
 /// the axis (a carrot 0.6 m ahead on it), centred between the posts by the side sonars, and
 /// on. Pushing without moving (a post) backs it off to line up again.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct GoThrough {
     lined_up: bool,
     /// Cycles spent commanding forward motion without moving.
@@ -60,6 +61,7 @@ impl Skill for GoThrough {
     type Params = GoThroughParams;
     type Inputs<'a> = GoIn<'a>;
     type Outputs<'a> = GoOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 6;
     fn compute(&mut self, ctx: &Ctx<GoThroughParams>, i: GoIn, o: &mut GoOut) -> SkillResult {
         let (d, od, s, p) = (*i.door, *i.odometry, *i.sonar, ctx.params);

@@ -26,6 +26,7 @@ pub use stop::*;
 pub use wall_follow::*;
 pub use wander::*;
 
+use serde::{Deserialize, Serialize};
 use skill_sdk::prelude::*;
 use skillfab_msgs::{Barcodes, Door, Drive, Odometry, Progress, SONARS, Sonar, Target};
 use std::f64::consts::{PI, TAU};
@@ -75,21 +76,22 @@ pub struct DriveOut<'a> {
     pub drive: Proposal<'a, Drive>,
 }
 
-/// When a skill (re)starts. The runtime does not run an inactive skill, so a run that does not
-/// follow the previous cycle's begins a new activation: skills that count or remember "since
-/// activated" start afresh there (a sequencer reuses them from step to step of a plan).
-#[derive(Debug, Default, Clone, Copy)]
+/// When a skill begins an activation: skills that count or remember "since activated" start
+/// afresh there (a sequencer reuses them from step to step of a plan). The manager numbers
+/// activations ([`Ctx::activation`]); a restarted process keeps its number, so a restart in
+/// the middle of an activation goes on with the state it kept.
+#[derive(Debug, Default, Clone, Copy, Serialize, Deserialize)]
 pub struct Activation {
-    /// The cycle of the last run.
-    last: Option<u64>,
+    /// The activation of the last run.
+    last: Option<u32>,
 }
 
 impl Activation {
-    /// Notes a run in `cycle`; true when it begins an activation (the first run, a run after a
-    /// gap of more than one cycle, or cycles that went back: a restarted manager).
-    pub fn begins(&mut self, cycle: u64) -> bool {
-        let fresh = self.last.is_none_or(|l| cycle > l + 1 || cycle <= l);
-        self.last = Some(cycle);
+    /// Notes a run of activation `ctx.activation`; true when it begins one (the first run, or
+    /// the first of a new activation).
+    pub fn begins<P>(&mut self, ctx: &Ctx<'_, P>) -> bool {
+        let fresh = self.last != Some(ctx.activation);
+        self.last = Some(ctx.activation);
         fresh
     }
 }

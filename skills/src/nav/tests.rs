@@ -265,82 +265,145 @@ fn wander_drives_on_and_bounces_off_what_is_ahead() {
     );
 }
 
-#[test]
-fn a_restarted_wander_keeps_its_visit_map_and_draws_on() {
-    let mut h = Harness::<Wander>::new();
-    h.input("sonar", ring(|_| 5.0));
-    for k in 0..300 {
-        h.input(
-            "odometry",
-            Odometry {
-                x: 0.01 * f64::from(k),
-                ..Odometry::default()
-            },
-        );
-        h.step().unwrap();
+/// The outputs of a skill driven by `feed` for `steps` steps, restarted before every `every`-th
+/// step (0: never) as a `kill -9` and a new process given the kept state would restart it.
+fn outputs_restarted_every<S: Skill, T: Message + std::fmt::Debug>(
+    every: u64,
+    steps: u64,
+    port: &str,
+    mut feed: impl FnMut(&mut Harness<S>, u64),
+) -> Vec<String> {
+    let mut h = Harness::<S>::new();
+    h.restarting(every);
+    (0..steps)
+        .map(|k| {
+            feed(&mut h, k);
+            format!("{:?}", h.step().unwrap().output::<T>(port))
+        })
+        .collect()
+}
+
+/// Sonar readings that change from cycle to cycle (each new, ranges of a room 2–6 m across).
+fn varying_ring(k: u64) -> Sonar {
+    let mut s = ring(|a| 4.0 + 2.0 * (a * 3.0 + k as f64 * 0.01).sin());
+    s.age_ms = [(k % 3) as f64 * 5.0; SONARS];
+    s
+}
+
+/// Odometry of a robot driving a slow circle.
+fn circling(k: u64) -> Odometry {
+    let t = k as f64 * 0.004;
+    Odometry {
+        x: 2.0 * t.cos(),
+        y: 2.0 * t.sin(),
+        theta: wrap(t + PI / 2.0),
+        v: 0.2,
+        w: 0.1,
     }
-    let kept = h.skill().snapshot().unwrap();
-    let mut again = Wander::default();
-    again.restore(&kept);
-    assert_eq!(
-        again.snapshot().unwrap(),
-        kept,
-        "the same map and generator"
-    );
-    // Bytes of another layout change nothing.
-    let mut fresh = Wander::default();
-    fresh.restore(b"wander-0 something else");
-    assert_eq!(fresh.snapshot(), Wander::default().snapshot());
 }
 
 #[test]
-fn a_restarted_explore_keeps_its_grid_and_the_places_it_looked_from() {
-    let mut h = Harness::<Explore>::new();
-    // Walls 2 m away all round, each reading new every cycle; a full look round on the spot.
-    let mut s = ring(|_| 2.0);
-    for k in 0..1000 {
-        s.age_ms = [f64::from(k % 2) * 5.0; SONARS];
-        h.input("sonar", s).input(
-            "odometry",
-            Odometry {
-                theta: wrap(0.008 * f64::from(k)),
-                ..Odometry::default()
-            },
-        );
-        h.step().unwrap();
-    }
-    let kept = h.skill().snapshot().unwrap();
-    assert!(
-        kept.len() > 8 + 4 + 16 + 12 * 100,
-        "a grid and a place looked from"
+fn a_restarted_wander_draws_on_as_if_never_killed() {
+    let feed = |h: &mut Harness<Wander>, k| {
+        h.input("sonar", varying_ring(k))
+            .input("odometry", circling(k));
+    };
+    let once = outputs_restarted_every::<Wander, Drive>(0, 1500, "drive", feed);
+    assert_eq!(
+        outputs_restarted_every::<Wander, Drive>(7, 1500, "drive", feed),
+        once,
+        "the same map and generator after every restart"
     );
-    let mut again = Explore::default();
-    again.restore(&kept);
-    assert_eq!(again.snapshot().unwrap(), kept, "the same grid and places");
-    let mut fresh = Explore::default();
-    fresh.restore(b"explore0 something else");
-    assert_eq!(fresh.snapshot(), Explore::default().snapshot());
-    fresh.restore(b"explore1\xff\xff");
-    assert_eq!(fresh.snapshot(), Explore::default().snapshot(), "cut short");
+    // A fresh process would not draw the same (the test has teeth).
+    let mut fresh = Harness::<Wander>::new();
+    let forgetful: Vec<String> = (0..1500)
+        .map(|k| {
+            if k % 7 == 0 {
+                fresh = Harness::new();
+            }
+            feed(&mut fresh, k);
+            format!("{:?}", fresh.step().unwrap().output::<Drive>("drive"))
+        })
+        .collect();
+    assert_ne!(forgetful, once);
+}
+
+#[test]
+fn a_restarted_explore_goes_on_covering_as_if_never_killed() {
+    let feed = |h: &mut Harness<Explore>, k| {
+        h.input("sonar", varying_ring(k))
+            .input("odometry", circling(k));
+    };
+    assert_eq!(
+        outputs_restarted_every::<Explore, Drive>(13, 3000, "drive", feed),
+        outputs_restarted_every::<Explore, Drive>(0, 3000, "drive", feed),
+    );
 }
 
 #[test]
 fn a_restarted_door_locate_keeps_its_readings_and_its_door() {
-    let mut d = DoorLocate::default();
-    d.restore(b"nonsense");
-    let empty = d.snapshot().unwrap();
-    assert_eq!(empty, DoorLocate::default().snapshot().unwrap());
-    // A snapshot with a door, a wall and readings comes back byte for byte.
-    let mut b = empty[..8].to_vec();
-    let door = [1.0, 2.0, 3.0, 0.5, 0.9];
-    let wall = [1.0, 0.25, 4.0, 2.0, 3.5];
-    let rays = [0.1, 0.2, 1.0, f64::INFINITY, 0.3, 0.4, -1.0, 2.5];
-    for x in door.iter().chain(&wall).chain(&rays) {
-        b.extend(x.to_le_bytes());
-    }
-    let mut again = DoorLocate::default();
-    again.restore(&b);
-    assert_eq!(again.snapshot().unwrap(), b);
+    let run = |every| {
+        let mut h = Harness::<DoorLocate>::new();
+        h.restarting(every);
+        let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
+        let mut doors = Vec::new();
+        pass(&mut h, DOOR_WORLD, path, |h, od| {
+            h.input("odometry", *od);
+            h.input("target", remembered((1.95, -0.4), od));
+            doors.push(*h.step().unwrap().output::<Door>("door").unwrap());
+        });
+        doors
+    };
+    let restarted = run(3);
+    assert!(restarted.last().unwrap().found);
+    assert_eq!(format!("{restarted:?}"), format!("{:?}", run(0)));
+}
+
+#[test]
+fn restarted_go_through_wall_follow_and_avoid_go_on_as_if_never_killed() {
+    let door = Door {
+        found: true,
+        x: 3.0,
+        y: 0.0,
+        heading: 0.0,
+        width: 1.2,
+    };
+    // A robot that closes on the door from the side, with walls near and far.
+    let od = |k: u64| Odometry {
+        x: k as f64 * 0.004,
+        y: 1.0 - k as f64 * 0.002,
+        theta: 0.0,
+        v: 0.3,
+        w: 0.0,
+    };
+    let through = |h: &mut Harness<GoThrough>, k| {
+        h.input("door", door)
+            .input("sonar", varying_ring(k))
+            .input("odometry", od(k));
+    };
+    assert_eq!(
+        outputs_restarted_every::<GoThrough, Drive>(5, 800, "drive", through),
+        outputs_restarted_every::<GoThrough, Drive>(0, 800, "drive", through),
+    );
+    let near = |k: u64| {
+        let mut s = ring(|a| 0.4 + 0.3 * (a + k as f64 * 0.05).cos().abs());
+        s.age_ms = [0.0; SONARS];
+        s
+    };
+    let follow = |h: &mut Harness<WallFollow>, k| {
+        h.input("sonar", near(k));
+    };
+    assert_eq!(
+        outputs_restarted_every::<WallFollow, Drive>(5, 800, "drive", follow),
+        outputs_restarted_every::<WallFollow, Drive>(0, 800, "drive", follow),
+    );
+    let avoid = |h: &mut Harness<Avoid>, k| {
+        h.input("sonar", near(k));
+    };
+    assert_eq!(
+        outputs_restarted_every::<Avoid, Drive>(5, 800, "drive", avoid),
+        outputs_restarted_every::<Avoid, Drive>(0, 800, "drive", avoid),
+    );
 }
 
 #[test]

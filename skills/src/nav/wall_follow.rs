@@ -1,6 +1,7 @@
 //! `wall_follow`: hallway (wall) following.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`WallFollow`].
 #[derive(Params, Debug, Clone)]
@@ -28,7 +29,7 @@ pub struct WallFollowParams {
 /// or leaving the wall at up to 30°. A wall ahead turns it away. Where the wall beside stops,
 /// it holds its heading for `gap` cycles (past an open door), then curves toward the side
 /// (around a corner).
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct WallFollow {
     /// Cycles since the wall was last beside.
     lost: u64,
@@ -38,6 +39,7 @@ impl Skill for WallFollow {
     type Params = WallFollowParams;
     type Inputs<'a> = SonarIn<'a>;
     type Outputs<'a> = DriveOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 3;
     fn compute(
         &mut self,

@@ -1,6 +1,7 @@
 //! `wander`: wandering that covers the room.
 
 use super::*;
+use serde::{Deserialize, Serialize};
 
 /// Parameters of [`Wander`].
 #[derive(Params, Debug, Clone)]
@@ -44,7 +45,7 @@ pub struct WanderIn<'a> {
 /// along it) that leads through the least visited ground, from a coarse map of where the robot
 /// has been (odometry frame, 0.5 m cells), with a little randomness. Close obstacles are
 /// `avoid`'s.
-#[derive(Default)]
+#[derive(Default, Serialize, Deserialize)]
 pub struct Wander {
     rng: u64,
     heading: Option<f64>,
@@ -109,6 +110,7 @@ impl Skill for Wander {
     type Params = WanderParams;
     type Inputs<'a> = WanderIn<'a>;
     type Outputs<'a> = DriveOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 2;
     fn compute(&mut self, ctx: &Ctx<WanderParams>, i: WanderIn, o: &mut DriveOut) -> SkillResult {
         let (p, s, od) = (ctx.params, &*i.sonar, &*i.odometry);
@@ -151,48 +153,4 @@ impl Skill for Wander {
         });
         Ok(())
     }
-
-    /// The visit map and the random generator's state: a restarted wander goes on covering
-    /// the room instead of starting its search again (the odometry frame survives device
-    /// restarts, so the map stays in place).
-    fn snapshot(&self) -> Option<Vec<u8>> {
-        let mut b = Vec::with_capacity(24 + 12 * self.visits.len());
-        b.extend(SNAPSHOT_TAG);
-        b.extend(self.rng.to_le_bytes());
-        b.extend(self.driven.to_le_bytes());
-        let mut cells: Vec<_> = self.visits.iter().collect();
-        cells.sort_unstable();
-        for (&(x, y), &n) in cells {
-            b.extend(x.to_le_bytes());
-            b.extend(y.to_le_bytes());
-            b.extend(n.to_le_bytes());
-        }
-        Some(b)
-    }
-
-    fn restore(&mut self, snapshot: &[u8]) {
-        let Some(rest) = snapshot.strip_prefix(SNAPSHOT_TAG.as_slice()) else {
-            return;
-        };
-        let word = |b: &[u8], at: usize| -> Option<[u8; 8]> { b.get(at..at + 8)?.try_into().ok() };
-        let (Some(rng), Some(driven)) = (word(rest, 0), word(rest, 8)) else {
-            return;
-        };
-        let quad = |b: &[u8]| -> [u8; 4] { [b[0], b[1], b[2], b[3]] };
-        let cells = rest[16..].chunks_exact(12).map(|c| {
-            (
-                (
-                    i32::from_le_bytes(quad(&c[0..])),
-                    i32::from_le_bytes(quad(&c[4..])),
-                ),
-                u32::from_le_bytes(quad(&c[8..])),
-            )
-        });
-        self.visits = cells.collect();
-        self.rng = u64::from_le_bytes(rng);
-        self.driven = f64::from_le_bytes(driven);
-    }
 }
-
-/// First bytes of a wander snapshot (its layout's version).
-const SNAPSHOT_TAG: &[u8; 8] = b"wander-1";

@@ -424,59 +424,92 @@ fn a_plain_iceoryx2_client_reads_a_skills_output_from_the_documented_names() {
     );
 }
 
+/// The pid of the registered skill `name`, once its process is another than `old`.
+fn new_instance(
+    t: &TestDomain,
+    board: &skillfab_proto::board::Board,
+    name: &str,
+    old: Option<u32>,
+) -> u32 {
+    let mut pid = 0;
+    t.wait_until("the skill to be registered by a new process", || {
+        pid = skillfab_tests::registered(board, name).map_or(0, |s| s.decl.pid);
+        pid != 0 && Some(pid) != old
+    });
+    pid
+}
+
+fn kill9(pid: u32) {
+    let killed = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    );
+    assert!(killed.is_ok(), "SIGKILL to {pid}: {killed:?}");
+}
+
 #[test]
-fn a_killed_skill_comes_back_with_what_it_kept_and_a_clean_leave_drops_it() {
-    let mut t = TestDomain::new("snapshot");
+fn a_killed_skill_goes_on_from_its_last_completed_run_and_a_clean_leave_drops_its_state() {
+    let mut t = TestDomain::new("state");
     let launch = t.launch_file(
         "[manager]\nperiod_ms = 5\n[[process]]\nname = \"counter\"\nbin = \"{bin:counter}\"\nrestart = \"on-failure\"\n",
     );
     t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
     let board = t.board();
-    let file = t.domain.root_path().join("skills/counter/snapshot");
-    let kept = || {
-        std::fs::read(&file)
-            .ok()
-            .and_then(|b| b.try_into().ok())
-            .map(u64::from_le_bytes)
-    };
-    t.wait_until("a snapshot of more than 100 runs", || {
-        kept().is_some_and(|n| n > 100)
-    });
-    let pid = skillfab_tests::registered(&board, "counter")
-        .unwrap()
-        .decl
-        .pid;
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(pid as i32),
-        nix::sys::signal::Signal::SIGKILL,
-    )
-    .unwrap();
-    let at_kill = kept().unwrap();
-    t.wait_until("the restarted counter to run", || {
-        skillfab_tests::registered(&board, "counter")
-            .is_some_and(|s| s.decl.pid != pid && s.runs > 5)
-    });
-    let back = cycle(&board);
+    let shm = std::path::Path::new("/dev/shm").join(format!("{}state_counter", t.domain.prefix()));
     let c = skillfab_client::Client::connect(&t.domain).unwrap();
-    let (value, k) = c.query("counter.count.value").unwrap();
-    assert!(
-        k >= back - 1,
-        "a sample of the new instance ({k} vs {back})"
+    let count = || c.query("counter.count.value").unwrap().0.as_f64().unwrap() as u64;
+    let first = new_instance(&t, &board, "counter", None);
+    t.wait_until("some runs", || {
+        skillfab_tests::registered(&board, "counter").is_some_and(|s| s.runs > 20)
+    });
+
+    // Killed between two runs: the manager holds the cycle, one step ends a whole run.
+    c.stop().unwrap();
+    c.step(1).unwrap();
+    let before = count();
+    assert!(shm.exists(), "the state object {}", shm.display());
+    kill9(first);
+    let second = new_instance(&t, &board, "counter", Some(first));
+    c.step(1).unwrap();
+    assert_eq!(
+        count(),
+        before + 1,
+        "the first run after the restart counts on from the last one"
     );
-    // It counts on from what the dead one kept (a fresh one would be at its few runs).
-    assert!(
-        value.as_f64().unwrap() > at_kill as f64,
-        "{value} after a snapshot of {at_kill}"
+
+    // Runs that fail (a panic after counting) are undone, as their outputs are dropped.
+    c.set_param("counter", "panic_every", "3").unwrap();
+    let from = count();
+    let k = c.step(9).unwrap();
+    let failed = ((k - 8)..=k).filter(|k| k % 3 == 0).count() as u64;
+    assert_eq!(count(), from + 9 - failed, "only completed runs count");
+    c.set_param("counter", "panic_every", "0").unwrap();
+
+    // Killed inside a run: the run it was in never completed, so it is not kept.
+    c.set_param("counter", "dwell_ms", "10000").unwrap();
+    c.run().unwrap();
+    t.wait_until("a run to be under way", || {
+        let s = board.slot(skillfab_tests::registered(&board, "counter").unwrap().slot);
+        s.last_start_ns.load(std::sync::atomic::Ordering::Acquire)
+            > s.last_end_ns.load(std::sync::atomic::Ordering::Acquire)
+    });
+    c.stop().unwrap();
+    let completed = count();
+    kill9(second);
+    let third = new_instance(&t, &board, "counter", Some(second));
+    c.set_param("counter", "dwell_ms", "0").unwrap();
+    c.step(2).unwrap();
+    assert_eq!(
+        count(),
+        completed + 2,
+        "the run it was killed in is not kept"
     );
+
     // A clean leave (SIGTERM; `on-failure` does not restart it): the next one starts afresh.
-    let new_pid = skillfab_tests::registered(&board, "counter")
-        .unwrap()
-        .decl
-        .pid;
     nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(new_pid as i32),
+        nix::unistd::Pid::from_raw(third as i32),
         nix::sys::signal::Signal::SIGTERM,
     )
     .unwrap();
-    t.wait_until("the snapshot to be dropped", || !file.exists());
+    t.wait_until("the state to be dropped", || !shm.exists());
 }

@@ -48,6 +48,15 @@ struct Corridor {
 }
 
 impl Corridor {
+    /// Its skills restarted (as after `kill -9`) every `every` cycles.
+    fn restarting(mut self, every: u64) -> Corridor {
+        self.intersection.restarting(every);
+        self.hall.restarting(every);
+        self.doors.restarting(every);
+        self.avoid.restarting(every);
+        self
+    }
+
     /// Cycles until `there` holds of the robot, at most `cycles`; whether it got there.
     fn until(&mut self, r: &mut Robot, cycles: u32, there: impl Fn(&Robot) -> bool) -> bool {
         (0..cycles).any(|_| {
@@ -432,11 +441,49 @@ fn intersection_and_door_detect_count_afresh_when_reactivated() {
 #[test]
 fn hall_follow_takes_building_a_from_the_lab_door_to_the_lobby() {
     for seed in 1..=4 {
+        let (r, c, seen) = to_the_lobby(seed, 0);
+        let [x, y, _] = r.sim.pose;
+        assert_eq!(r.sim.collisions, 0, "seed {seed}: {:?}", r.sim.pose);
+        assert!(
+            seen.is_some(),
+            "seed {seed}: the call button never in view, at {x}, {y}"
+        );
+        assert!(c.junction.count >= 3, "seed {seed}: {:?}", c.junction);
+    }
+}
+
+/// The corridor skills restarted (as after `kill -9`) every 17 cycles: the same way to the
+/// lobby, to the same cycle and pose, the same doors counted.
+#[test]
+fn the_way_to_the_lobby_with_its_skills_restarted_again_and_again_is_the_same() {
+    let (r, c, seen) = to_the_lobby(2, 0);
+    let (r2, c2, seen2) = to_the_lobby(2, 17);
+    assert!(seen.is_some());
+    assert_eq!(
+        (
+            seen2,
+            r2.sim.pose,
+            format!("{:?} {:?}", c2.junction, c2.seen_doors)
+        ),
+        (
+            seen,
+            r.sim.pose,
+            format!("{:?} {:?}", c.junction, c.seen_doors)
+        )
+    );
+}
+
+/// From the lab door of building A with hall_follow told the turns (left, straight, right)
+/// until the call button's barcode is in view: the robot, the skills, the cycle it came into
+/// view. The skills are restarted every `every` cycles (0: never).
+fn to_the_lobby(seed: u64, every: u64) -> (Robot, Corridor, Option<u64>) {
+    {
         // Just through the lab door (go_through stops 0.8 m past it), facing east.
         let mut r = Robot::in_building("building-a.toml", seed, 0, [10.8, 4.0, 0.05]);
-        let mut c = Corridor::default();
+        let mut c = Corridor::default().restarting(every);
         c.hall.set_param("turn=1").unwrap();
         let mut track = Harness::<BarcodeTrack>::new();
+        track.restarting(every);
         track.set_param("id=850").unwrap();
         let mut seen = None;
         for k in 0..40_000 {
@@ -453,13 +500,7 @@ fn hall_follow_takes_building_a_from_the_lab_door_to_the_lobby() {
                 break;
             }
         }
-        let [x, y, _] = r.sim.pose;
-        assert_eq!(r.sim.collisions, 0, "seed {seed}: {:?}", r.sim.pose);
-        assert!(
-            seen.is_some(),
-            "seed {seed}: the call button never in view, at {x}, {y}"
-        );
-        assert!(c.junction.count >= 3, "seed {seed}: {:?}", c.junction);
+        (r, c, seen)
     }
 }
 

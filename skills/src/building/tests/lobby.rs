@@ -530,26 +530,60 @@ enum Ride {
 #[test]
 fn a_ride_calls_a_car_boards_it_presses_four_and_leaves_on_the_fourth_floor() {
     for seed in 1..=6 {
+        let (log, stage, r) = ride(seed, 0);
+        let [x, _, _] = r.sim.pose;
+        assert_eq!(stage, Ride::Out, "seed {seed}: {log:?}");
+        assert_eq!(r.sim.collisions, 0, "seed {seed}: {log:?}");
+        assert_eq!(r.sim.floor(), 4, "seed {seed}");
+        // Out of the doorway's light curtain (0.51 m): its doors may close behind it.
+        assert!(x < 27.5 - 0.55, "out in the lobby: {:?}", r.sim.pose);
+    }
+}
+
+/// Every skill of a ride restarted (as after `kill -9`) every `every` cycles: the ride is the
+/// same, stage for stage at the same simulated time, to the same pose.
+#[test]
+fn a_ride_with_every_skill_restarted_again_and_again_is_the_same_ride() {
+    for seed in 1..=2 {
+        let (log, stage, r) = ride(seed, 0);
+        let (again, stage_again, r_again) = ride(seed, 23);
+        assert_eq!(stage, Ride::Out);
+        assert_eq!(format!("{again:?}"), format!("{log:?}"), "seed {seed}");
+        assert_eq!((stage_again, r_again.sim.pose), (stage, r.sim.pose));
+    }
+}
+
+/// A ride from the lobby of building A with `seed`, the skills restarted every `every` cycles
+/// (0: never): the stages with the simulated time each began, the last stage, the robot.
+fn ride(seed: u64, every: u64) -> (Vec<(f64, Ride)>, Ride, Robot) {
+    {
         let mut r = Robot::in_building("building-a.toml", seed, 0, [24.5, 18.0, 0.1]);
         let mut stage = Ride::Call;
         let mut log = vec![(0.0, stage)];
         let fresh_push = |retreat: &str| {
             let mut h = Harness::<PushButton>::new();
             h.set_param(retreat).unwrap();
+            h.restarting(every);
             h
         };
         let fresh_track = |id: &str| {
             let mut h = Harness::<BarcodeTrack>::new();
             h.set_param(id).unwrap();
+            h.restarting(every);
             h
         };
+        fn restarting<S: Skill>(every: u64) -> Harness<S> {
+            let mut h = Harness::new();
+            h.restarting(every);
+            h
+        }
         let mut track = fresh_track("id=850");
         let mut push = fresh_push(CALL_RETREAT);
-        let mut watch = Harness::<CarWatch>::new();
-        let mut enter = Harness::<EnterCar>::new();
-        let mut leave = Harness::<LeaveCar>::new();
-        let mut signs = Harness::<SignRead>::new();
-        let mut avoid = Harness::<Avoid>::new();
+        let mut watch: Harness<CarWatch> = restarting(every);
+        let mut enter: Harness<EnterCar> = restarting(every);
+        let mut leave: Harness<LeaveCar> = restarting(every);
+        let mut signs: Harness<SignRead> = restarting(every);
+        let mut avoid: Harness<Avoid> = restarting(every);
         avoid.set_param("safe_distance=0.15").unwrap();
         let mut since = 0u64;
         for k in 0..60_000u64 {
@@ -644,16 +678,16 @@ fn a_ride_calls_a_car_boards_it_presses_four_and_leaves_on_the_fourth_floor() {
                     Ride::Call => {
                         track = fresh_track("id=850");
                         push = fresh_push(CALL_RETREAT);
-                        watch = Harness::new();
+                        watch = restarting(every);
                     }
-                    Ride::Enter => enter = Harness::new(),
+                    Ride::Enter => enter = restarting(every),
                     Ride::Press => {
                         track = fresh_track("id=864");
                         push = fresh_push("retreat=0.0");
                     }
                     Ride::Up => {
-                        leave = Harness::new();
-                        signs = Harness::new();
+                        leave = restarting(every);
+                        signs = restarting(every);
                     }
                     _ => {}
                 }
@@ -662,11 +696,6 @@ fn a_ride_calls_a_car_boards_it_presses_four_and_leaves_on_the_fourth_floor() {
                 break;
             }
         }
-        let [x, _, _] = r.sim.pose;
-        assert_eq!(stage, Ride::Out, "seed {seed}: {log:?}");
-        assert_eq!(r.sim.collisions, 0, "seed {seed}: {log:?}");
-        assert_eq!(r.sim.floor(), 4, "seed {seed}");
-        // Out of the doorway's light curtain (0.51 m): its doors may close behind it.
-        assert!(x < 27.5 - 0.55, "out in the lobby: {:?}", r.sim.pose);
+        (log, stage, r)
     }
 }

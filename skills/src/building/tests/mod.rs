@@ -283,6 +283,10 @@ struct Gapped<S: Skill> {
     inputs: Vec<(String, Option<Box<dyn Any>>)>,
     names: Vec<String>,
     outputs: Vec<skill_sdk::ports::ErasedOutput>,
+    /// The cycle of the last step and the activation number: a gap in the cycles stands for
+    /// a deactivation and activation, as the manager would number it.
+    last: Option<u64>,
+    activation: u32,
 }
 
 struct Given<'a>(&'a [(String, Option<Box<dyn Any>>)], u64);
@@ -317,6 +321,8 @@ impl<S: Skill> Gapped<S> {
             inputs,
             names,
             outputs,
+            last: None,
+            activation: 0,
         }
     }
 
@@ -328,6 +334,10 @@ impl<S: Skill> Gapped<S> {
 
     /// Runs the body in `cycle`; returns output `port` if it was written.
     fn step_at<T: Message + Copy>(&mut self, cycle: u64, port: &str) -> Option<T> {
+        if self.last.is_none_or(|l| cycle > l + 1 || cycle <= l) {
+            self.activation += 1;
+        }
+        self.last = Some(cycle);
         let src = Given(&self.inputs, cycle);
         let input = <S::Inputs<'_> as InputSet<'_>>::fetch(&src).unwrap();
         {
@@ -336,6 +346,7 @@ impl<S: Skill> Gapped<S> {
                 params: &self.params,
                 cycle,
                 name: "gapped",
+                activation: self.activation,
                 clock: Clock {
                     time: HARNESS_PERIOD * u32::try_from(cycle).unwrap(),
                     period: Some(HARNESS_PERIOD),

@@ -9,6 +9,11 @@ use crate::nav::Avoid;
 /// barcode_track's view in a shipped lab world, or `None` within `limit` cycles; and the
 /// robot's collisions.
 fn search(file: &str, seed: u64, limit: u64) -> (Option<u64>, u64) {
+    search_restarted(file, seed, limit, 0)
+}
+
+/// [`search`] with every skill restarted (as after `kill -9`) every `every` cycles (0: never).
+fn search_restarted(file: &str, seed: u64, limit: u64, every: u64) -> (Option<u64>, u64) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../devices/denning-sim/worlds")
         .join(file);
@@ -20,6 +25,10 @@ fn search(file: &str, seed: u64, limit: u64) -> (Option<u64>, u64) {
     let mut avoid = Harness::<Avoid>::new();
     let mut track = Harness::<BarcodeTrack>::new();
     track.set_param("id=7").unwrap();
+    explore.restarting(every);
+    wander.restarting(every);
+    avoid.restarting(every);
+    track.restarting(every);
     for k in 0..limit {
         explore
             .input("sonar", r.sonar)
@@ -56,6 +65,17 @@ fn explore_finds_the_lab_doors_barcode_in_every_shipped_lab() {
             assert!(seen.is_some(), "{file} seed {seed}: never seen in 300 s");
             assert_eq!(collisions, 0, "{file} seed {seed}");
         }
+    }
+}
+
+/// A search whose skills are restarted (as after `kill -9`) every 31 cycles finds the
+/// barcode in the same cycle, as if none had ever died.
+#[test]
+fn a_search_with_its_skills_restarted_again_and_again_is_the_same_search() {
+    for file in ["exit-lab.toml", "exit-lab-clutter.toml"] {
+        let once = search(file, 2, 30_000);
+        assert!(once.0.is_some(), "{file}");
+        assert_eq!(search_restarted(file, 2, 30_000, 31), once, "{file}");
     }
 }
 

@@ -38,14 +38,24 @@ fn sign_read_reads_the_floor_and_the_nearest_room_and_forgets_the_floor_when_rea
     assert!(!s.floor_known, "reactivated: read it again");
 }
 
+/// Also with both skills restarted (as after `kill -9`) every 3 cycles: a restarted deliver
+/// that forgot what it said would say it again.
 #[test]
 fn deliver_says_the_message_once_near_its_room() {
+    for every in [0, 3] {
+        deliver_once(every);
+    }
+}
+
+fn deliver_once(every: u64) {
     // Along a corridor past room 403's sign, to room 405's.
     let walls = [[-1.0, 1.2, 20.0, 1.2], [-1.0, -1.2, 20.0, -1.2]];
     let signs = barcode(403, 5.0, 1.15) + &barcode(405, 10.0, 1.15);
     let mut r = Robot::new(&world([0.0, 0.0, 0.0], &walls, &signs), 11);
     let mut read = Harness::<SignRead>::new();
     let mut deliver = Harness::<Deliver>::new();
+    read.restarting(every);
+    deliver.restarting(every);
     let mut decided_at = None;
     let mut progress = Progress::default();
     while r.sim.pose[0] < 9.5 {

@@ -168,6 +168,20 @@ class Push(ctypes.Structure):
     ]
 
 
+class Safety(ctypes.Structure):
+    """What a device's safety layer did to the drive command (devices/denning: its speed limit by the nearest fresh sonar echo along the direction of travel and by the link's health)."""
+
+    TYPE_NAME = "skillfab.Safety"
+    _fields_ = [
+        ("limit", ctypes.c_double),
+        ("clear_m", ctypes.c_double),
+        ("action", ctypes.c_uint32),
+        ("slowed", ctypes.c_uint64),
+        ("stopped", ctypes.c_uint64),
+        ("blind", ctypes.c_uint64),
+    ]
+
+
 class Say(ctypes.Structure):
     """A message for the robot's speaker and display: the `say` actuator channel. The safe command (seq 0) says nothing."""
 
@@ -282,6 +296,7 @@ BY_TYPE_NAME = {
     Odometry.TYPE_NAME: Odometry,
     Progress.TYPE_NAME: Progress,
     Push.TYPE_NAME: Push,
+    Safety.TYPE_NAME: Safety,
     Say.TYPE_NAME: Say,
     Scalar.TYPE_NAME: Scalar,
     Scaled.TYPE_NAME: Scaled,

@@ -101,11 +101,12 @@ fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, Str
         })
         .collect();
     let cycles_lost: u64 = kills.iter().filter_map(|k| k["cycles_lost"].as_u64()).sum();
-    let link_sum = |i: usize| -> u64 {
+    let sum_of = |field: &str, i: usize| -> u64 {
         runs.iter()
-            .filter_map(|r| r["link"].as_array().and_then(|l| l.get(i)?.as_u64()))
+            .filter_map(|r| r[field].as_array().and_then(|l| l.get(i)?.as_u64()))
             .sum()
     };
+    let link_sum = |i: usize| sum_of("link", i);
     let failures: Vec<Value> = runs
         .iter()
         .filter(|r| r["success"] != json!(true))
@@ -118,6 +119,9 @@ fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, Str
         "out_of_the_lab": demo["successes"],
         "median_time_s": demo["median_time_s"],
         "collisions": runs.iter().filter_map(|r| r["collisions"].as_u64()).sum::<u64>(),
+        "safety_slowed": sum_of("safety", 0),
+        "safety_stopped": sum_of("safety", 1),
+        "safety_blind": sum_of("safety", 2),
         "max_command_gap_s": max_of("max_command_gap_s"),
         "max_stale_drive_s": max_of("max_stale_drive_s"),
         "kills": kills.len(),

@@ -140,6 +140,18 @@ typedef struct sf_Push {
 #define SF_PUSH_TYPE_NAME "skillfab.Push"
 #define SF_PUSH_SIZE 1
 
+/** What a device's safety layer did to the drive command (devices/denning: its speed limit by the nearest fresh sonar echo along the direction of travel and by the link's health). */
+typedef struct sf_Safety {
+    double limit;
+    double clear_m;
+    uint32_t action;
+    uint64_t slowed;
+    uint64_t stopped;
+    uint64_t blind;
+} sf_Safety;
+#define SF_SAFETY_TYPE_NAME "skillfab.Safety"
+#define SF_SAFETY_SIZE 48
+
 /** A message for the robot's speaker and display: the `say` actuator channel. The safe command (seq 0) says nothing. */
 typedef struct sf_Say {
     uint32_t seq;

@@ -95,6 +95,16 @@ impl Robot {
         });
     }
 
+    /// Collision steps so far (ground truth: steps in which the robot pushed into a wall).
+    fn collisions(&self) -> f64 {
+        let text = std::fs::read_to_string(&self.trajectory).unwrap_or_default();
+        let last = text.lines().last().unwrap_or("");
+        last.split(',')
+            .nth(7)
+            .and_then(|c| c.parse().ok())
+            .unwrap_or(f64::NAN)
+    }
+
     /// Last ground-truth row: (x, y, v).
     fn truth(&self) -> (f64, f64, f64) {
         let text = std::fs::read_to_string(&self.trajectory).unwrap_or_default();
@@ -141,6 +151,29 @@ fn a_drive_proposal_moves_the_robot_and_the_robot_watchdog_stops_it() {
     r.t.wait_until("the robot's watchdog to stop the drive", || {
         r.truth().2 == 0.0
     });
+}
+
+#[test]
+fn the_safety_layer_stops_the_robot_short_of_a_wall_a_proposer_drives_at() {
+    let mut r = Robot::start("safety", &[]);
+    // Full speed at the east wall, 3.64 m ahead: nothing in the skills stops it.
+    r.t.spawn("proposer", &["--name", "go", "--param", "translate=0.5"]);
+    r.t.wait_until("the robot to move", || r.truth().2 > 0.1);
+    r.t.wait_until("the device to stop it", || {
+        num(&r.client, "denning.safety.stopped").is_some_and(|n| n > 20.0) && r.truth().2 == 0.0
+    });
+    let (x, _, _) = r.truth();
+    assert!(x < 6.0 - 0.36, "short of the wall: {x}");
+    assert!(x > 6.0 - 0.36 - 0.4, "close to it, not far: {x}");
+    assert_eq!(r.collisions(), 0.0);
+    // It still turns, and backs away, on the same proposer's word.
+    r.client.set_param("go", "translate", "-0.2").unwrap();
+    r.t.wait_until("the robot to back away", || r.truth().2 < -0.1);
+
+    // With the layer off, the same proposer drives it into the wall.
+    r.client.set_param("denning", "safety", "false").unwrap();
+    r.client.set_param("go", "translate", "0.5").unwrap();
+    r.t.wait_until("a collision", || r.collisions() > 0.0);
 }
 
 #[test]

@@ -4,10 +4,11 @@
 
 use denning::codec::{Command as Wire, Text};
 use denning::driver::{Driver, Odometer, SONARS};
+use denning::safety::{Action, Guard, Limits, LinkHealth};
 use denning::transport::{Serial, Transport};
 use skill_sdk::prelude::*;
 use skillfab_msgs::{
-    Arm, Barcodes, Battery, Bumpers, Drive, Link, Odometry, Push, Say, Sonar, Voice,
+    Arm, Barcodes, Battery, Bumpers, Drive, Link, Odometry, Push, Safety, Say, Sonar, Voice,
 };
 use std::time::{Duration, Instant};
 
@@ -36,6 +37,8 @@ pub struct Sensors<'a> {
     pub arm: Output<'a, Arm>,
     /// The speaker and display.
     pub voice: Output<'a, Voice>,
+    /// What the safety layer did to the last drive command.
+    pub safety: Output<'a, Safety>,
 }
 
 /// Channels served.
@@ -58,6 +61,55 @@ pub struct DenningParams {
     /// than real time needs it divided by its time factor).
     #[param(default = 500.0, min = 1.0, max = 10000.0)]
     pub blind_ms: f64,
+    /// The safety layer (`denning::safety`): translation limited by the nearest fresh sonar
+    /// echo along the direction of travel and by the link's health. Off only for tests of
+    /// the skills' own behaviour.
+    #[param(default = true)]
+    pub safety: bool,
+    /// Gap kept between the body and an echo along the direction of travel (m; with the
+    /// margin, more than the sonar's shortest range).
+    #[param(default = 0.14, min = 0.0, max = 2.0)]
+    pub safety_stop_m: f64,
+    /// Braking assumed (m/s²).
+    #[param(default = 0.4, min = 0.05, max = 5.0)]
+    pub safety_decel: f64,
+    /// Reaction time assumed: sonar age, the cycle, the link (s).
+    #[param(default = 0.25, min = 0.0, max = 5.0)]
+    pub safety_react_s: f64,
+    /// Age past which a sonar reading is forgotten (ms, in the robot's time).
+    #[param(default = 1200.0, min = 100.0, max = 10000.0)]
+    pub safety_fresh_ms: f64,
+    /// Lateral margin added to the body's radius (m).
+    #[param(default = 0.04, min = 0.0, max = 1.0)]
+    pub safety_margin_m: f64,
+    /// Free range along the direction of travel that makes a passage: the other echoes then
+    /// count by their sonar's axis, not their whole cone (m).
+    #[param(default = 1.0, min = 0.2, max = 10.0)]
+    pub safety_opening_m: f64,
+    /// Speed allowed while the way ahead is not seen or the link is bad (m/s).
+    #[param(default = 0.12, min = 0.0, max = 2.0)]
+    pub safety_blind_speed: f64,
+    /// Share of frames dropped over a second past which the link is bad.
+    #[param(default = 0.5, min = 0.0, max = 1.0)]
+    pub safety_bad_share: f64,
+}
+
+impl DenningParams {
+    /// The safety layer's settings.
+    fn limits(&self) -> Limits {
+        Limits {
+            on: self.safety,
+            stop_m: self.safety_stop_m,
+            min_range_m: denning::safety::Limits::default().min_range_m,
+            decel: self.safety_decel,
+            react_s: self.safety_react_s,
+            fresh_ms: self.safety_fresh_ms,
+            margin_m: self.safety_margin_m,
+            opening_m: self.safety_opening_m,
+            blind_speed: self.safety_blind_speed,
+            bad_share: self.safety_bad_share,
+        }
+    }
 }
 
 /// The device.
@@ -75,6 +127,13 @@ pub struct Denning {
     /// Strokes of the last pusher report counted, and the strokes that pressed a button.
     strokes_seen: u16,
     hits: u32,
+    /// The safety layer's memory (fresh echoes, the link's recent counts).
+    guard: Guard,
+    /// The pose and link counts of the newest sample (what the safety layer judges with).
+    pose: (f64, f64, f64),
+    link: LinkHealth,
+    /// The safety layer's last verdict, published with the next sample.
+    verdict: Option<denning::safety::Verdict>,
 }
 
 impl Device for Denning {
@@ -120,10 +179,16 @@ impl Device for Denning {
         // The driver's clock: the host's, or the robot's in lock-step.
         let now = d.now();
         let ms = |t: Instant| now.duration_since(t).as_secs_f64() * 1000.0;
+        self.pose = s.pose;
+        self.link = LinkHealth {
+            frames: s.stats.frames,
+            bad: s.stats.bad_checksum + s.stats.bad_count,
+        };
         let sonar = out.sonar.get_mut();
         for i in 0..SONARS {
             match s.sonar[i] {
                 Some((r, at)) => {
+                    self.guard.observe(i, r, at, s.pose, &ctx.params.limits());
                     sonar.range[i] = r.unwrap_or(f64::INFINITY);
                     sonar.age_ms[i] = ms(at);
                 }
@@ -177,6 +242,16 @@ impl Device for Denning {
             said: u32::from(s.said),
             seq: self.said_seq,
         });
+        let counts = self.guard.counts;
+        let v = self.verdict.take();
+        out.safety.set(Safety {
+            limit: v.map_or(f64::INFINITY, |v| v.limit),
+            clear_m: v.map_or(f64::INFINITY, |v| v.clear),
+            action: v.map_or(0, |v| v.action as u32),
+            slowed: counts.slowed,
+            stopped: counts.stopped,
+            blind: counts.blind,
+        });
         out.link.set(Link {
             connected: s.connected,
             age_ms: s.received.map_or(f64::INFINITY, ms),
@@ -197,7 +272,21 @@ impl Device for Denning {
             .seen
             .is_some_and(|t| d.now().saturating_duration_since(t) < limit);
         let (v, w) = if seen {
-            (c.drive.translate, c.drive.rotate)
+            let verdict = self.guard.limit(
+                c.drive.translate,
+                c.drive.rotate,
+                d.now(),
+                self.pose,
+                self.link,
+                &ctx.params.limits(),
+            );
+            if verdict.action != Action::Passed
+                && self.verdict.is_none_or(|v| v.action != verdict.action)
+            {
+                tracing::debug!(?verdict, "safety layer acted");
+            }
+            self.verdict = Some(verdict);
+            (verdict.translate, verdict.rotate)
         } else {
             (0.0, 0.0)
         };

@@ -125,6 +125,10 @@ pub struct RunOutcome {
     /// The serial link as the device reported it last: (frames, bad frames, garbage bytes,
     /// connects).
     pub link: Option<(u64, u64, u64, u64)>,
+    /// What the device's safety layer did, as it reported last: cycles (slowed, stopped,
+    /// capped for a way ahead not seen or a bad link). Counted since the device started: a
+    /// restarted device counts afresh.
+    pub safety: Option<(u64, u64, u64)>,
     /// Where the robot was at the end (ground truth): floor, x, y (m). A failed run's
     /// first clue.
     pub end: Option<(i32, f64, f64)>,
@@ -484,6 +488,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         max_command_gap_s: 0.0,
         max_stale_drive_s: 0.0,
         link: None,
+        safety: None,
         end: None,
         trajectory: Vec::new(),
     };
@@ -613,18 +618,25 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     if let Some(k) = sim_killer {
         out.kills.extend(k.finish());
     }
-    let link = |field: &str| {
-        c.query(&format!("denning.link.{field}"))
+    let device = |field: &str| {
+        c.query(&format!("denning.{field}"))
             .ok()
             .and_then(|(v, _)| v.as_f64())
             .map(|x| x as u64)
     };
     out.link = (|| {
         Some((
-            link("frames")?,
-            link("bad_frames")?,
-            link("garbage")?,
-            link("connects")?,
+            device("link.frames")?,
+            device("link.bad_frames")?,
+            device("link.garbage")?,
+            device("link.connects")?,
+        ))
+    })();
+    out.safety = (|| {
+        Some((
+            device("safety.slowed")?,
+            device("safety.stopped")?,
+            device("safety.blind")?,
         ))
     })();
     match &mut driver {

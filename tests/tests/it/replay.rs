@@ -193,9 +193,17 @@ fn a_recording_cut_short_by_kill_9_replays_up_to_its_last_complete_cycle() {
     );
     assert!(t.run("skillfab", &["ctl", "run"]).status.success());
     let start = 0;
-    t.wait_until("recorded cycles", || {
-        c.stats().is_ok_and(|s| s.cycles > start + 800)
-    });
+    // Killed once the file on disk holds more than 500 complete cycles (the recorder writes
+    // behind the cycles; how far behind depends on the machine's load).
+    let complete = |rec: &std::path::Path| {
+        records(rec)
+            .iter()
+            .filter(|j| j["kind"] == "cycle")
+            .filter_map(|j| j["cycle"].as_u64())
+            .max()
+            .unwrap_or(0)
+    };
+    t.wait_until("recorded cycles", || complete(&rec) > start + 600);
     let pid = board.header().manager_pid.load(Ordering::Acquire);
     nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
     let recorded: Vec<Json> = records(&rec);

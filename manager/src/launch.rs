@@ -79,6 +79,27 @@ pub struct LaunchFile {
     /// `[bridge]`: the domain's bridge to other hosts, started after the processes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bridge: Option<BridgeSection>,
+    /// `[plan]`: the domain's sequencer, a plan run by `skillfab sequence` and supervised
+    /// like a process (restarted after a crash, it resumes where it was).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<PlanSection>,
+}
+
+/// `[plan]` of a launch file.
+#[derive(Debug, Default, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanSection {
+    /// The plan file (relative to the launch file).
+    pub file: String,
+    /// Its tree to run (default: its main one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tree: Option<String>,
+    /// Most restarts in a row before giving up (default 5).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_restarts: Option<u32>,
+    /// First restart delay (ms, default 200; doubles each time).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backoff_ms: Option<u64>,
 }
 
 /// `[bridge]` of a launch file: the options of `skillfab bridge`.
@@ -222,6 +243,9 @@ pub struct ProcessSpec {
     pub backoff: Duration,
     /// Whether it registers with the manager as a skill.
     pub registers: bool,
+    /// A plan runner: exit status 1 is the plan failing, an end like success (not restarted);
+    /// killed, or exit 3 (the fabric could not be asked), it is restarted and resumes.
+    pub plan: bool,
 }
 
 /// A validated launch file.
@@ -345,6 +369,7 @@ impl Launch {
                 max_restarts: p.max_restarts.unwrap_or(5),
                 backoff: Duration::from_millis(p.backoff_ms.unwrap_or(200)),
                 registers: p.registers.unwrap_or(true),
+                plan: false,
             });
         }
         if let Some(b) = &raw.bridge {
@@ -370,6 +395,47 @@ impl Launch {
                 // Its skill (the imports' producer) registers; a bridge that only exports
                 // does not.
                 registers: !b.import.is_empty(),
+                plan: false,
+            });
+        }
+        if let Some(plan) = &raw.plan {
+            let bad = |message: String| LaunchError::Process {
+                path: path.to_path_buf(),
+                name: "plan".into(),
+                message,
+            };
+            if processes.iter().any(|q: &ProcessSpec| q.name == "plan") {
+                return Err(bad("a process is named 'plan' too".into()));
+            }
+            let program = find_program("skillfab", base).ok_or_else(|| {
+                bad("program 'skillfab' not found (next to skillfab-manager, on PATH)".into())
+            })?;
+            let file = base.join(&plan.file);
+            if !file.is_file() {
+                return Err(bad(format!("plan file {} not found", file.display())));
+            }
+            let mut args = vec!["sequence".to_string(), file.to_string_lossy().into_owned()];
+            if let Some(t) = &plan.tree {
+                args.extend(["--tree".into(), t.clone()]);
+            }
+            // It starts once the skills it drives have registered.
+            let skills: Vec<&str> = processes
+                .iter()
+                .filter(|p| p.registers)
+                .map(|p| p.name.as_str())
+                .collect();
+            if !skills.is_empty() {
+                args.extend(["--wait-for".into(), skills.join(",")]);
+            }
+            processes.push(ProcessSpec {
+                name: "plan".into(),
+                program,
+                args,
+                restart: Restart::OnFailure,
+                max_restarts: plan.max_restarts.unwrap_or(5),
+                backoff: Duration::from_millis(plan.backoff_ms.unwrap_or(200)),
+                registers: false,
+                plan: true,
             });
         }
         Ok(Launch {
@@ -532,7 +598,7 @@ mod tests {
                 let mut seen = std::collections::HashSet::new();
                 let entries: Vec<ProcessEntry> =
                     entries.into_iter().filter(|e| seen.insert(e.name.clone())).collect();
-                let file = LaunchFile { manager: ManagerSection::default(), process: entries.clone(), bridge: None };
+                let file = LaunchFile { manager: ManagerSection::default(), process: entries.clone(), bridge: None, plan: None };
                 let text = toml::to_string(&file).unwrap();
                 let launch = parse(&text).unwrap();
                 prop_assert_eq!(launch.processes.len(), entries.len());

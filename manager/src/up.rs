@@ -195,7 +195,9 @@ fn watch(p: &mut Supervised, domain: &Domain) {
                 if p.started.elapsed() >= STABLE {
                     p.restarts = 0;
                 }
-                let failed = !status.success();
+                // A plan that failed ended as much as one that succeeded.
+                let ended = status.success() || (p.spec.plan && status.code() == Some(1));
+                let failed = !ended;
                 let again = match p.spec.restart {
                     Restart::Never => false,
                     Restart::OnFailure => failed,

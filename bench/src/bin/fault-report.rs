@@ -2,13 +2,16 @@
 //!
 //! ```text
 //! fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]
+//!              [--plan FILE.xml] [--mission deliver [--building FILE]]
 //! fault-report --soak CYCLES [--json]
 //! fault-report --clients [SECS] [--json]
 //! ```
 //!
-//! Each scenario is one `skillfab demo exit-lab --runs N --json` with its faults (release
-//! binaries beside this one): `kill` — SIGKILL to a random fabric process (the manager, the
-//! Denning device or any skill; skills restart on failure) every S simulated seconds;
+//! Each scenario is one `skillfab demo exit-lab --runs N --json` (with `--mission deliver`,
+//! `skillfab demo deliver`; with `--plan`, the exit-lab mission driven by that plan) with its
+//! faults (release binaries beside this one): `kill` — SIGKILL to a random fabric process
+//! (the manager, the Denning device, any skill, and the plan's runner when a plan drives:
+//! each is restarted at once, a plan runner resumes the plan) every S simulated seconds;
 //! `corrupt-1`, `corrupt-5` — 1 % / 5 % of the serial bytes with a flipped bit; `drop-1` —
 //! 1 % of them dropped; `sim-restart` — the simulator (the robot's serial side) killed every
 //! 60 simulated seconds and restarted where the robot was. Per scenario: missions out of the lab, median mission time, the longest time
@@ -49,10 +52,15 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
 }
 
 /// Runs one scenario; returns its summary.
-fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, String> {
-    eprintln!("fault-report: {} ({})", s.name, s.args.join(" "));
+fn run(
+    skillfab: &PathBuf,
+    mission: &str,
+    s: &Scenario,
+    common: &[String],
+) -> Result<Value, String> {
+    eprintln!("fault-report: {mission} {} ({})", s.name, s.args.join(" "));
     let out = Command::new(skillfab)
-        .args(["demo", "exit-lab", "--json"])
+        .args(["demo", mission, "--json"])
         .args(common)
         .args(&s.args)
         .output()
@@ -80,9 +88,10 @@ fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, Str
         .filter_map(|k| k["recovery_ms"].as_f64())
         .collect();
     let unrecovered = kills.len() - recovery.len();
-    // Recovery by what was killed: the manager, the device, the simulator, a skill.
+    // Recovery by what was killed: the manager, the device, the simulator, the plan's
+    // runner, a skill.
     let class = |t: &str| match t {
-        "manager" | "denning" | "denning-sim" => t.to_string(),
+        "manager" | "denning" | "denning-sim" | "plan" => t.to_string(),
         _ => "skill".to_string(),
     };
     let mut by_target: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
@@ -113,9 +122,11 @@ fn run(skillfab: &PathBuf, s: &Scenario, common: &[String]) -> Result<Value, Str
         .map(|r| json!({"seed": r["seed"], "time_s": r["time_s"], "last_step": r["steps"].as_array().and_then(|s| s.iter().rev().nth(1)).cloned()}))
         .collect();
     Ok(json!({
+        "mission": mission,
         "scenario": s.name,
         "args": s.args.join(" "),
         "runs": demo["runs"],
+        // Out of the lab (exit-lab), or the message delivered (deliver).
         "out_of_the_lab": demo["successes"],
         "median_time_s": demo["median_time_s"],
         "collisions": runs.iter().filter_map(|r| r["collisions"].as_u64()).sum::<u64>(),
@@ -142,7 +153,7 @@ fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
         println!(
-            "usage: fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]\n       fault-report --soak CYCLES [--json]\n       fault-report --clients [SECS] [--json]"
+            "usage: fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]\n                    [--plan FILE.xml] [--mission deliver [--building FILE]]\n       fault-report --soak CYCLES [--json]\n       fault-report --clients [SECS] [--json]"
         );
         return std::process::ExitCode::SUCCESS;
     }
@@ -263,8 +274,25 @@ fn main() -> std::process::ExitCode {
     let every = arg_value(&args, "--kill-every").unwrap_or_else(|| "5".into());
     let only = arg_value(&args, "--only");
     let mut common = vec!["--runs".to_string(), runs, "--time-factor".into(), tf];
-    if let Some(w) = arg_value(&args, "--world") {
-        common.extend(["--world".into(), w]);
+    let mission = arg_value(&args, "--mission").unwrap_or_else(|| "exit-lab".into());
+    match mission.as_str() {
+        "exit-lab" => {
+            if let Some(w) = arg_value(&args, "--world") {
+                common.extend(["--world".into(), w]);
+            }
+        }
+        "deliver" => {
+            if let Some(b) = arg_value(&args, "--building") {
+                common.extend(["--building".into(), b]);
+            }
+        }
+        other => {
+            eprintln!("fault-report: --mission is exit-lab or deliver, not '{other}'");
+            return std::process::ExitCode::FAILURE;
+        }
+    }
+    if let Some(p) = arg_value(&args, "--plan") {
+        common.extend(["--plan".into(), p]);
     }
     let scenarios = [
         Scenario {
@@ -294,7 +322,7 @@ fn main() -> std::process::ExitCode {
         .iter()
         .filter(|s| only.as_deref().is_none_or(|o| s.name.contains(o)))
     {
-        match run(&skillfab, s, &common) {
+        match run(&skillfab, &mission, s, &common) {
             Ok(r) => results.push(r),
             Err(e) => {
                 eprintln!("fault-report: {e}");

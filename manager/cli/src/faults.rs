@@ -49,7 +49,7 @@ pub struct Kill {
 
 /// The process whose command line holds every one of `words` (the simulator of one run is
 /// found by its program name and its link path).
-fn process_with_args(words: &[&str]) -> Option<u32> {
+pub(crate) fn process_with_args(words: &[&str]) -> Option<u32> {
     std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
         let pid: u32 = e.file_name().to_str()?.parse().ok()?;
         let cmdline = std::fs::read(e.path().join("cmdline")).ok()?;
@@ -73,6 +73,21 @@ fn sigkill(pid: u32, target: &str) -> Option<Instant> {
 /// The manager's place in the killer's list (not a board slot).
 const MANAGER: usize = usize::MAX;
 const MANAGER_NAME: &str = "manager";
+/// The plan runner as a kill target (no slot).
+const PLAN: usize = usize::MAX - 1;
+const PLAN_NAME: &str = "plan";
+
+/// Whether the runner `pid` has taken `domain`'s plan over: the kept state names it (a
+/// client id is `<pid>-<n>`) as its last runner.
+fn plan_taken_over(domain: &Domain, pid: u32) -> bool {
+    match skillfab_sequence::PlanStore::of(domain).load() {
+        skillfab_sequence::Kept::State(s) => s
+            .runners
+            .last()
+            .is_some_and(|r| r.starts_with(&format!("{pid}-"))),
+        _ => false,
+    }
+}
 
 /// Whether a manager other than `dead` runs in `domain`, has cycled past `k0` and has every
 /// unit of `names` registered again; the cycles since `k0` if so.
@@ -114,8 +129,15 @@ fn units(board: &Board) -> Vec<(usize, String, u32, bool)> {
 }
 
 impl Killer {
-    /// Starts killing in `domain` every `every` (real time).
-    pub fn start(domain: &Domain, every: Duration, period: Duration, seed: u64) -> Killer {
+    /// Starts killing in `domain` every `every` (real time): a unit, the manager, or the
+    /// plan runner running the plan file `plan` (its recovery: a new runner resumed it).
+    pub fn start(
+        domain: &Domain,
+        every: Duration,
+        period: Duration,
+        seed: u64,
+        plan: Option<String>,
+    ) -> Killer {
         let domain = domain.clone();
         Killer::spawn(move |st, ks| {
             let mut rng = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
@@ -140,6 +162,10 @@ impl Killer {
                     let pid = board.header().manager_pid.load(Ordering::Acquire);
                     list.push((MANAGER, MANAGER_NAME.to_string(), pid, true));
                 }
+                let runner = |plan: &str| process_with_args(&["sequence", plan]);
+                if let Some(pid) = plan.as_deref().and_then(runner) {
+                    list.push((PLAN, PLAN_NAME.to_string(), pid, true));
+                }
                 if list.is_empty() {
                     continue;
                 }
@@ -162,6 +188,19 @@ impl Killer {
                 while Instant::now() < deadline && !st.load(Ordering::Acquire) {
                     let back = if slot == MANAGER {
                         manager_back(&domain, pid, k0, &unit_names)
+                    } else if slot == PLAN {
+                        // A new runner that has taken the plan over (its state file
+                        // rewritten by it: it names the new runner's client id).
+                        plan.as_deref()
+                            .and_then(runner)
+                            .filter(|p| *p != pid && plan_taken_over(&domain, *p))
+                            .map(|_| {
+                                board
+                                    .header()
+                                    .cycle
+                                    .load(Ordering::Acquire)
+                                    .saturating_sub(k0)
+                            })
                     } else {
                         units(&board)
                             .into_iter()
@@ -183,7 +222,7 @@ impl Killer {
                         kill.recovery_ms = Some(elapsed.as_secs_f64() * 1000.0);
                         // A unit misses the cycles run without it; while the manager is away
                         // no cycle runs: those due in that time are lost.
-                        kill.cycles_lost = Some(if slot == MANAGER {
+                        kill.cycles_lost = Some(if slot == MANAGER || slot == PLAN {
                             (elapsed.as_secs_f64() / period.as_secs_f64()) as u64
                         } else {
                             cycles

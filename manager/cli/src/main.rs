@@ -8,7 +8,7 @@ mod new;
 mod replay;
 mod sequence;
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use skillfab_manager::args::{DomainArg, ManagerArgs, UpArgs, init_tracing};
 use skillfab_proto::domain::Domain;
 use std::path::PathBuf;
@@ -134,6 +134,16 @@ enum Cmd {
         /// Only read and check the plan.
         #[arg(long)]
         check: bool,
+        /// Do not resume the plan a runner that died left (same plan, same domain): restore
+        /// what it had set and start from the first node.
+        #[arg(long)]
+        fresh: bool,
+        /// Wait for these skills to have registered (comma-separated) before starting.
+        #[arg(long, value_delimiter = ',')]
+        wait_for: Vec<String>,
+        /// How long to wait for the manager and the skills of --wait-for (s).
+        #[arg(long, default_value_t = 60.0)]
+        wait_timeout_s: f64,
         #[command(flatten)]
         remote: RemoteArg,
     },
@@ -149,6 +159,61 @@ enum Cmd {
     },
 }
 
+/// The faults a demo can inject ([`faults::Faults`]).
+#[derive(Args, Debug, Clone)]
+struct FaultArgs {
+    /// Fault injection: SIGKILL to a random fabric process (the manager, the device, a
+    /// skill, or the plan's runner when a plan drives) every this many simulated seconds;
+    /// each is restarted at once.
+    #[arg(long, value_name = "SECONDS")]
+    kill_every: Option<f64>,
+    /// Fault injection: SIGKILL to the simulator every this many simulated seconds; it is
+    /// restarted and resumes the robot where it was, the device reconnects.
+    #[arg(long, value_name = "SECONDS")]
+    kill_sim_every: Option<f64>,
+    /// Fault injection: share of the serial bytes with a flipped bit (0..=0.5).
+    #[arg(long, default_value_t = 0.0)]
+    corrupt_rate: f64,
+    /// Fault injection: share of the serial bytes dropped (0..=0.5).
+    #[arg(long, default_value_t = 0.0)]
+    drop_rate: f64,
+}
+
+impl FaultArgs {
+    /// The faults, checked (`seed`: the run's, for the killer's choices).
+    fn faults(&self, lockstep: bool, seed: u64) -> anyhow::Result<faults::Faults> {
+        for (name, k) in [
+            ("--kill-every", self.kill_every),
+            ("--kill-sim-every", self.kill_sim_every),
+        ] {
+            if k.is_some_and(|k| k.is_nan() || k < 1.0) {
+                anyhow::bail!("{name} must be at least 1 simulated second");
+            }
+        }
+        for (name, r) in [
+            ("--corrupt-rate", self.corrupt_rate),
+            ("--drop-rate", self.drop_rate),
+        ] {
+            if !(0.0..=0.5).contains(&r) {
+                anyhow::bail!("{name} must be in [0, 0.5], got {r}");
+            }
+        }
+        if lockstep && (self.kill_every.is_some() || self.kill_sim_every.is_some()) {
+            anyhow::bail!(
+                "--kill-every and --kill-sim-every time their kills on the host's clock; \
+                 they do not go with --lockstep"
+            );
+        }
+        Ok(faults::Faults {
+            kill_every_s: self.kill_every,
+            kill_sim_every_s: self.kill_sim_every,
+            corrupt_rate: self.corrupt_rate,
+            drop_rate: self.drop_rate,
+            seed,
+        })
+    }
+}
+
 #[derive(Subcommand, Debug)]
 enum DemoCmd {
     /// A sequencer drives the simulated Denning robot out of the lab.
@@ -161,20 +226,8 @@ enum DemoCmd {
         /// Simulated seconds before a run counts as failed.
         #[arg(long, default_value_t = 300.0)]
         limit_s: f64,
-        /// Fault injection: SIGKILL to a random fabric process (the device or a skill) every
-        /// this many simulated seconds; skills restart on failure.
-        #[arg(long, value_name = "SECONDS")]
-        kill_every: Option<f64>,
-        /// Fault injection: SIGKILL to the simulator every this many simulated seconds; it is
-        /// restarted and resumes the robot where it was, the device reconnects.
-        #[arg(long, value_name = "SECONDS")]
-        kill_sim_every: Option<f64>,
-        /// Fault injection: share of the serial bytes with a flipped bit (0..=0.5).
-        #[arg(long, default_value_t = 0.0)]
-        corrupt_rate: f64,
-        /// Fault injection: share of the serial bytes dropped (0..=0.5).
-        #[arg(long, default_value_t = 0.0)]
-        drop_rate: f64,
+        #[command(flatten)]
+        faults: FaultArgs,
         /// Drive the robot with this plan (`skillfab sequence`'s format, e.g.
         /// skills/plans/exit-lab.xml) instead of the sequencer written in Rust.
         #[arg(long, value_name = "FILE.xml")]
@@ -203,6 +256,8 @@ enum DemoCmd {
         /// Simulated seconds before a run counts as failed (20 minutes).
         #[arg(long, default_value_t = 1200.0)]
         limit_s: f64,
+        #[command(flatten)]
+        faults: FaultArgs,
     },
 }
 
@@ -353,8 +408,22 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             file,
             tree,
             check,
+            fresh,
+            wait_for,
+            wait_timeout_s,
             remote,
-        } => sequence::run(&domain, remote.options(), &file, tree.as_deref(), check),
+        } => sequence::run(
+            &domain,
+            remote.options(),
+            &file,
+            &sequence::RunOptions {
+                tree,
+                check,
+                fresh,
+                wait_for,
+                wait: std::time::Duration::from_secs_f64(wait_timeout_s.max(0.0)),
+            },
+        ),
         Cmd::Bridge(args) => Ok(skillfab_bridge::run(&domain, &args)?),
         Cmd::New {
             what: NewCmd::Skill { name, lang, dir },
@@ -396,42 +465,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     world,
                     run,
                     limit_s,
-                    kill_every,
-                    kill_sim_every,
-                    corrupt_rate,
-                    drop_rate,
+                    faults,
                     plan,
                 },
         } => {
-            for (name, k) in [
-                ("--kill-every", kill_every),
-                ("--kill-sim-every", kill_sim_every),
-            ] {
-                if k.is_some_and(|k| k.is_nan() || k < 1.0) {
-                    anyhow::bail!("{name} must be at least 1 simulated second");
-                }
-            }
-            for (name, r) in [("--corrupt-rate", corrupt_rate), ("--drop-rate", drop_rate)] {
-                if !(0.0..=0.5).contains(&r) {
-                    anyhow::bail!("{name} must be in [0, 0.5], got {r}");
-                }
-            }
-            if run.lockstep && (kill_every.is_some() || kill_sim_every.is_some()) {
-                anyhow::bail!(
-                    "--kill-every and --kill-sim-every time their kills on the host's clock; \
-                     they do not go with --lockstep"
-                );
-            }
             let json = run.json;
             let mut opts = run.options(demo::Site::World(world), limit_s)?;
-            opts.faults = faults::Faults {
-                kill_every_s: kill_every,
-                kill_sim_every_s: kill_sim_every,
-                corrupt_rate,
-                drop_rate,
-                seed: opts.seed,
-            };
-            opts.plan = plan.as_deref().map(sequence::read_plan).transpose()?;
+            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
+            // Read and checked here: a mistake is refused before anything starts.
+            if let Some(p) = &plan {
+                sequence::read_plan(p)?;
+            }
+            opts.plan = plan;
             let summary = demo::demo(&opts)?;
             report(&summary, json, "left the lab")?;
             if summary.successes == 0 {
@@ -447,6 +492,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     tree,
                     run,
                     limit_s,
+                    faults,
                 },
         } => {
             let stem = building
@@ -455,7 +501,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .unwrap_or_default();
             let json = run.json;
             let mut opts = run.options(demo::Site::Building(building), limit_s)?;
-            opts.plan = Some(sequence::read_plan(&plan)?);
+            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
+            sequence::read_plan(&plan)?;
+            opts.plan = Some(plan);
             opts.tree = Some(tree.unwrap_or(stem));
             let summary = demo::demo(&opts)?;
             report(&summary, json, "delivered the message")?;
@@ -592,7 +640,10 @@ fn main() -> ExitCode {
         Err(e) => {
             // One line: the refusal (and its cause chain) for scripts and people alike.
             eprintln!("skillfab: error: {}", format!("{e:#}").replace('\n', " "));
-            ExitCode::FAILURE
+            match e.downcast_ref::<sequence::Unfinished>() {
+                Some(_) => ExitCode::from(sequence::UNFINISHED),
+                None => ExitCode::FAILURE,
+            }
         }
     }
 }

@@ -324,6 +324,7 @@ fn launch_file(
     let text = |p: PathBuf| p.to_string_lossy().into_owned();
     let mut launch = LaunchFile {
         bridge: None,
+        plan: None,
         manager: ManagerSection {
             period_ms: rec.period_ns.map(|ns| ns as f64 / 1e6),
             deadline_ms: None,

@@ -1,11 +1,42 @@
 //! `skillfab sequence FILE`: a plan run as the domain's sequencer (the engine is the
-//! `skillfab-sequence` crate; this is its command line).
+//! `skillfab-sequence` crate; this is its command line). The plan's state is kept in the
+//! domain's shared memory after every tick: a runner started after this one dies resumes it
+//! (docs/sequence.md, "A plan that survives its runner").
+//!
+//! Exit status: 0 the plan succeeded (or was halted by Ctrl-C/SIGTERM), 1 it failed,
+//! [`UNFINISHED`] it could not be run to its end (no manager, the fabric gone): its state is
+//! kept, and `up` starts a runner again.
 
 use anyhow::Context;
 use skillfab_client::{Client, ZenohOptions};
+use skillfab_proto::control::SkillState;
 use skillfab_proto::domain::Domain;
-use skillfab_sequence::{Plan, Sequencer, Status};
+use skillfab_sequence::{Plan, PlanStore, Sequencer, Status};
 use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The exit status of a runner that could not take its plan to its end.
+pub const UNFINISHED: u8 = 3;
+
+/// The plan could not be run to its end (exit status [`UNFINISHED`]).
+#[derive(Debug, thiserror::Error)]
+#[error("the plan was not run to its end (its state is kept for the next runner): {0:#}")]
+pub struct Unfinished(anyhow::Error);
+
+/// How `skillfab sequence` runs its plan.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// The tree to run (else the plan's main one).
+    pub tree: Option<String>,
+    /// Only read and check the plan.
+    pub check: bool,
+    /// Start over whatever a runner before left.
+    pub fresh: bool,
+    /// Skills to wait for (registered, not starting) before the first tick.
+    pub wait_for: Vec<String>,
+    /// How long to wait for the manager and those skills.
+    pub wait: Duration,
+}
 
 /// Reads and checks the plan in `file`.
 pub fn read_plan(file: &Path) -> anyhow::Result<Plan> {
@@ -13,18 +44,55 @@ pub fn read_plan(file: &Path) -> anyhow::Result<Plan> {
     Ok(Plan::parse(&text, &file.display().to_string())?)
 }
 
-/// Runs the plan in `file` (its tree `tree`, else its main one) on the manager of `domain`,
-/// printing each step with the cycle and the fabric's time; an error when the plan fails.
+/// Connects to `domain`'s manager on this host, waiting up to `wait` for it and for the
+/// skills of `wait_for` to have registered.
+fn connect_waiting(domain: &Domain, wait_for: &[String], wait: Duration) -> anyhow::Result<Client> {
+    let deadline = Instant::now() + wait;
+    loop {
+        let missing = match Client::connect(domain) {
+            Ok(c) => match c.list() {
+                Ok(list) => {
+                    let ready = |name: &String| {
+                        list.iter()
+                            .any(|s| s.name == *name && s.state != SkillState::Starting)
+                    };
+                    let missing: Vec<&String> = wait_for.iter().filter(|n| !ready(n)).collect();
+                    if missing.is_empty() {
+                        return Ok(c);
+                    }
+                    format!(
+                        "skills not registered: {}",
+                        missing
+                            .iter()
+                            .map(|s| s.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                }
+                Err(e) => e.to_string(),
+            },
+            Err(e) => e.to_string(),
+        };
+        if Instant::now() >= deadline {
+            anyhow::bail!("{missing}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Runs the plan in `file` on the manager of `domain`, printing each step with the cycle and
+/// the fabric's time; an error when the plan fails.
 pub fn run(
     domain: &Domain,
     remote: Option<ZenohOptions>,
     file: &Path,
-    tree: Option<&str>,
-    check: bool,
+    opts: &RunOptions,
 ) -> anyhow::Result<()> {
     let plan = read_plan(file)?;
-    let mut seq = Sequencer::new(&plan, tree)?;
-    if check {
+    let tree = opts.tree.as_deref();
+    let name = file.display().to_string();
+    let mut seq = Sequencer::kept(&plan, tree, &name, PlanStore::of(domain), opts.fresh)?;
+    if opts.check {
         println!(
             "{}: {} tree(s), runs '{}'",
             file.display(),
@@ -34,8 +102,8 @@ pub fn run(
         return Ok(());
     }
     let mut client = match &remote {
-        Some(o) => Client::connect_remote(domain.name(), o)?,
-        None => Client::connect(domain)?,
+        Some(o) => Client::connect_remote(domain.name(), o).map_err(|e| Unfinished(e.into()))?,
+        None => connect_waiting(domain, &opts.wait_for, opts.wait).map_err(Unfinished)?,
     };
     crate::demo::catch_interrupts()?;
     let mut print = |c: &Client, what: &str| {
@@ -49,7 +117,9 @@ pub fn run(
         }
     };
     let mut stop = crate::demo::interrupted;
-    match skillfab_sequence::run(&mut client, &mut seq, &mut stop, &mut print)? {
+    let ended = skillfab_sequence::run(&mut client, &mut seq, &mut stop, &mut print)
+        .map_err(|e| Unfinished(e.into()))?;
+    match ended {
         Some(Status::Success) => {
             println!("the plan succeeded");
             Ok(())

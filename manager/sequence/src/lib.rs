@@ -12,6 +12,7 @@
 //! [`tree::Fabric`] (unit-tested without a fabric); [`run`] drives a real one through the
 //! client library.
 
+pub mod keep;
 pub mod plan;
 pub mod run;
 pub mod tree;
@@ -19,6 +20,7 @@ pub mod tree;
 #[cfg(test)]
 mod tests;
 
+pub use keep::{Kept, PlanState, PlanStore};
 pub use plan::{Plan, PlanError};
-pub use run::{ClientFabric, LockStep, Sequencer, run};
+pub use run::{ClientFabric, LockStep, Opening, Sequencer, run};
 pub use tree::{Fabric, FabricError, SeqError, Status};

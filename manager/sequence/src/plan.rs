@@ -134,6 +134,16 @@ pub struct Plan {
     pub trees: BTreeMap<String, Spec>,
     /// The tree run unless another is asked for (`main_tree_to_execute`, or the only one).
     pub main: String,
+    /// A fingerprint of the file's text (FNV-1a, 64 bits): a restarted runner resumes only
+    /// the plan that was running, not a file changed since.
+    pub fingerprint: u64,
+}
+
+/// FNV-1a over `bytes`: stable across builds and platforms (unlike `std`'s hasher).
+pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 /// A reader of one file's elements: errors carry the file and the element's line.
@@ -535,7 +545,11 @@ impl Plan {
                 ));
             }
         };
-        let plan = Plan { trees, main };
+        let plan = Plan {
+            trees,
+            main,
+            fingerprint: fnv1a(text.as_bytes()),
+        };
         if !plan.trees.contains_key(&plan.main) {
             return Err(r.error(
                 root,

@@ -1,13 +1,14 @@
 //! The sequencer's loop over a [`Client`]: tick the tree, wait for events, tick again; in
 //! lock-step, resume the paused manager once the plan has reacted.
 
+use crate::keep::{Kept, PlanState, PlanStore};
 use crate::plan::{Plan, PlanError};
-use crate::tree::{Cx, Fabric, FabricError, Node, SeqError, Status};
+use crate::tree::{Cx, Fabric, FabricError, Node, Override, Saved, SeqError, Status};
 use skillfab_client::{Client, ClientError};
-use skillfab_proto::control::{EventKind, MonitorMode};
+use skillfab_proto::control::{EventKind, MonitorFate, MonitorMode};
 use skillfab_proto::param::ParamValue;
 use std::collections::HashSet;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 /// The fabric a plan drives, through a client of the local manager (or a remote one).
 pub struct ClientFabric<'a> {
@@ -74,6 +75,15 @@ impl Fabric for ClientFabric<'_> {
         let _ = self.client.remove_monitor(id);
     }
 
+    fn adopt_monitors(&mut self, ids: &[u64]) -> Result<Vec<MonitorFate>, FabricError> {
+        self.client.adopt_monitors(ids).map_err(fabric_error)
+    }
+
+    fn monitors(&mut self) -> Result<Vec<(u64, String)>, FabricError> {
+        let list = self.client.monitors().map_err(fabric_error)?;
+        Ok(list.into_iter().map(|m| (m.id, m.client)).collect())
+    }
+
     /// The fabric's clock on this host (none while its manager restarts: time stands still
     /// for the plan's timers); over a bridge, the wall clock since the plan started.
     fn now(&mut self) -> Duration {
@@ -84,12 +94,47 @@ impl Fabric for ClientFabric<'_> {
     }
 }
 
-/// A plan being run: its tree, the monitors of this client that fired, the step log.
+/// A plan being run: its tree, the monitors of this client that fired, the step log, the
+/// parameters it set; and where its state is kept for a runner that takes over.
 pub struct Sequencer {
     root: Node,
     fired: HashSet<u64>,
     steps: Vec<String>,
     origin: Instant,
+    overrides: Vec<Override>,
+    keep: Option<Keeping>,
+}
+
+/// A plan whose state is kept ([`Sequencer::kept`]).
+struct Keeping {
+    store: PlanStore,
+    state: PlanState,
+    /// A second tree, into which a kept state is read (used only if it fits).
+    spare: Option<Node>,
+    /// Start over whatever was kept (`--fresh`).
+    fresh: bool,
+    /// How the runner started, once it has ([`Sequencer::open`]).
+    opened: Option<Opening>,
+    /// A failed save was said once.
+    warned: bool,
+}
+
+/// How a runner whose plan's state is kept started.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Opening {
+    /// Nothing was kept: the plan starts from its first node.
+    Fresh,
+    /// The same plan was running: it goes on where its last runner left it.
+    Resumed {
+        /// Where it was (the running leaves, timers, parameters set).
+        at: Vec<String>,
+    },
+    /// Another plan's state, or one that cannot be resumed, was kept: what it had set was
+    /// restored and its monitors removed, and this plan starts from its first node.
+    StartedOver {
+        /// Why.
+        why: String,
+    },
 }
 
 impl Sequencer {
@@ -100,7 +145,264 @@ impl Sequencer {
             fired: HashSet::new(),
             steps: Vec::new(),
             origin: Instant::now(),
+            overrides: Vec::new(),
+            keep: None,
         })
+    }
+
+    /// The same, with the plan's state kept in `store` after every tick, so that a runner
+    /// started after this one dies (same plan, same domain) resumes it at the node it was in
+    /// ([`Sequencer::open`]). `file` names the plan in the kept state and messages; with
+    /// `fresh`, a kept plan is not resumed: what it had set is restored, and this one starts
+    /// from its first node.
+    pub fn kept(
+        plan: &Plan,
+        tree: Option<&str>,
+        file: &str,
+        store: PlanStore,
+        fresh: bool,
+    ) -> Result<Sequencer, PlanError> {
+        let tree = tree.unwrap_or(&plan.main);
+        let mut seq = Sequencer::new(plan, Some(tree))?;
+        seq.keep = Some(Keeping {
+            store,
+            state: PlanState::new(file, tree, plan.fingerprint, ""),
+            spare: Some(Node::build(plan, tree)?),
+            fresh,
+            opened: None,
+            warned: false,
+        });
+        Ok(seq)
+    }
+
+    /// How this runner started (after [`Sequencer::open`]; `None` for a plan not kept).
+    pub fn opening(&self) -> Option<&Opening> {
+        self.keep.as_ref().and_then(|k| k.opened.as_ref())
+    }
+
+    /// Takes over what the plan's last runner kept, once, before the first tick: the same
+    /// plan resumes (its monitors taken over — those that fired while no runner ran count as
+    /// fired, those gone are installed again — parameters set by `WithParam`s that are no
+    /// longer running restored); anything else is undone first (parameters restored,
+    /// monitors removed). `me` is this runner's client id. A plan not kept starts fresh.
+    pub fn open(&mut self, fabric: &mut dyn Fabric, me: &str) -> Result<Opening, SeqError> {
+        let Some(k) = self.keep.as_mut() else {
+            return Ok(Opening::Fresh);
+        };
+        if let Some(o) = &k.opened {
+            return Ok(o.clone());
+        }
+        k.state.runners = vec![me.to_string()];
+        let old = match k.store.load() {
+            Kept::Nothing => None,
+            Kept::Unreadable(why) => {
+                let why = format!(
+                    "the kept plan state is unreadable ({why}); what it set cannot be restored"
+                );
+                return self.opened(fabric, Opening::StartedOver { why });
+            }
+            Kept::State(s) => Some(*s),
+        };
+        let Some(old) = old else {
+            return self.opened(fabric, Opening::Fresh);
+        };
+        let (file, tree) = (&k.state.file, &k.state.tree);
+        let mut why = if k.fresh {
+            Some("--fresh".to_string())
+        } else if old.file != *file || old.tree != *tree {
+            Some(format!(
+                "another plan was running ({}, tree {})",
+                old.file, old.tree
+            ))
+        } else if old.fingerprint != k.state.fingerprint {
+            Some(format!("{file} changed since its last runner"))
+        } else {
+            None
+        };
+        if why.is_none()
+            && let Some(mut spare) = k.spare.take()
+        {
+            let mut saved = old.nodes.iter();
+            let fits = spare
+                .load(&mut saved, &old.overrides)
+                .and_then(|()| match saved.next() {
+                    Some(_) => Err("it has more nodes than the tree".to_string()),
+                    None => Ok(()),
+                });
+            match fits {
+                Ok(()) => {
+                    self.root = spare;
+                    return self.resume(fabric, old, me);
+                }
+                Err(e) => why = Some(format!("its kept state does not fit the plan: {e}")),
+            }
+        }
+        let why = why.unwrap_or_default();
+        self.undo(fabric, &old, &why)?;
+        self.opened(fabric, Opening::StartedOver { why })
+    }
+
+    /// Undoes what the runners of `old` left set (their overrides, latest first) and
+    /// installed (their monitors).
+    fn undo(
+        &mut self,
+        fabric: &mut dyn Fabric,
+        old: &PlanState,
+        why: &str,
+    ) -> Result<(), SeqError> {
+        self.steps.push(format!(
+            "the plan {} (tree {}) of runner(s) {} is not resumed ({why}): undoing what it set",
+            old.file,
+            old.tree,
+            old.runners.join(", ")
+        ));
+        for o in old.overrides.iter().rev() {
+            let what = format!("{}.{} restored to {}", o.skill, o.param, o.before);
+            match fabric.set_param_value(&o.skill, &o.param, o.before) {
+                Ok(()) => self.steps.push(what),
+                Err(FabricError::Refused(r)) => self.steps.push(format!("{what}: refused: {r}")),
+                Err(source) => return Err(SeqError::Fabric { what, source }),
+            }
+        }
+        let mut theirs: HashSet<u64> = old
+            .nodes
+            .iter()
+            .filter_map(|n| match n {
+                Saved::WaitFor(m) => *m,
+                _ => None,
+            })
+            .collect();
+        if let Ok(all) = fabric.monitors() {
+            theirs.extend(
+                all.iter()
+                    .filter(|(_, c)| old.runners.contains(c))
+                    .map(|(id, _)| *id),
+            );
+        }
+        for id in theirs {
+            fabric.remove_monitor(id);
+        }
+        Ok(())
+    }
+
+    /// Goes on with the plan `old` kept (loaded into the tree already).
+    fn resume(
+        &mut self,
+        fabric: &mut dyn Fabric,
+        old: PlanState,
+        me: &str,
+    ) -> Result<Opening, SeqError> {
+        self.overrides = old.overrides.clone();
+        self.fired = old.fired.iter().copied().collect();
+        // Parameters set by a `WithParam` that had ended when its runner died, before it
+        // could say so: restored now.
+        let mut setting = Vec::new();
+        self.root.setting(&mut setting);
+        let stale: Vec<Override> = self
+            .overrides
+            .iter()
+            .filter(|o| !setting.contains(&o.node))
+            .cloned()
+            .collect();
+        for o in stale.iter().rev() {
+            let what = format!("{}.{} restored to {}", o.skill, o.param, o.before);
+            match fabric.set_param_value(&o.skill, &o.param, o.before) {
+                Ok(()) => self.steps.push(what),
+                Err(FabricError::Refused(r)) => self.steps.push(format!("{what}: refused: {r}")),
+                Err(source) => return Err(SeqError::Fabric { what, source }),
+            }
+            self.overrides.retain(|x| x.node != o.node);
+        }
+        // The running `WaitFor`s' monitors: taken over, counted as fired, or installed again.
+        let mut ids = Vec::new();
+        self.root.monitors(&mut ids);
+        let fates = if ids.is_empty() {
+            Vec::new()
+        } else {
+            fabric
+                .adopt_monitors(&ids)
+                .map_err(|source| SeqError::Fabric {
+                    what: "taking over the plan's monitors".into(),
+                    source,
+                })?
+        };
+        let (mut live, mut fired, mut gone) = (0, 0, HashSet::new());
+        for (id, fate) in ids.iter().zip(fates) {
+            match fate {
+                MonitorFate::Live => live += 1,
+                MonitorFate::Fired(_) => {
+                    fired += 1;
+                    self.fired.insert(*id);
+                }
+                MonitorFate::Gone => {
+                    gone.insert(*id);
+                }
+            }
+        }
+        self.root.forget_monitors(&gone);
+        // Monitors a runner installed in a tick it did not live to keep: nobody waits on them.
+        if let Ok(all) = fabric.monitors() {
+            for (id, client) in all {
+                if old.runners.contains(&client) && !ids.contains(&id) {
+                    fabric.remove_monitor(id);
+                }
+            }
+        }
+        let mut at = Vec::new();
+        self.root.running(&mut at);
+        let Some(k) = self.keep.as_mut() else {
+            return Ok(Opening::Fresh);
+        };
+        k.state.runners = old.runners;
+        k.state.runners.push(me.to_string());
+        k.state.started = old.started;
+        let since = SystemTime::now()
+            .duration_since(old.started)
+            .unwrap_or_default();
+        self.origin = Instant::now().checked_sub(since).unwrap_or(self.origin);
+        self.steps.push(format!(
+            "resuming {} (runner {} of it) at: {}; monitors: {live} taken over, {fired} fired meanwhile, {} installed again",
+            k.state.file,
+            k.state.runners.len(),
+            if at.is_empty() { "its start".to_string() } else { at.join("; ") },
+            gone.len()
+        ));
+        self.opened(fabric, Opening::Resumed { at })
+    }
+
+    fn opened(&mut self, fabric: &mut dyn Fabric, o: Opening) -> Result<Opening, SeqError> {
+        if let Some(k) = self.keep.as_mut() {
+            k.opened = Some(o.clone());
+        }
+        self.commit(fabric.now());
+        Ok(o)
+    }
+
+    /// Keeps the plan's state as it is now (after a tick).
+    fn commit(&mut self, now: std::time::Duration) {
+        let Some(k) = self.keep.as_mut() else {
+            return;
+        };
+        k.state.nodes.clear();
+        self.root.save(&mut k.state.nodes);
+        k.state.fired = self.fired.iter().copied().collect();
+        k.state.fired.sort_unstable();
+        k.state.overrides.clone_from(&self.overrides);
+        k.state.at = now;
+        save(k);
+    }
+
+    /// Forgets the kept state: the plan ended (succeeded, failed or was halted).
+    fn ended(&mut self) {
+        if let Some(k) = &self.keep {
+            k.store.remove();
+        }
+    }
+
+    /// Whether a runner took the plan over from another (the fabric may be running: in
+    /// lock-step the plan waits for it to pause).
+    fn resumed(&self) -> bool {
+        matches!(self.opening(), Some(Opening::Resumed { .. }))
     }
 
     /// When the plan started: the origin of its wall-clock time over a bridge.
@@ -122,24 +424,48 @@ impl Sequencer {
         }
     }
 
-    /// Ticks the tree once.
+    /// Ticks the tree once (a kept plan's state is kept after it, and forgotten when the
+    /// tree ends).
     pub fn tick(&mut self, fabric: &mut dyn Fabric) -> Result<Status, SeqError> {
+        let keep = &mut self.keep;
+        let mut keep = |o: &[Override]| {
+            if let Some(k) = keep.as_mut() {
+                k.state.overrides = o.to_vec();
+                save(k);
+            }
+        };
         let mut cx = Cx {
             fabric,
             fired: &mut self.fired,
             steps: &mut self.steps,
+            overrides: &mut self.overrides,
+            keep: &mut keep,
         };
-        self.root.tick(&mut cx)
+        // A tick cut short by the fabric is not kept (as if its runner died in it): the
+        // runner halts the tree, and the halted state is kept.
+        let status = self.root.tick(&mut cx)?;
+        let now = cx.fabric.now();
+        match status {
+            Status::Running => self.commit(now),
+            // The plan ended: nothing to take over.
+            Status::Success | Status::Failure => self.ended(),
+        }
+        Ok(status)
     }
 
     /// Halts the tree: monitors removed, parameters restored.
     pub fn halt(&mut self, fabric: &mut dyn Fabric) {
+        let mut keep = |_: &[Override]| {};
         let mut cx = Cx {
             fabric,
             fired: &mut self.fired,
             steps: &mut self.steps,
+            overrides: &mut self.overrides,
+            keep: &mut keep,
         };
         self.root.halt(&mut cx);
+        let now = cx.fabric.now();
+        self.commit(now);
     }
 
     /// The earliest fabric time a running timer (`Sleep`, `Timeout`) of the plan is due.
@@ -150,6 +476,19 @@ impl Sequencer {
     /// The steps done since the last call.
     pub fn take_steps(&mut self) -> Vec<String> {
         std::mem::take(&mut self.steps)
+    }
+}
+
+/// Writes `k`'s state (a failure is said once: the plan goes on, but a runner that takes
+/// over would not find where it was).
+fn save(k: &mut Keeping) {
+    match k.store.save(&k.state) {
+        Ok(()) => k.warned = false,
+        Err(e) if !k.warned => {
+            k.warned = true;
+            tracing::warn!(file = %k.store.path().display(), error = %e, "the plan's state cannot be kept");
+        }
+        Err(_) => {}
     }
 }
 
@@ -169,6 +508,9 @@ const MAX_STEP: u64 = 200;
 #[derive(Debug)]
 pub struct LockStep {
     paused: bool,
+    /// A runner that took over while the manager ran waits for it to pause (at a monitor's
+    /// firing or the end of its predecessor's `step`) before it ticks.
+    until_paused: bool,
 }
 
 impl LockStep {
@@ -176,10 +518,10 @@ impl LockStep {
     /// paused: a manager started `--paused` waits for the plan's first tick). Over a bridge
     /// the board cannot be read: a plan does not pace a remote lock-step manager.
     pub fn of(client: &Client) -> Option<LockStep> {
-        client
-            .clock()
-            .filter(|c| c.lockstep)
-            .map(|_| LockStep { paused: true })
+        client.clock().filter(|c| c.lockstep).map(|_| LockStep {
+            paused: true,
+            until_paused: false,
+        })
     }
 
     /// Whether the manager waits for the plan (it is ticked, then resumed).
@@ -189,8 +531,13 @@ impl LockStep {
 
     /// Takes in an event: a monitor that fired paused the manager.
     pub fn on_event(&mut self, event: &EventKind) {
-        if matches!(event, EventKind::MonitorFired { .. }) {
-            self.paused = true;
+        let paused = match event {
+            EventKind::MonitorFired { .. } => true,
+            EventKind::Cycling { running: false } => self.until_paused,
+            _ => false,
+        };
+        if paused {
+            (self.paused, self.until_paused) = (true, false);
         }
     }
 
@@ -258,10 +605,26 @@ fn drive(
         .subscribe()
         .map_err(failed("subscribing to events"))?;
     let id = client.id().to_string();
+    seq.open(&mut ClientFabric::new(client, seq.origin()), &id)?;
+    for s in seq.take_steps() {
+        on_step(client, &s);
+    }
     let mut lockstep = LockStep::of(client);
+    // A plan taken over while its lock-step manager runs (its last runner died after `run`
+    // or inside a `step`): the manager pauses at the next firing or the step's end.
+    if seq.resumed()
+        && let Some(l) = lockstep.as_mut()
+        && client
+            .stats()
+            .map_err(failed("reading the manager's state"))?
+            .running
+    {
+        (l.paused, l.until_paused) = (false, true);
+    }
     loop {
         if stop() {
             seq.halt(&mut ClientFabric::new(client, seq.origin()));
+            seq.ended();
             for s in seq.take_steps() {
                 on_step(client, &s);
             }

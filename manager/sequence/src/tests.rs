@@ -4,6 +4,7 @@
 use crate::plan::Plan;
 use crate::run::Sequencer;
 use crate::tree::{Fabric, FabricError, Status};
+use skillfab_proto::control::MonitorFate;
 use skillfab_proto::param::ParamValue;
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -14,6 +15,15 @@ struct Mock {
     active: BTreeMap<String, bool>,
     params: BTreeMap<String, f64>,
     monitors: BTreeMap<u64, String>,
+    /// Who installed each monitor.
+    owners: BTreeMap<u64, String>,
+    /// Monitors that fired (and went).
+    fired: Vec<u64>,
+    /// The client asking (a restarted runner is another).
+    client: String,
+    /// Requests answered so far, and the one that finds the fabric gone (a runner dying).
+    requests: usize,
+    die_at: Option<usize>,
     next: u64,
     now: Duration,
     log: Vec<String>,
@@ -26,7 +36,17 @@ impl Mock {
             m.active.insert((*s).to_string(), false);
         }
         m.params.insert("avoid.safe_distance".into(), 0.6);
+        m.client = "me".into();
         m
+    }
+
+    /// Counts a request; `Failed` at the one a runner dies in.
+    fn request(&mut self) -> Result<(), FabricError> {
+        self.requests += 1;
+        if self.die_at == Some(self.requests) {
+            return Err(FabricError::Failed("the runner died here".into()));
+        }
+        Ok(())
     }
 
     fn known(&self, skills: &[String]) -> Result<(), FabricError> {
@@ -56,6 +76,7 @@ impl Mock {
 
 impl Fabric for Mock {
     fn activate(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        self.request()?;
         self.known(skills)?;
         for s in skills {
             self.active.insert(s.clone(), true);
@@ -64,6 +85,7 @@ impl Fabric for Mock {
     }
 
     fn deactivate(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        self.request()?;
         self.known(skills)?;
         for s in skills {
             self.active.insert(s.clone(), false);
@@ -72,6 +94,7 @@ impl Fabric for Mock {
     }
 
     fn get_param(&mut self, skill: &str, param: &str) -> Result<ParamValue, FabricError> {
+        self.request()?;
         self.params
             .get(&format!("{skill}.{param}"))
             .map(|v| ParamValue::Float(*v))
@@ -79,6 +102,7 @@ impl Fabric for Mock {
     }
 
     fn set_param(&mut self, skill: &str, param: &str, value: &str) -> Result<(), FabricError> {
+        self.request()?;
         let key = format!("{skill}.{param}");
         if !self.params.contains_key(&key) {
             return Err(FabricError::Refused(format!(
@@ -103,16 +127,44 @@ impl Fabric for Mock {
     }
 
     fn add_monitor(&mut self, condition: &str, _hold: u32) -> Result<u64, FabricError> {
+        self.request()?;
         if condition.contains("nobody") {
             return Err(FabricError::Refused("unknown skill 'nobody'".into()));
         }
         self.next += 1;
         self.monitors.insert(self.next, condition.to_string());
+        self.owners.insert(self.next, self.client.clone());
         Ok(self.next)
     }
 
     fn remove_monitor(&mut self, id: u64) {
         self.monitors.remove(&id);
+    }
+
+    fn adopt_monitors(&mut self, ids: &[u64]) -> Result<Vec<MonitorFate>, FabricError> {
+        self.request()?;
+        Ok(ids
+            .iter()
+            .map(|id| {
+                if self.monitors.contains_key(id) {
+                    self.owners.insert(*id, self.client.clone());
+                    MonitorFate::Live
+                } else if self.fired.contains(id) {
+                    MonitorFate::Fired(0)
+                } else {
+                    MonitorFate::Gone
+                }
+            })
+            .collect())
+    }
+
+    fn monitors(&mut self) -> Result<Vec<(u64, String)>, FabricError> {
+        self.request()?;
+        Ok(self
+            .monitors
+            .keys()
+            .map(|id| (*id, self.owners[id].clone()))
+            .collect())
     }
 
     fn now(&mut self) -> Duration {
@@ -129,14 +181,15 @@ fn plan(body: &str) -> Plan {
 /// A monitor firing, as the manager's event says it (a `Once` monitor is then gone).
 fn fire(seq: &mut Sequencer, f: &mut Mock, id: u64) {
     f.monitors.remove(&id);
+    f.fired.push(id);
     let ev = skillfab_proto::control::EventKind::MonitorFired {
         id,
-        client: "me".into(),
+        client: f.owners.get(&id).cloned().unwrap_or_else(|| "me".into()),
         expr: String::new(),
         values: Vec::new(),
         stamp_ns: 0,
     };
-    assert!(seq.on_event("me", &ev));
+    assert!(seq.on_event(&f.client, &ev));
 }
 
 #[test]
@@ -499,4 +552,187 @@ fn misspelt_attributes_zero_timeouts_blackboard_keys_and_deep_nesting_are_refuse
     text += "<BehaviorTree ID=\"T30\"><AlwaysSuccess/></BehaviorTree></root>";
     let e = Plan::parse(&text, "p.xml").unwrap_err();
     assert!(e.reason.contains("more than 100000 nodes"), "{e}");
+}
+
+/// A plan with the three nodes whose state matters most when a runner dies: a parameter set
+/// for a while, a `Timeout` and a `RetryUntilSuccessful` (the door is seen on the third
+/// attempt), then a `Sleep`.
+const RESUMABLE: &str = r#"<Sequence>
+     <Activate skills="wander"/>
+     <WithParam skill="avoid" param="safe_distance" value="0.2">
+       <Sequence>
+         <ForceSuccess><Timeout msec="500"><WaitFor name="never" condition="never.x.y == 1"/></Timeout></ForceSuccess>
+         <RetryUntilSuccessful num_attempts="5">
+           <Timeout name="look" msec="300"><WaitFor name="door" condition="door.found == 1"/></Timeout>
+         </RetryUntilSuccessful>
+         <Sleep msec="200"/>
+       </Sequence>
+     </WithParam>
+     <Deactivate skills="wander"/>
+   </Sequence>"#;
+
+/// Where a runner of [`RESUMABLE`] got: the tick it ended in and how, and the fabric then.
+#[derive(Debug)]
+struct End {
+    tick: u32,
+    status: Status,
+    /// Requests the last runner made (not compared).
+    requests: usize,
+    params: BTreeMap<String, f64>,
+    on: Vec<String>,
+    monitors: usize,
+}
+
+/// Runs [`RESUMABLE`] one tick per 100 ms of fabric time (the door's monitor fires once it
+/// is 1.5 s), its state kept in `store`. With `die_at`, the runner dies in that request to
+/// the fabric (nothing more it does is kept), and another takes over.
+fn run_resumable(store: &std::path::Path, die_at: Option<usize>) -> (End, Vec<String>) {
+    let _ = std::fs::remove_file(store);
+    let p = plan(RESUMABLE);
+    let mut f = Mock::new(&["wander"]);
+    f.die_at = die_at;
+    let mut steps = Vec::new();
+    let mut n = 1;
+    f.client = format!("runner-{n}");
+    let kept = |p: &Plan| {
+        Sequencer::kept(
+            p,
+            None,
+            "test.xml",
+            crate::keep::PlanStore::at(store.to_path_buf()),
+            false,
+        )
+        .unwrap()
+    };
+    let mut seq = kept(&p);
+    let me = f.client.clone();
+    seq.open(&mut f, &me).unwrap();
+    for tick in 1..200 {
+        f.now = Duration::from_millis(100 * u64::from(tick));
+        if f.now >= Duration::from_millis(1500)
+            && let Some((&id, _)) = f.monitors.iter().find(|(_, c)| *c == "door.found == 1")
+        {
+            fire(&mut seq, &mut f, id);
+        }
+        let status = match seq.tick(&mut f) {
+            Ok(s) => s,
+            Err(_) => {
+                // This runner is dead; the next one takes over (the fabric answers again).
+                f.die_at = None;
+                n += 1;
+                f.client = format!("runner-{n}");
+                steps.extend(seq.take_steps());
+                seq = kept(&p);
+                let me = f.client.clone();
+                seq.open(&mut f, &me).unwrap();
+                seq.tick(&mut f).unwrap()
+            }
+        };
+        steps.extend(seq.take_steps());
+        if status != Status::Running {
+            let end = End {
+                tick,
+                status,
+                requests: f.requests,
+                params: f.params.clone(),
+                on: f.on().iter().map(|s| s.to_string()).collect(),
+                monitors: f.monitors.len(),
+            };
+            return (end, steps);
+        }
+    }
+    panic!("the plan did not end: {steps:#?}");
+}
+
+#[test]
+fn a_runner_that_dies_anywhere_is_taken_over_and_the_plan_ends_as_an_uninterrupted_one() {
+    let dir = std::env::temp_dir().join(format!("sf-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let store = dir.join("plan");
+    let (whole, steps) = run_resumable(&store, None);
+    assert_eq!(whole.status, Status::Success, "{steps:#?}");
+    assert_eq!(whole.params["avoid.safe_distance"], 0.6);
+    assert_eq!(whole.monitors, 0);
+    assert!(!store.exists(), "a plan that ended leaves nothing kept");
+    // Dying in each request the plan makes, in turn: inside the `WithParam` (between
+    // reading the parameter and setting it, too), the `Timeout`, each attempt of the retry.
+    assert_eq!(whole.requests, 9, "{whole:?}");
+    let same = |e: &End| (e.tick, e.status, e.params.clone(), e.on.clone(), e.monitors);
+    for die_at in 1..=whole.requests {
+        let (end, steps) = run_resumable(&store, Some(die_at));
+        assert_eq!(
+            same(&end),
+            same(&whole),
+            "died at request {die_at}: {steps:#?}"
+        );
+        assert!(
+            steps
+                .iter()
+                .any(|s| s.starts_with("resuming test.xml (runner 2 of it)")),
+            "died at request {die_at}: {steps:#?}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn another_plan_a_changed_file_or_fresh_first_undoes_what_the_last_runner_set() {
+    let dir = std::env::temp_dir().join(format!("sf-plan-other-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let store = || crate::keep::PlanStore::at(dir.join("plan"));
+    let p = plan(RESUMABLE);
+    // Each way a kept plan is not resumed: the runner that left it had set the parameter
+    // and was waiting; the next one restores it and removes its monitors, then starts over.
+    let changed = plan(&RESUMABLE.replace("msec=\"200\"", "msec=\"300\""));
+    let cases: [(&Plan, &str, bool, &str); 3] = [
+        (
+            &p,
+            "other.xml",
+            false,
+            "another plan was running (test.xml, tree Main)",
+        ),
+        (
+            &changed,
+            "test.xml",
+            false,
+            "test.xml changed since its last runner",
+        ),
+        (&p, "test.xml", true, "--fresh"),
+    ];
+    for (next, file, fresh, why) in cases {
+        let mut f = Mock::new(&["wander"]);
+        f.client = "runner-1".into();
+        let mut seq = Sequencer::kept(&p, None, "test.xml", store(), false).unwrap();
+        seq.open(&mut f, "runner-1").unwrap();
+        for _ in 0..3 {
+            seq.tick(&mut f).unwrap();
+        }
+        assert_eq!(f.params["avoid.safe_distance"], 0.2);
+        assert_eq!(f.monitors.len(), 1);
+        drop(seq);
+        f.client = "runner-2".into();
+        let mut seq = Sequencer::kept(next, None, file, store(), fresh).unwrap();
+        let opening = seq.open(&mut f, "runner-2").unwrap();
+        assert_eq!(
+            opening,
+            crate::run::Opening::StartedOver { why: why.into() }
+        );
+        assert_eq!(f.params["avoid.safe_distance"], 0.6, "{why}");
+        assert!(f.monitors.is_empty(), "{why}: {:?}", f.monitors);
+        let steps = seq.take_steps();
+        assert!(steps[0].contains(why), "{steps:?}");
+        assert_eq!(steps[1], "avoid.safe_distance restored to 0.6");
+        // It starts from its first node.
+        seq.tick(&mut f).unwrap();
+        assert_eq!(seq.take_steps()[0], "activate wander");
+    }
+    // A kept state that cannot be read: said, and the plan starts over.
+    std::fs::write(dir.join("plan"), b"{not json").unwrap();
+    let mut f = Mock::new(&["wander"]);
+    let mut seq = Sequencer::kept(&p, None, "test.xml", store(), false).unwrap();
+    let crate::run::Opening::StartedOver { why } = seq.open(&mut f, "runner-3").unwrap() else {
+        panic!("resumed from garbage");
+    };
+    assert!(why.contains("unreadable"), "{why}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -3,12 +3,14 @@
 //! holds — a `WaitFor` removes its monitor, a `WithParam` restores its parameter.
 
 use crate::plan::{Kind, Plan, PlanError, Spec};
+use serde::{Deserialize, Serialize};
+use skillfab_proto::control::MonitorFate;
 use skillfab_proto::param::ParamValue;
 use std::collections::HashSet;
 use std::time::Duration;
 
 /// What a node returns when ticked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Status {
     /// Not done yet: tick it again.
     Running,
@@ -51,6 +53,11 @@ pub trait Fabric {
     fn add_monitor(&mut self, condition: &str, hold: u32) -> Result<u64, FabricError>;
     /// Removes a monitor (one that fired already is gone: not an error).
     fn remove_monitor(&mut self, id: u64);
+    /// Takes over monitors another client installed (a runner that died before this one):
+    /// what became of each, in order.
+    fn adopt_monitors(&mut self, ids: &[u64]) -> Result<Vec<MonitorFate>, FabricError>;
+    /// Every installed monitor: (id, the client it belongs to).
+    fn monitors(&mut self) -> Result<Vec<(u64, String)>, FabricError>;
     /// The fabric's time (cycle × period with a period; lock-step included).
     fn now(&mut self) -> Duration;
 }
@@ -72,6 +79,42 @@ pub enum SeqError {
     },
 }
 
+/// A parameter a `WithParam` set and must restore, with the value it had before. It is put
+/// in the plan's kept state *before* the parameter is set, so that a runner that dies at any
+/// instant leaves behind what to restore (a restarted runner, or one that starts another
+/// plan, restores it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Override {
+    /// The `WithParam` node's number (preorder, sub-trees inlined).
+    pub node: usize,
+    /// Skill instance.
+    pub skill: String,
+    /// Parameter.
+    pub param: String,
+    /// Its value before the plan set it.
+    pub before: ParamValue,
+}
+
+/// A node's state between ticks, as kept for a runner that resumes the plan (one per node,
+/// in preorder; the plan's fingerprint guarantees the same tree).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Saved {
+    /// `Sequence`, `Fallback`: the child it is at.
+    Chain(usize),
+    /// `Parallel`: the children decided.
+    Parallel(Vec<Option<Status>>),
+    /// `RetryUntilSuccessful`: attempts failed, and whether the next is due now.
+    Retry(u32, bool),
+    /// `Timeout`, `Sleep`: since when (fabric time), if running.
+    Timer(Option<Duration>),
+    /// `WithParam`: whether its parameter is set (the value to restore is an [`Override`]).
+    WithParam(bool),
+    /// `WaitFor`: its monitor, if running.
+    WaitFor(Option<u64>),
+    /// Anything that keeps nothing.
+    Nothing,
+}
+
 /// What a tick can see and do: the fabric, the monitors that fired since the last tick, and
 /// the step log.
 pub struct Cx<'a> {
@@ -81,6 +124,10 @@ pub struct Cx<'a> {
     pub fired: &'a mut HashSet<u64>,
     /// What was done, in order (the runner prints and drains it).
     pub steps: &'a mut Vec<String>,
+    /// The parameters set by `WithParam`s that are running, to restore.
+    pub overrides: &'a mut Vec<Override>,
+    /// Keeps `overrides` where a restarted runner finds them (before a parameter is set).
+    pub keep: &'a mut dyn FnMut(&[Override]),
 }
 
 impl Cx<'_> {
@@ -121,6 +168,8 @@ impl Cx<'_> {
 /// A node and its state between ticks.
 pub struct Node {
     name: String,
+    /// Its number in the tree (preorder, sub-trees inlined).
+    id: usize,
     state: State,
 }
 
@@ -185,24 +234,20 @@ impl Node {
                 plan.trees.keys().cloned().collect::<Vec<_>>().join(", ")
             ),
         })?;
-        Ok(Node::from_spec(plan, spec))
+        Ok(Node::from_spec(plan, spec, &mut 0))
     }
 
-    fn from_spec(plan: &Plan, spec: &Spec) -> Node {
-        let many = |c: &[Spec]| {
-            c.iter()
-                .map(|s| Node::from_spec(plan, s))
-                .collect::<Vec<_>>()
-        };
-        let one = |c: &Spec| Box::new(Node::from_spec(plan, c));
+    fn from_spec(plan: &Plan, spec: &Spec, next: &mut usize) -> Node {
+        let id = *next;
+        *next += 1;
         let state = match &spec.kind {
             Kind::Sequence(c) => State::Chain {
-                children: many(c),
+                children: Node::many(plan, c, next),
                 at: 0,
                 go_on: Status::Success,
             },
             Kind::Fallback(c) => State::Chain {
-                children: many(c),
+                children: Node::many(plan, c, next),
                 at: 0,
                 go_on: Status::Failure,
             },
@@ -214,23 +259,29 @@ impl Node {
                 done: vec![None; children.len()],
                 success: success.unwrap_or(children.len()),
                 failure: *failure,
-                children: many(children),
+                children: Node::many(plan, children, next),
             },
             Kind::Retry { attempts, child } => State::Retry {
-                child: one(child),
+                child: Box::new(Node::from_spec(plan, child, next)),
                 attempts: *attempts,
                 failed: 0,
                 again: false,
             },
             Kind::Timeout { after, child } => State::Timeout {
-                child: one(child),
+                child: Box::new(Node::from_spec(plan, child, next)),
                 after: *after,
                 since: None,
             },
-            Kind::Inverter(c) => State::Inverter(one(c)),
-            Kind::KeepRunningUntilFailure(c) => State::KeepRunning(one(c)),
-            Kind::ForceSuccess(c) => State::Force(one(c), Status::Success),
-            Kind::ForceFailure(c) => State::Force(one(c), Status::Failure),
+            Kind::Inverter(c) => State::Inverter(Box::new(Node::from_spec(plan, c, next))),
+            Kind::KeepRunningUntilFailure(c) => {
+                State::KeepRunning(Box::new(Node::from_spec(plan, c, next)))
+            }
+            Kind::ForceSuccess(c) => {
+                State::Force(Box::new(Node::from_spec(plan, c, next)), Status::Success)
+            }
+            Kind::ForceFailure(c) => {
+                State::Force(Box::new(Node::from_spec(plan, c, next)), Status::Failure)
+            }
             Kind::WithParam {
                 skill,
                 param,
@@ -240,7 +291,7 @@ impl Node {
                 skill: skill.clone(),
                 param: param.clone(),
                 value: value.clone(),
-                child: one(child),
+                child: Box::new(Node::from_spec(plan, child, next)),
                 old: None,
             },
             Kind::Activate(_)
@@ -260,19 +311,30 @@ impl Node {
             },
             // Checked when the plan was read: the tree exists and does not contain itself.
             Kind::SubTree(id) => match plan.trees.get(id) {
-                Some(t) => return Node::from_spec(plan, t),
+                Some(t) => {
+                    *next -= 1;
+                    return Node::from_spec(plan, t, next);
+                }
                 None => State::Act(Kind::AlwaysFailure),
             },
         };
         Node {
             name: spec.name.clone(),
+            id,
             state,
         }
     }
 
+    fn many(plan: &Plan, specs: &[Spec], next: &mut usize) -> Vec<Node> {
+        specs
+            .iter()
+            .map(|s| Node::from_spec(plan, s, next))
+            .collect()
+    }
+
     /// Ticks the node once.
     pub fn tick(&mut self, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
-        let name = &self.name;
+        let (name, id) = (&self.name, self.id);
         match &mut self.state {
             State::Chain {
                 children,
@@ -404,12 +466,29 @@ impl Node {
             } => {
                 if old.is_none() {
                     let what = format!("{skill}.{param} = {value} while {}", child.name);
-                    let r = cx.fabric.get_param(skill, param);
-                    let Some(before) = cx.outcome(&what, r)? else {
-                        return Ok(Status::Failure);
+                    let kept = cx.overrides.iter().find(|o| o.node == id);
+                    let before = match kept {
+                        // A runner that died had read it (and maybe set it): that value is
+                        // the one to restore, not what the parameter holds now.
+                        Some(o) => o.before,
+                        None => {
+                            let r = cx.fabric.get_param(skill, param);
+                            let Some(before) = cx.outcome(&what, r)? else {
+                                return Ok(Status::Failure);
+                            };
+                            cx.overrides.push(Override {
+                                node: id,
+                                skill: skill.clone(),
+                                param: param.clone(),
+                                before,
+                            });
+                            (cx.keep)(cx.overrides);
+                            before
+                        }
                     };
                     let r = cx.fabric.set_param(skill, param, value);
                     if cx.outcome(&what, r)?.is_none() {
+                        cx.overrides.retain(|o| o.node != id);
                         return Ok(Status::Failure);
                     }
                     cx.step(format!("{what} (was {before})"));
@@ -419,7 +498,7 @@ impl Node {
                 if status != Status::Running
                     && let Some(before) = old.take()
                 {
-                    restore(cx, skill, param, before)?;
+                    restore(cx, id, skill, param, before)?;
                 }
                 Ok(status)
             }
@@ -477,19 +556,7 @@ impl Node {
             State::Retry { again: true, .. } => Some(Duration::ZERO),
             _ => None,
         };
-        let children: Vec<&Node> = match &self.state {
-            State::Chain { children, .. } | State::Parallel { children, .. } => {
-                children.iter().collect()
-            }
-            State::Retry { child, .. }
-            | State::Timeout { child, .. }
-            | State::Inverter(child)
-            | State::KeepRunning(child)
-            | State::Force(child, _)
-            | State::WithParam { child, .. } => vec![child],
-            _ => Vec::new(),
-        };
-        children
+        self.children()
             .into_iter()
             .filter_map(Node::deadline)
             .chain(own)
@@ -498,6 +565,7 @@ impl Node {
 
     /// Stops a running node: what it holds is undone, its state is as if never ticked.
     pub fn halt(&mut self, cx: &mut Cx<'_>) {
+        let id = self.id;
         match &mut self.state {
             State::Chain { children, at, .. } => {
                 if let Some(c) = children.get_mut(*at) {
@@ -538,7 +606,7 @@ impl Node {
             } => {
                 child.halt(cx);
                 if let Some(before) = old.take()
-                    && let Err(e) = restore(cx, skill, param, before)
+                    && let Err(e) = restore(cx, id, skill, param, before)
                 {
                     tracing::warn!(error = %e, "parameter not restored");
                 }
@@ -584,11 +652,186 @@ fn act(kind: &Kind, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
     }
 }
 
-fn restore(cx: &mut Cx<'_>, skill: &str, param: &str, before: ParamValue) -> Result<(), SeqError> {
+/// Restores what `WithParam` node `node` set; its override is forgotten once the manager
+/// has answered (restored, or refused: a skill that is gone has nothing to restore).
+fn restore(
+    cx: &mut Cx<'_>,
+    node: usize,
+    skill: &str,
+    param: &str,
+    before: ParamValue,
+) -> Result<(), SeqError> {
     let what = format!("{skill}.{param} restored to {before}");
     let r = cx.fabric.set_param_value(skill, param, before);
-    if cx.outcome(&what, r)?.is_some() {
+    let answered = cx.outcome(&what, r)?;
+    cx.overrides.retain(|o| o.node != node);
+    if answered.is_some() {
         cx.step(what);
     }
     Ok(())
+}
+
+impl Node {
+    fn children(&self) -> Vec<&Node> {
+        match &self.state {
+            State::Chain { children, .. } | State::Parallel { children, .. } => {
+                children.iter().collect()
+            }
+            State::Retry { child, .. }
+            | State::Timeout { child, .. }
+            | State::Inverter(child)
+            | State::KeepRunning(child)
+            | State::Force(child, _)
+            | State::WithParam { child, .. } => vec![child],
+            State::Act(_) | State::WaitFor { .. } | State::Sleep { .. } => Vec::new(),
+        }
+    }
+
+    fn children_mut(&mut self) -> Vec<&mut Node> {
+        match &mut self.state {
+            State::Chain { children, .. } | State::Parallel { children, .. } => {
+                children.iter_mut().collect()
+            }
+            State::Retry { child, .. }
+            | State::Timeout { child, .. }
+            | State::Inverter(child)
+            | State::KeepRunning(child)
+            | State::Force(child, _)
+            | State::WithParam { child, .. } => vec![child],
+            State::Act(_) | State::WaitFor { .. } | State::Sleep { .. } => Vec::new(),
+        }
+    }
+
+    /// The state of this node and those below it, in preorder.
+    pub fn save(&self, out: &mut Vec<Saved>) {
+        out.push(match &self.state {
+            State::Chain { at, .. } => Saved::Chain(*at),
+            State::Parallel { done, .. } => Saved::Parallel(done.clone()),
+            State::Retry { failed, again, .. } => Saved::Retry(*failed, *again),
+            State::Timeout { since, .. } | State::Sleep { since, .. } => Saved::Timer(*since),
+            State::WithParam { old, .. } => Saved::WithParam(old.is_some()),
+            State::WaitFor { monitor, .. } => Saved::WaitFor(*monitor),
+            State::Inverter(_) | State::KeepRunning(_) | State::Force(..) | State::Act(_) => {
+                Saved::Nothing
+            }
+        });
+        for c in self.children() {
+            c.save(out);
+        }
+    }
+
+    /// Takes the state [`Node::save`] gave back (the values to restore from `overrides`).
+    /// An error if it does not fit this tree: nothing is half-applied by the caller, which
+    /// builds a new tree.
+    pub fn load(
+        &mut self,
+        saved: &mut std::slice::Iter<'_, Saved>,
+        overrides: &[Override],
+    ) -> Result<(), String> {
+        let id = self.id;
+        let s = saved
+            .next()
+            .ok_or_else(|| format!("it ends before node {id} ({})", self.name))?;
+        match (&mut self.state, s) {
+            (State::Chain { at, children, .. }, Saved::Chain(a)) if *a < children.len() => *at = *a,
+            (State::Parallel { done, .. }, Saved::Parallel(d)) if d.len() == done.len() => {
+                done.clone_from(d)
+            }
+            (State::Retry { failed, again, .. }, Saved::Retry(f, a)) => {
+                (*failed, *again) = (*f, *a)
+            }
+            (State::Timeout { since, .. } | State::Sleep { since, .. }, Saved::Timer(t)) => {
+                *since = *t
+            }
+            (State::WithParam { old, .. }, Saved::WithParam(set)) => {
+                *old = match (set, overrides.iter().find(|o| o.node == id)) {
+                    (false, _) => None,
+                    (true, Some(o)) => Some(o.before),
+                    (true, None) => {
+                        return Err(format!(
+                            "node {id} ({}) set a parameter without keeping its value",
+                            self.name
+                        ));
+                    }
+                };
+            }
+            (State::WaitFor { monitor, .. }, Saved::WaitFor(m)) => *monitor = *m,
+            (
+                State::Inverter(_) | State::KeepRunning(_) | State::Force(..) | State::Act(_),
+                Saved::Nothing,
+            ) => {}
+            (_, other) => {
+                return Err(format!("node {id} ({}) does not keep {other:?}", self.name));
+            }
+        }
+        for c in self.children_mut() {
+            c.load(saved, overrides)?;
+        }
+        Ok(())
+    }
+
+    /// The running `WithParam` nodes (whose overrides are still needed).
+    pub fn setting(&self, out: &mut Vec<usize>) {
+        if let State::WithParam { old: Some(_), .. } = &self.state {
+            out.push(self.id);
+        }
+        for c in self.children() {
+            c.setting(out);
+        }
+    }
+
+    /// The monitors of the running `WaitFor`s.
+    pub fn monitors(&self, out: &mut Vec<u64>) {
+        if let State::WaitFor {
+            monitor: Some(m), ..
+        } = &self.state
+        {
+            out.push(*m);
+        }
+        for c in self.children() {
+            c.monitors(out);
+        }
+    }
+
+    /// Forgets monitors that are gone (a resumed `WaitFor` installs its monitor again at its
+    /// next tick: the condition is checked afresh).
+    pub fn forget_monitors(&mut self, gone: &HashSet<u64>) {
+        if let State::WaitFor { monitor, .. } = &mut self.state
+            && monitor.is_some_and(|m| gone.contains(&m))
+        {
+            *monitor = None;
+        }
+        for c in self.children_mut() {
+            c.forget_monitors(gone);
+        }
+    }
+
+    /// The leaves and timers that are running, by name: where the plan is.
+    pub fn running(&self, out: &mut Vec<String>) {
+        let here = match &self.state {
+            State::WaitFor {
+                monitor: Some(_),
+                condition,
+                ..
+            } => Some(format!("{} (waiting for {condition})", self.name)),
+            State::Sleep { since: Some(_), .. } | State::Timeout { since: Some(_), .. } => {
+                Some(self.name.clone())
+            }
+            State::WithParam {
+                old: Some(_),
+                skill,
+                param,
+                value,
+                ..
+            } => Some(format!("{skill}.{param} = {value}")),
+            State::Retry { failed, .. } if *failed > 0 => {
+                Some(format!("{} ({failed} attempt(s) failed)", self.name))
+            }
+            _ => None,
+        };
+        out.extend(here);
+        for c in self.children() {
+            c.running(out);
+        }
+    }
 }

@@ -182,8 +182,13 @@ impl ControlPlane {
         }
     }
 
-    /// Drops the monitors of clients whose process is gone.
+    /// Drops the monitors of clients whose process is gone — but not in lock-step: there a
+    /// monitor's firing pauses the fabric until its plan has reacted, and the fabric waits
+    /// for a plan runner that died (a restarted one takes its monitors over).
     pub fn forget_dead_clients(&mut self, m: &mut Manager) {
+        if matches!(m.config.pace, crate::engine::Pace::LockStep(_)) {
+            return;
+        }
         let before = m.monitors.len();
         m.monitors
             .retain(|mon| client_pid(&mon.client).is_none_or(pid_alive));
@@ -250,6 +255,7 @@ impl Manager {
             Request::Query(path) => self.query(&path),
             Request::AddMonitor { expr, mode, hold } => self.add_monitor(client, expr, mode, hold),
             Request::RemoveMonitor(id) => self.remove_monitor(id),
+            Request::AdoptMonitors(ids) => self.adopt_monitors(client, &ids),
             Request::ListMonitors => Ok(Reply::Monitors(
                 self.monitors.iter().map(Monitor::info).collect(),
             )),

@@ -4,7 +4,7 @@ use super::query::check_numeric;
 use super::*;
 use crate::monitors::expr;
 use crate::monitors::{Monitor, Resolved};
-use skillfab_proto::control::MonitorMode;
+use skillfab_proto::control::{MonitorFate, MonitorMode};
 
 impl Manager {
     /// Parses and type-checks a monitor expression against the outputs it reads; installs it.
@@ -47,6 +47,25 @@ impl Manager {
             paths,
         ));
         Ok(Reply::MonitorAdded(id))
+    }
+
+    /// Hands monitors over to `client` (a restarted plan runner taking its predecessor's):
+    /// what became of each.
+    pub(super) fn adopt_monitors(&mut self, client: &str, ids: &[u64]) -> Response {
+        let fates = ids
+            .iter()
+            .map(|id| {
+                if let Some(m) = self.monitors.iter_mut().find(|m| m.id == *id) {
+                    m.client = client.to_string();
+                    MonitorFate::Live
+                } else if let Some((_, cycle)) = self.fired_once.iter().find(|(i, _)| i == id) {
+                    MonitorFate::Fired(*cycle)
+                } else {
+                    MonitorFate::Gone
+                }
+            })
+            .collect();
+        Ok(Reply::Adopted(fates))
     }
 
     /// Removes one of the monitors.

@@ -45,6 +45,9 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+/// How many fired `Once` monitors the manager remembers for [`Manager::fired_once`].
+pub(crate) const FIRED_KEPT: usize = 4096;
+
 /// How often the manager checks that registered processes are alive (and its longest sleep).
 /// A sync skill that dies mid-cycle is also found when the cycle's deadline passes; each
 /// check reads `/proc` for every skill, so it is not done every cycle.
@@ -243,6 +246,9 @@ pub struct Manager {
     /// Installed monitors.
     pub(crate) monitors: Vec<Monitor>,
     pub(crate) next_monitor: u64,
+    /// The `Once` monitors that fired and were removed, with their cycle, newest last (at
+    /// most [`FIRED_KEPT`]): a restarted plan runner asks what became of its monitors.
+    pub(crate) fired_once: std::collections::VecDeque<(u64, u64)>,
     /// Untyped readers of topics that monitors and queries read.
     pub(crate) readers: HashMap<String, RawReader>,
     /// Requests and events; taken out while the loop runs.
@@ -343,6 +349,7 @@ impl Manager {
             outbox: Vec::new(),
             monitors: Vec::new(),
             next_monitor: 1,
+            fired_once: std::collections::VecDeque::new(),
             readers: HashMap::new(),
             control: Some(control),
             events_published: 0,

@@ -156,7 +156,17 @@ impl Manager {
             self.stop_at = None;
         }
         let before = self.monitors.len();
-        self.monitors.retain(|m| !m.spent());
+        let cycle = self.cycle;
+        let spent = &mut self.fired_once;
+        self.monitors.retain(|m| {
+            if m.spent() {
+                spent.push_back((m.id, cycle));
+            }
+            !m.spent()
+        });
+        while spent.len() > FIRED_KEPT {
+            spent.pop_front();
+        }
         self.state_check |= self.monitors.len() != before;
     }
 }

@@ -31,7 +31,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use skillfab_proto::board::Board;
 use skillfab_proto::control::{
-    self, ControlError, Event, MonitorInfo, MonitorMode, ParamArg, Reply, Request, SkillInfo, Stats,
+    self, ControlError, Event, MonitorFate, MonitorInfo, MonitorMode, ParamArg, Reply, Request,
+    SkillInfo, Stats,
 };
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::{LogLine, LogReader};
@@ -579,6 +580,18 @@ impl Client {
             hold,
         })? {
             Reply::MonitorAdded(id) => Ok(id),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Takes over monitors another client installed (a restarted plan runner its
+    /// predecessor's): those still installed are this client's from now on, and their
+    /// firings reach it. What became of each, in order. Subscribes to events first, so a
+    /// firing right after the hand-over is not missed.
+    pub fn adopt_monitors(&self, ids: &[u64]) -> Result<Vec<MonitorFate>, ClientError> {
+        self.subscribe()?;
+        match self.request(&Request::AdoptMonitors(ids.to_vec()))? {
+            Reply::Adopted(f) if f.len() == ids.len() => Ok(f),
             other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
     }

@@ -209,3 +209,195 @@ fn in_lock_step_a_plans_timers_end_in_the_same_cycle_every_run() {
         "stepped from {before} to {at}"
     );
 }
+
+/// A runner of `plan` started on `t`'s domain, its output read line by line as it comes.
+struct Runner {
+    child: std::process::Child,
+    lines: std::sync::mpsc::Receiver<String>,
+}
+
+impl Runner {
+    fn start(t: &TestDomain, plan: &Path) -> Runner {
+        use std::io::BufRead;
+        let mut child = t
+            .command("skillfab")
+            .args(["sequence", plan.to_str().unwrap()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let out = child.stdout.take().unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+                if tx.send(l).is_err() {
+                    break;
+                }
+            }
+        });
+        Runner { child, lines }
+    }
+
+    /// Every line until one ends with `what` (then the runner is killed with SIGKILL: it dies
+    /// wherever it is) or the output ends.
+    fn until(&mut self, what: Option<&str>, text: &mut String) {
+        while let Ok(l) = self.lines.recv_timeout(std::time::Duration::from_secs(60)) {
+            text.push_str(&l);
+            text.push('\n');
+            if what.is_some_and(|w| l.ends_with(w)) {
+                kill(Pid::from_raw(self.child.id() as i32), Signal::SIGKILL).unwrap();
+                let _ = self.child.wait();
+                return;
+            }
+        }
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "{status}: {text}");
+    }
+}
+
+#[test]
+fn a_plan_runner_killed_inside_a_with_param_a_retry_and_a_timeout_is_resumed_to_the_same_cycle() {
+    let mut t = TestDomain::new("seqkill");
+    let launch = t.launch_file(skillfab_tests::HELLO);
+    t.spawn(
+        "skillfab",
+        &["up", launch.to_str().unwrap(), "--lockstep", "--paused"],
+    );
+    let board = t.board();
+    t.wait_until("the hello network to register", || {
+        ["ticker", "scale", "smooth"]
+            .iter()
+            .all(|n| skillfab_tests::registered(&board, n).is_some())
+    });
+    let c = Client::connect(&t.domain).unwrap();
+    c.step(5).unwrap();
+    let cycle_of = |text: &str, what: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.ends_with(what))
+            .unwrap_or_else(|| panic!("no '{what}' in:\n{text}"));
+        line.trim_start_matches("[cycle")
+            .split(',')
+            .next()
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    };
+    // 5 ms a cycle: each attempt times out after 40 cycles; the ticker (one a cycle) passes
+    // the mark in the third. Killed after the parameter is set, after each failed attempt
+    // and inside the sleep, the runners together end the plan in the cycle one runner does.
+    let run = |kills: &[&str]| -> (u64, String) {
+        // The manager waits for the plan: the ticker's value now is where it starts.
+        let tick = c.query("ticker.tick.value").unwrap().0.as_f64().unwrap() as u64;
+        let p = plan(
+            &t,
+            &format!(
+                r#"<Sequence>
+                     <Log message="start"/>
+                     <WithParam skill="scale" param="gain" value="7">
+                       <Sequence>
+                         <RetryUntilSuccessful num_attempts="4">
+                           <Timeout name="look" msec="200"><WaitFor name="mark" condition="ticker.tick.value &gt; {}"/></Timeout>
+                         </RetryUntilSuccessful>
+                         <Log message="marked"/>
+                         <Sleep name="rest" msec="100"/>
+                       </Sequence>
+                     </WithParam>
+                     <Log message="done"/>
+                   </Sequence>"#,
+                tick + 100
+            ),
+        );
+        let mut text = String::new();
+        for k in kills {
+            Runner::start(&t, &p).until(Some(k), &mut text);
+        }
+        Runner::start(&t, &p).until(None, &mut text);
+        let start = cycle_of(&text, "start");
+        (cycle_of(&text, "done") - start, text)
+    };
+    let (whole, text) = run(&[]);
+    assert!(whole > 100, "{text}");
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.0)
+    );
+    let (killed, text) = run(&[
+        "scale.gain = 7 while Sequence (was 2)",
+        "look: timed out after 200 ms",
+        "RetryUntilSuccessful: attempt 2 failed; again",
+        "marked",
+    ]);
+    assert_eq!(killed, whole, "{text}");
+    assert_eq!(text.matches("resuming").count(), 4, "{text}");
+    // What the plan set is restored, and no runner left a monitor behind.
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.0)
+    );
+    assert!(c.monitors().unwrap().is_empty(), "{text}");
+}
+
+/// The pids of the processes whose command line holds `needle`.
+fn pids_with(needle: &str) -> Vec<i32> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<i32>().ok())
+        .filter(|pid| {
+            std::fs::read(format!("/proc/{pid}/cmdline"))
+                .is_ok_and(|c| String::from_utf8_lossy(&c).contains(needle))
+        })
+        .collect()
+}
+
+#[test]
+fn up_supervises_a_plan_a_killed_runner_is_restarted_and_resumes_and_a_plan_that_ended_is_not() {
+    let mut t = TestDomain::new("sequp");
+    std::fs::write(
+        t.dir.join("up-plan.xml"),
+        r#"<root BTCPP_format="4"><BehaviorTree ID="Main">
+             <Sequence>
+               <WithParam skill="scale" param="gain" value="7">
+                 <WaitFor name="later" condition="ticker.tick.value &gt; 600"/>
+               </WithParam>
+               <Log message="done"/>
+             </Sequence>
+           </BehaviorTree></root>"#,
+    )
+    .unwrap();
+    let launch = t.launch_file(&format!(
+        "{}[plan]\nfile = \"up-plan.xml\"\n",
+        skillfab_tests::HELLO
+    ));
+    let up = t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let c = loop {
+        if let Ok(c) = Client::connect(&t.domain) {
+            break c;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let gain = |c: &Client| c.get_param("scale", "gain").ok();
+    t.wait_until("the plan to set scale.gain", || {
+        gain(&c) == Some(ParamValue::Float(7.0))
+    });
+    let runners = pids_with("up-plan.xml");
+    assert_eq!(runners.len(), 1, "{runners:?}");
+    kill(Pid::from_raw(runners[0]), Signal::SIGKILL).unwrap();
+    // Restarted by `up`, the plan goes on waiting (the parameter stays set), then ends and
+    // restores the value from before the plan — one started afresh would read 7 as it.
+    t.wait_until("the resumed plan to end", || {
+        gain(&c) == Some(ParamValue::Float(2.0))
+    });
+    let log = || std::fs::read_to_string(t.dir.join(format!("{up}-skillfab.log"))).unwrap();
+    t.wait_until("up to see the plan finish", || {
+        log().contains("process finished process=plan")
+    });
+    let log = log();
+    assert!(
+        log.contains("process exited; restarting process=plan"),
+        "{log}"
+    );
+    assert!(c.monitors().unwrap().is_empty());
+    assert!(pids_with("up-plan.xml").is_empty());
+}

@@ -22,7 +22,9 @@ use denning_sim::truth::TruthRecord;
 use denning_sim::world::World;
 use serde::Serialize;
 use skillfab_client::Client;
-use skillfab_manager::launch::{LaunchFile, ManagerSection, ProcessEntry, Restart, find_program};
+use skillfab_manager::launch::{
+    LaunchFile, ManagerSection, PlanSection, ProcessEntry, Restart, find_program,
+};
 use skillfab_proto::control::{EventKind, MonitorMode, SkillState};
 use skillfab_proto::domain::Domain;
 use std::path::{Path, PathBuf};
@@ -88,9 +90,11 @@ pub struct DemoOptions {
     pub lockstep: bool,
     /// Record the first run here (MCAP, every topic).
     pub record: Option<PathBuf>,
-    /// A plan (`skillfab sequence`'s format) that drives the robot instead of the sequencer
-    /// written in Rust here (the delivery mission needs one).
-    pub plan: Option<skillfab_sequence::Plan>,
+    /// A plan file (`skillfab sequence`'s format, checked) that drives the robot instead of
+    /// the sequencer written in Rust here (the delivery mission needs one). It runs as the
+    /// `[plan]` of the network's launch file: a process of its own, supervised by `up`,
+    /// resumed where it was if it dies.
+    pub plan: Option<PathBuf>,
     /// The plan's tree to run (default: its main tree).
     pub tree: Option<String>,
 }
@@ -241,6 +245,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     let text = |p: &Path| p.to_string_lossy().into_owned();
     let mut launch = LaunchFile {
         bridge: None,
+        plan: None,
         manager: ManagerSection {
             period_ms: Some(period_ms),
             // (Lock-step: the manager's own, 10 s.)
@@ -321,10 +326,22 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     if opts.lockstep {
         launch.process[0].args.push("--lockstep".into());
     }
+    // The plan, copied into the run's directory: its runner is found by that path.
+    if let Some(plan) = &opts.plan {
+        let copy = dir.join(PLAN_FILE);
+        std::fs::copy(plan, &copy).with_context(|| format!("{}", plan.display()))?;
+        launch.plan = Some(PlanSection {
+            file: text(&copy),
+            tree: opts.tree.clone(),
+            max_restarts: Some(restarts),
+            backoff_ms: Some(backoff_ms),
+        });
+    }
     let launch = toml::to_string(&launch).context("writing the launch file")?;
     let path = dir.join("exit-lab.toml");
     std::fs::write(&path, launch)?;
-    let log = std::fs::File::create(dir.join("up.log"))?;
+    // (The plan runner's steps are in it: `up` sends its children's stdout there.)
+    let log = std::fs::File::create(dir.join(STEPS_FILE))?;
     let mut cmd = Command::new(std::env::current_exe()?);
     cmd.args([
         "up",
@@ -359,6 +376,56 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     Ok((Network { child, dir, domain }, traj))
 }
 
+/// The plan's copy in a run's directory.
+const PLAN_FILE: &str = "plan.xml";
+/// `up`'s log in a run's directory, with the plan runner's steps.
+const STEPS_FILE: &str = "up.log";
+
+/// The plan runner of `net` (the process running its copy of the plan), if one runs.
+fn plan_runner(net: &Network) -> Option<u32> {
+    let plan = net.dir.join(PLAN_FILE);
+    crate::faults::process_with_args(&["sequence", &plan.to_string_lossy()])
+}
+
+/// The steps the plan's runners printed (`[cycle N, t = …] what`): what, cycle, the robot's
+/// time (a cycle is 10 ms of it); and how the plan ended, if it has.
+fn plan_steps(net: &Network) -> (Vec<(String, u64, f64)>, Option<String>) {
+    let text = std::fs::read_to_string(net.dir.join(STEPS_FILE)).unwrap_or_default();
+    let mut steps = Vec::new();
+    let mut ended = None;
+    for line in text.lines() {
+        if let Some(rest) = line.strip_prefix("[cycle")
+            && let Some((head, what)) = rest.split_once("] ")
+            && let Some(Ok(cycle)) = head.split(',').next().map(|c| c.trim().parse::<u64>())
+        {
+            steps.push((what.to_string(), cycle, cycle as f64 * 0.01));
+        } else if line == "the plan succeeded" {
+            ended = Some("Success".to_string());
+        } else if line.ends_with("the plan failed") {
+            ended = Some("Failure".to_string());
+        }
+    }
+    (steps, ended)
+}
+
+/// Halts the plan (SIGTERM to its runner: it restores what it set and removes its monitors)
+/// and waits for its runner to exit (10 s at most).
+fn halt_plan(net: &Network) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Some(pid) = plan_runner(net) {
+        if let Ok(p) = i32::try_from(pid) {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(p),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+        if Instant::now() > deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 fn connect(net: &Network, skills: &[&str]) -> anyhow::Result<Client> {
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
@@ -376,11 +443,10 @@ fn connect(net: &Network, skills: &[&str]) -> anyhow::Result<Client> {
     }
 }
 
-/// What drives the robot: the sequencer written here, or a plan.
+/// What drives the robot: the sequencer written here, or a plan (run by `up`).
 enum Driver {
     Code(Sequencer),
-    /// With its lock-step pacing, if the manager runs in lock-step.
-    Plan(skillfab_sequence::Sequencer),
+    Plan,
 }
 
 /// How long a run waits for the simulator's first ground truth.
@@ -503,10 +569,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     let step = |c: &Client, out: &mut RunOutcome, what: &str| record(c, &mut out.steps, what);
     // The plan (run below), or the Rust sequencer's first step.
     let mut driver = match &opts.plan {
-        Some(plan) => Driver::Plan(skillfab_sequence::Sequencer::new(
-            plan,
-            opts.tree.as_deref(),
-        )?),
+        Some(_) => Driver::Plan,
         None if matches!(opts.site, Site::Building(_)) => {
             bail!("the delivery mission runs a plan: none was given")
         }
@@ -540,6 +603,10 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             // The manager's period: 10 ms of simulated time.
             Duration::from_secs_f64(0.01 / opts.time_factor),
             opts.faults.seed ^ seed,
+            // The plan runner is a process of the fabric too.
+            opts.plan
+                .as_ref()
+                .map(|_| net.dir.join(PLAN_FILE).to_string_lossy().into_owned()),
         )
     });
     if opts.lockstep && matches!(driver, Driver::Code(_)) {
@@ -569,33 +636,31 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                 break;
             }
         },
-        // The plan runs (and paces a lock-step manager) until it ends or the ground truth
-        // ends the run; it is then halted: what it set is restored, its monitors removed.
-        Driver::Plan(p) => {
-            let mut looked = Instant::now();
+        // The plan runs as a process of the network (and paces a lock-step manager) until
+        // it ends or the ground truth ends the run; it is then halted: what it set is
+        // restored, its monitors removed.
+        Driver::Plan => {
             let mut last: Option<TruthRecord> = None;
-            let mut stop = || {
+            let ended = loop {
                 if interrupted() {
-                    return true;
+                    bail!("interrupted");
+                }
+                last = latest(&traj).or(last);
+                match &last {
+                    Some(now) if judge(&opts.site, now, opts.limit_s).is_some() => break None,
+                    None if started.elapsed() > NO_TRUTH => bail!(NO_TRUTH_ERROR),
+                    _ => {}
+                }
+                if let (_, Some(how)) = plan_steps(&net) {
+                    break Some(how);
                 }
                 // The trajectory file is read whole: ten times a second is enough.
-                if looked.elapsed() >= Duration::from_millis(100) {
-                    looked = Instant::now();
-                    last = latest(&traj).or(last);
-                }
-                match &last {
-                    Some(now) => judge(&opts.site, now, opts.limit_s).is_some(),
-                    None => started.elapsed() > NO_TRUTH,
-                }
+                std::thread::sleep(Duration::from_millis(100));
             };
-            let steps = &mut out.steps;
-            let mut on_step = |c: &Client, what: &str| record(c, steps, what);
-            let ended = skillfab_sequence::run(&mut c, p, &mut stop, &mut on_step)?;
-            if interrupted() {
-                bail!("interrupted");
-            }
-            if let Some(status) = ended {
-                step(&c, &mut out, &format!("the plan ended: {status:?}"));
+            halt_plan(&net);
+            out.steps = plan_steps(&net).0;
+            if let Some(status) = &ended {
+                step(&c, &mut out, &format!("the plan ended: {status}"));
             }
             let Some(mut now) = latest(&traj).or(last) else {
                 bail!(NO_TRUTH_ERROR);
@@ -645,7 +710,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             step(&c, &mut out, "avoid.safe_distance restored");
         }
         // Halted already when the run ended.
-        Driver::Plan(_) => {}
+        Driver::Plan => {}
     }
     let all: Vec<&str> = opts
         .site

@@ -121,6 +121,10 @@ pub enum Request {
     /// The message schema of a topic, as the skills that declare it declare it (its
     /// producer's first).
     TopicSchema(String),
+    /// Take over monitors installed by another client (a plan runner that was restarted
+    /// takes over its predecessor's): each that is still installed is this client's from now
+    /// on. Answered with each one's fate ([`crate::control::MonitorFate`]).
+    AdoptMonitors(Vec<u64>),
 }
 
 /// Encodes a request.

@@ -209,6 +209,21 @@ pub enum Reply {
     },
     /// The message schema of a topic.
     Schema(crate::schema::MessageSchema),
+    /// What became of the monitors a client asked to take over, in the order asked.
+    Adopted(Vec<MonitorFate>),
+}
+
+/// What became of a monitor ([`crate::control::Request::AdoptMonitors`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MonitorFate {
+    /// Still installed: now the asking client's.
+    Live,
+    /// A `Once` monitor that fired in this cycle and was removed (the manager remembers the
+    /// last few thousand).
+    Fired(u64),
+    /// Not installed and not known to have fired: removed, or fired too long ago, or lost
+    /// with a manager that restarted without it.
+    Gone,
 }
 
 /// Why a request was refused. Every variant names what was wrong.

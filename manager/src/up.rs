@@ -212,6 +212,7 @@ fn watch(p: &mut Supervised, domain: &Domain) {
                 } else {
                     if again {
                         tracing::error!(process = %p.spec.name, %status, restarts = p.restarts, "process exited; giving up");
+                        tell_gave_up(domain, &p.spec.name, p.restarts, &status.to_string());
                     } else if failed {
                         tracing::warn!(process = %p.spec.name, %status, "process exited");
                     } else {
@@ -236,6 +237,56 @@ fn watch(p: &mut Supervised, domain: &Domain) {
                 p.gave_up = true;
             }
         }
+    }
+}
+
+/// Tells `domain`'s manager that `up` gave up restarting `process`: it publishes the event a
+/// plan reacts to ([`EventKind::ProcessGaveUp`](skillfab_proto::control::EventKind)). A
+/// manager that does not answer within 2 s is not told (said in the log).
+fn tell_gave_up(domain: &Domain, process: &str, restarts: u32, status: &str) {
+    use skillfab_proto::control::{self, Request};
+    let request = Request::ProcessGaveUp {
+        process: process.to_string(),
+        restarts,
+        status: status.to_string(),
+    };
+    let ask = || -> Result<(), String> {
+        let node = services::node(domain, &format!("skillfab-up-{}", std::process::id()))
+            .map_err(|e| e.to_string())?;
+        let port = services::control_service(&node)
+            .map_err(|e| e.to_string())?
+            .client_builder()
+            .initial_max_slice_len(control::MAX_REQUEST_BYTES)
+            .allocation_strategy(iceoryx2::prelude::AllocationStrategy::Static)
+            .create()
+            .map_err(|e| format!("control port: {e:?}"))?;
+        // A client id is `<pid>-<n>`: this one lives as long as `up`.
+        let id = format!("{}-up", std::process::id());
+        let bytes = control::encode_request(&id, 1, &request).map_err(|e| e.to_string())?;
+        let pending = port
+            .loan_slice_uninit(bytes.len())
+            .map_err(|e| format!("loan: {e:?}"))?
+            .write_from_slice(&bytes)
+            .send()
+            .map_err(|e| format!("send: {e:?}"))?;
+        services::notifier(&node, &skillfab_proto::names::control())
+            .map_err(|e| e.to_string())?
+            .notify()
+            .map_err(|e| format!("wake: {e:?}"))?;
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < deadline {
+            if let Some(answer) = pending.receive().map_err(|e| format!("receive: {e:?}"))? {
+                return control::decode_response(answer.payload())
+                    .map_err(|e| e.to_string())?
+                    .map(|_| ())
+                    .map_err(|e| e.to_string());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        Err("no answer within 2 s".into())
+    };
+    if let Err(e) = ask() {
+        tracing::warn!(%process, error = %e, "the manager was not told that up gave up");
     }
 }
 

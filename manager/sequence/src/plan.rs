@@ -117,6 +117,9 @@ pub enum Kind {
     },
     /// Running for `after` of fabric time, then success.
     Sleep(Duration),
+    /// Running until `skillfab up` gives up restarting this process (it kept crashing), then
+    /// success: a plan's way to react to a part of the fabric that will not come back.
+    WaitGaveUp(String),
     /// A line in the step log; success.
     Log(String),
     /// Success.
@@ -330,6 +333,7 @@ impl Reader<'_> {
             "Activate" | "Deactivate" => &["skills"],
             "WaitFor" => &["condition", "hold"],
             "Log" => &["message"],
+            "WaitGaveUp" => &["process"],
             "SubTree" => &["ID"],
             _ => &[],
         };
@@ -447,6 +451,10 @@ impl Reader<'_> {
                 self.leaf(node)?;
                 Kind::Log(self.attr(node, "message")?)
             }
+            "WaitGaveUp" => {
+                self.leaf(node)?;
+                Kind::WaitGaveUp(self.attr(node, "process")?)
+            }
             "AlwaysSuccess" => {
                 self.leaf(node)?;
                 Kind::AlwaysSuccess
@@ -466,8 +474,8 @@ impl Reader<'_> {
                         "unknown node <{other}> (control: Sequence, Fallback, Parallel; \
                          decorators: RetryUntilSuccessful, Timeout, Inverter, ForceSuccess, \
                          ForceFailure, KeepRunningUntilFailure, WithParam; actions: Activate, \
-                         Deactivate, SetParam, WaitFor, Sleep, Log, AlwaysSuccess, \
-                         AlwaysFailure, SubTree)"
+                         Deactivate, SetParam, WaitFor, WaitGaveUp, Sleep, Log, \
+                         AlwaysSuccess, AlwaysFailure, SubTree)"
                     ),
                 ));
             }

@@ -103,6 +103,8 @@ pub struct Sequencer {
     origin: Instant,
     overrides: Vec<Override>,
     keep: Option<Keeping>,
+    /// Processes `skillfab up` gave up restarting.
+    gave_up: HashSet<String>,
 }
 
 /// A plan whose state is kept ([`Sequencer::kept`]).
@@ -147,6 +149,7 @@ impl Sequencer {
             origin: Instant::now(),
             overrides: Vec::new(),
             keep: None,
+            gave_up: HashSet::new(),
         })
     }
 
@@ -411,9 +414,10 @@ impl Sequencer {
     }
 
     /// Takes in an event of `client`'s stream; whether the plan has something to react to
-    /// (one of this client's monitors fired).
+    /// (one of this client's monitors fired, or `up` gave up on a process).
     pub fn on_event(&mut self, client: &str, event: &EventKind) -> bool {
         match event {
+            EventKind::ProcessGaveUp { process, .. } => self.gave_up.insert(process.clone()),
             EventKind::MonitorFired {
                 id, client: owner, ..
             } if owner == client => {
@@ -439,6 +443,7 @@ impl Sequencer {
             fired: &mut self.fired,
             steps: &mut self.steps,
             overrides: &mut self.overrides,
+            gave_up: &self.gave_up,
             keep: &mut keep,
         };
         // A tick cut short by the fabric is not kept (as if its runner died in it): the
@@ -461,6 +466,7 @@ impl Sequencer {
             fired: &mut self.fired,
             steps: &mut self.steps,
             overrides: &mut self.overrides,
+            gave_up: &self.gave_up,
             keep: &mut keep,
         };
         self.root.halt(&mut cx);

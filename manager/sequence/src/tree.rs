@@ -126,6 +126,8 @@ pub struct Cx<'a> {
     pub steps: &'a mut Vec<String>,
     /// The parameters set by `WithParam`s that are running, to restore.
     pub overrides: &'a mut Vec<Override>,
+    /// The processes `skillfab up` gave up restarting (events seen by this runner).
+    pub gave_up: &'a HashSet<String>,
     /// Keeps `overrides` where a restarted runner finds them (before a parameter is set).
     pub keep: &'a mut dyn FnMut(&[Override]),
 }
@@ -221,6 +223,7 @@ enum State {
         after: Duration,
         since: Option<Duration>,
     },
+    WaitGaveUp(String),
 }
 
 impl Node {
@@ -309,6 +312,7 @@ impl Node {
                 after: *d,
                 since: None,
             },
+            Kind::WaitGaveUp(p) => State::WaitGaveUp(p.clone()),
             // Checked when the plan was read: the tree exists and does not contain itself.
             Kind::SubTree(id) => match plan.trees.get(id) {
                 Some(t) => {
@@ -503,6 +507,12 @@ impl Node {
                 Ok(status)
             }
             State::Act(kind) => act(kind, cx),
+            State::WaitGaveUp(process) => Ok(if cx.gave_up.contains(process) {
+                cx.step(format!("{name}: skillfab up gave up restarting {process}"));
+                Status::Success
+            } else {
+                Status::Running
+            }),
             State::WaitFor {
                 condition,
                 hold,
@@ -618,7 +628,7 @@ impl Node {
                 }
             }
             State::Sleep { since, .. } => *since = None,
-            State::Act(_) => {}
+            State::Act(_) | State::WaitGaveUp(_) => {}
         }
     }
 }
@@ -683,7 +693,9 @@ impl Node {
             | State::KeepRunning(child)
             | State::Force(child, _)
             | State::WithParam { child, .. } => vec![child],
-            State::Act(_) | State::WaitFor { .. } | State::Sleep { .. } => Vec::new(),
+            State::Act(_) | State::WaitFor { .. } | State::Sleep { .. } | State::WaitGaveUp(_) => {
+                Vec::new()
+            }
         }
     }
 
@@ -698,7 +710,9 @@ impl Node {
             | State::KeepRunning(child)
             | State::Force(child, _)
             | State::WithParam { child, .. } => vec![child],
-            State::Act(_) | State::WaitFor { .. } | State::Sleep { .. } => Vec::new(),
+            State::Act(_) | State::WaitFor { .. } | State::Sleep { .. } | State::WaitGaveUp(_) => {
+                Vec::new()
+            }
         }
     }
 
@@ -711,9 +725,11 @@ impl Node {
             State::Timeout { since, .. } | State::Sleep { since, .. } => Saved::Timer(*since),
             State::WithParam { old, .. } => Saved::WithParam(old.is_some()),
             State::WaitFor { monitor, .. } => Saved::WaitFor(*monitor),
-            State::Inverter(_) | State::KeepRunning(_) | State::Force(..) | State::Act(_) => {
-                Saved::Nothing
-            }
+            State::Inverter(_)
+            | State::KeepRunning(_)
+            | State::Force(..)
+            | State::Act(_)
+            | State::WaitGaveUp(_) => Saved::Nothing,
         });
         for c in self.children() {
             c.save(out);
@@ -757,7 +773,11 @@ impl Node {
             }
             (State::WaitFor { monitor, .. }, Saved::WaitFor(m)) => *monitor = *m,
             (
-                State::Inverter(_) | State::KeepRunning(_) | State::Force(..) | State::Act(_),
+                State::Inverter(_)
+                | State::KeepRunning(_)
+                | State::Force(..)
+                | State::Act(_)
+                | State::WaitGaveUp(_),
                 Saved::Nothing,
             ) => {}
             (_, other) => {

@@ -256,6 +256,20 @@ impl Manager {
             Request::AddMonitor { expr, mode, hold } => self.add_monitor(client, expr, mode, hold),
             Request::RemoveMonitor(id) => self.remove_monitor(id),
             Request::AdoptMonitors(ids) => self.adopt_monitors(client, &ids),
+            Request::ProcessGaveUp {
+                process,
+                restarts,
+                status,
+            } => {
+                tracing::error!(%process, restarts, %status, "skillfab up gave up restarting it");
+                self.outbox
+                    .push(skillfab_proto::control::EventKind::ProcessGaveUp {
+                        process,
+                        restarts,
+                        status,
+                    });
+                Ok(Reply::Done)
+            }
             Request::ListMonitors => Ok(Reply::Monitors(
                 self.monitors.iter().map(Monitor::info).collect(),
             )),

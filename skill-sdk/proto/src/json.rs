@@ -112,6 +112,14 @@ pub fn event_json(e: &Event) -> Json {
             ("cycle_overrun", json!({"unfinished": unfinished}))
         }
         EventKind::Cycling { running } => ("cycling", json!({"running": running})),
+        EventKind::ProcessGaveUp {
+            process,
+            restarts,
+            status,
+        } => (
+            "process_gave_up",
+            json!({"process": process, "restarts": restarts, "status": status}),
+        ),
         EventKind::ChannelWinner {
             channel,
             winner,

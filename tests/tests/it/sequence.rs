@@ -401,3 +401,58 @@ fn up_supervises_a_plan_a_killed_runner_is_restarted_and_resumes_and_a_plan_that
     assert!(c.monitors().unwrap().is_empty());
     assert!(pids_with("up-plan.xml").is_empty());
 }
+
+#[test]
+fn when_up_gives_up_on_a_crashing_process_an_event_says_so_and_a_plan_reacts() {
+    let mut t = TestDomain::new("seqgaveup");
+    // A process that fails at once, every time: restarted twice (1 s, then 2 s later), then
+    // given up.
+    let launch = t.launch_file(&format!(
+        "{}[[process]]\nname = \"crasher\"\nbin = \"false\"\nregisters = false\n\
+         max_restarts = 2\nbackoff_ms = 1000\n",
+        skillfab_tests::HELLO
+    ));
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("the hello network to register", || {
+        ["ticker", "scale", "smooth"]
+            .iter()
+            .all(|n| skillfab_tests::registered(&board, n).is_some())
+    });
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+    // The plan watches for it beside its work, and takes another way when it comes.
+    let p = plan(
+        &t,
+        r#"<Fallback>
+             <Parallel success_count="1" failure_count="1">
+               <WaitFor name="work" condition="ticker.tick.value &lt; 0"/>
+               <Inverter><WaitGaveUp name="crasher gone" process="crasher"/></Inverter>
+             </Parallel>
+             <SetParam skill="scale" param="gain" value="9"/>
+           </Fallback>"#,
+    );
+    let (out, text) = sequence(&t, &p);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("crasher gone: skillfab up gave up restarting crasher"),
+        "{text}"
+    );
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(9.0)
+    );
+    // Every client heard it.
+    let mut heard = None;
+    while let Some(e) = c.next_event(std::time::Duration::from_secs(1)).unwrap() {
+        if let skillfab_proto::control::EventKind::ProcessGaveUp {
+            process, restarts, ..
+        } = e.kind
+        {
+            heard = Some((process, restarts));
+            break;
+        }
+    }
+    assert_eq!(heard, Some(("crasher".to_string(), 2)));
+    assert!(c.monitors().unwrap().is_empty(), "{text}");
+}

@@ -125,6 +125,16 @@ pub enum Request {
     /// takes over its predecessor's): each that is still installed is this client's from now
     /// on. Answered with each one's fate ([`crate::control::MonitorFate`]).
     AdoptMonitors(Vec<u64>),
+    /// `skillfab up` stopped restarting one of its processes (it crashed too often in a
+    /// row): the manager tells every client ([`crate::control::EventKind::ProcessGaveUp`]).
+    ProcessGaveUp {
+        /// The launch file's name of the process.
+        process: String,
+        /// Restarts in a row before `up` gave up.
+        restarts: u32,
+        /// How it last exited.
+        status: String,
+    },
 }
 
 /// Encodes a request.

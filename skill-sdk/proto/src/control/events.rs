@@ -122,6 +122,16 @@ pub enum EventKind {
         /// Whether it runs now.
         running: bool,
     },
+    /// `skillfab up` gave up restarting a process of the fabric that kept crashing (a plan
+    /// reacts with `WaitGaveUp`).
+    ProcessGaveUp {
+        /// The launch file's name of the process.
+        process: String,
+        /// Restarts in a row before `up` gave up.
+        restarts: u32,
+        /// How it last exited.
+        status: String,
+    },
 }
 
 /// One event of the stream.

@@ -342,6 +342,10 @@ impl Sequencer {
                 }
             }
         }
+        // Where it is, said before the monitors that are gone are forgotten (a `WaitFor`
+        // whose monitor is installed again is still where the plan is).
+        let mut at = Vec::new();
+        self.root.running(&mut at);
         self.root.forget_monitors(&gone);
         // Monitors a runner installed in a tick it did not live to keep: nobody waits on them.
         if let Ok(all) = fabric.monitors() {
@@ -351,8 +355,6 @@ impl Sequencer {
                 }
             }
         }
-        let mut at = Vec::new();
-        self.root.running(&mut at);
         let Some(k) = self.keep.as_mut() else {
             return Ok(Opening::Fresh);
         };

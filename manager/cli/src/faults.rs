@@ -185,6 +185,13 @@ impl Killer {
                     cycles_lost: None,
                 };
                 let deadline = killed_at + Duration::from_secs(10);
+                let since_k0 = || {
+                    board
+                        .header()
+                        .cycle
+                        .load(Ordering::Acquire)
+                        .saturating_sub(k0)
+                };
                 while Instant::now() < deadline && !st.load(Ordering::Acquire) {
                     let back = if slot == MANAGER {
                         manager_back(&domain, pid, k0, &unit_names)
@@ -194,13 +201,7 @@ impl Killer {
                         plan.as_deref()
                             .and_then(runner)
                             .filter(|p| *p != pid && plan_taken_over(&domain, *p))
-                            .map(|_| {
-                                board
-                                    .header()
-                                    .cycle
-                                    .load(Ordering::Acquire)
-                                    .saturating_sub(k0)
-                            })
+                            .map(|_| since_k0())
                     } else {
                         units(&board)
                             .into_iter()
@@ -209,13 +210,7 @@ impl Killer {
                                     && *p != pid
                                     && (!active || board.slot(*s).runs.load(Ordering::Acquire) > 0)
                             })
-                            .map(|_| {
-                                board
-                                    .header()
-                                    .cycle
-                                    .load(Ordering::Acquire)
-                                    .saturating_sub(k0)
-                            })
+                            .map(|_| since_k0())
                     };
                     if let Some(cycles) = back {
                         let elapsed = killed_at.elapsed();

@@ -259,14 +259,7 @@ impl Sequencer {
             old.tree,
             old.runners.join(", ")
         ));
-        for o in old.overrides.iter().rev() {
-            let what = format!("{}.{} restored to {}", o.skill, o.param, o.before);
-            match fabric.set_param_value(&o.skill, &o.param, o.before) {
-                Ok(()) => self.steps.push(what),
-                Err(FabricError::Refused(r)) => self.steps.push(format!("{what}: refused: {r}")),
-                Err(source) => return Err(SeqError::Fabric { what, source }),
-            }
-        }
+        self.restore_all(fabric, &old.overrides)?;
         let mut theirs: HashSet<u64> = old
             .nodes
             .iter()
@@ -284,6 +277,24 @@ impl Sequencer {
         }
         for id in theirs {
             fabric.remove_monitor(id);
+        }
+        Ok(())
+    }
+
+    /// Restores `overrides`, latest first, each step said (a refusal too); stops at a
+    /// fabric that cannot be asked.
+    fn restore_all(
+        &mut self,
+        fabric: &mut dyn Fabric,
+        overrides: &[Override],
+    ) -> Result<(), SeqError> {
+        for o in overrides.iter().rev() {
+            let what = format!("{}.{} restored to {}", o.skill, o.param, o.before);
+            match fabric.set_param_value(&o.skill, &o.param, o.before) {
+                Ok(()) => self.steps.push(what),
+                Err(FabricError::Refused(r)) => self.steps.push(format!("{what}: refused: {r}")),
+                Err(source) => return Err(SeqError::Fabric { what, source }),
+            }
         }
         Ok(())
     }
@@ -307,15 +318,9 @@ impl Sequencer {
             .filter(|o| !setting.contains(&o.node))
             .cloned()
             .collect();
-        for o in stale.iter().rev() {
-            let what = format!("{}.{} restored to {}", o.skill, o.param, o.before);
-            match fabric.set_param_value(&o.skill, &o.param, o.before) {
-                Ok(()) => self.steps.push(what),
-                Err(FabricError::Refused(r)) => self.steps.push(format!("{what}: refused: {r}")),
-                Err(source) => return Err(SeqError::Fabric { what, source }),
-            }
-            self.overrides.retain(|x| x.node != o.node);
-        }
+        self.restore_all(fabric, &stale)?;
+        self.overrides
+            .retain(|x| !stale.iter().any(|o| o.node == x.node));
         // The running `WaitFor`s' monitors: taken over, counted as fired, or installed again.
         let mut ids = Vec::new();
         self.root.monitors(&mut ids);

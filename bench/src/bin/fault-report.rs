@@ -1,8 +1,8 @@
 //! `fault-report`: the exit-lab mission under injected faults, and what they cost.
 //!
 //! ```text
-//! fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]
-//!              [--plan FILE.xml] [--mission deliver [--building FILE]]
+//! fault-report [--json] [--runs N] [--seed S] [--time-factor F] [--world FILE] [--kill-every S]
+//!              [--only NAME] [--plan FILE.xml] [--mission deliver [--building FILE]]
 //! fault-report --soak CYCLES [--json]
 //! fault-report --clients [SECS] [--json]
 //! ```
@@ -12,6 +12,8 @@
 //! faults (release binaries beside this one): `kill` — SIGKILL to a random fabric process
 //! (the manager, the Denning device, any skill, and the plan's runner when a plan drives:
 //! each is restarted at once, a plan runner resumes the plan) every S simulated seconds;
+//! `swap` — the device alone killed (hot-swapped by `up`) every 12 s with the robot in real
+//! time (time factor 1 whatever `--time-factor` says);
 //! `corrupt-1`, `corrupt-5` — 1 % / 5 % of the serial bytes with a flipped bit; `drop-1` —
 //! 1 % of them dropped; `sim-restart` — the simulator (the robot's serial side) killed every
 //! 60 simulated seconds and restarted where the robot was. Per scenario: missions out of the lab, median mission time, the longest time
@@ -153,7 +155,7 @@ fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
         println!(
-            "usage: fault-report [--json] [--runs N] [--time-factor F] [--world FILE] [--kill-every S] [--only NAME]\n                    [--plan FILE.xml] [--mission deliver [--building FILE]]\n       fault-report --soak CYCLES [--json]\n       fault-report --clients [SECS] [--json]"
+            "usage: fault-report [--json] [--runs N] [--seed S] [--time-factor F] [--world FILE] [--kill-every S]\n                    [--only NAME] [--plan FILE.xml] [--mission deliver [--building FILE]]\n       fault-report --soak CYCLES [--json]\n       fault-report --clients [SECS] [--json]"
         );
         return std::process::ExitCode::SUCCESS;
     }
@@ -273,7 +275,10 @@ fn main() -> std::process::ExitCode {
     let tf = arg_value(&args, "--time-factor").unwrap_or_else(|| "4".into());
     let every = arg_value(&args, "--kill-every").unwrap_or_else(|| "5".into());
     let only = arg_value(&args, "--only");
-    let mut common = vec!["--runs".to_string(), runs, "--time-factor".into(), tf];
+    let mut common = vec!["--runs".to_string(), runs];
+    if let Some(seed) = arg_value(&args, "--seed") {
+        common.extend(["--seed".into(), seed]);
+    }
     let mission = arg_value(&args, "--mission").unwrap_or_else(|| "exit-lab".into());
     match mission.as_str() {
         "exit-lab" => {
@@ -297,23 +302,62 @@ fn main() -> std::process::ExitCode {
     let scenarios = [
         Scenario {
             name: "kill",
-            args: vec!["--kill-every".into(), every],
+            args: vec![
+                "--kill-every".into(),
+                every,
+                "--time-factor".into(),
+                tf.clone(),
+            ],
+        },
+        // The device hot-swapped: SIGKILL every 12 s with the robot in real time.
+        Scenario {
+            name: "swap",
+            args: [
+                "--kill-every",
+                "12",
+                "--kill-only",
+                "denning",
+                "--time-factor",
+                "1",
+            ]
+            .map(String::from)
+            .to_vec(),
         },
         Scenario {
             name: "corrupt-1",
-            args: vec!["--corrupt-rate".into(), "0.01".into()],
+            args: vec![
+                "--corrupt-rate".into(),
+                "0.01".into(),
+                "--time-factor".into(),
+                tf.clone(),
+            ],
         },
         Scenario {
             name: "corrupt-5",
-            args: vec!["--corrupt-rate".into(), "0.05".into()],
+            args: vec![
+                "--corrupt-rate".into(),
+                "0.05".into(),
+                "--time-factor".into(),
+                tf.clone(),
+            ],
         },
         Scenario {
             name: "drop-1",
-            args: vec!["--drop-rate".into(), "0.01".into()],
+            args: vec![
+                "--drop-rate".into(),
+                "0.01".into(),
+                "--time-factor".into(),
+                tf.clone(),
+            ],
         },
         Scenario {
             name: "sim-restart",
-            args: vec!["--kill-sim-every".into(), "60".into()],
+            args: vec![
+                "--kill-sim-every".into(),
+                "60".into(),
+                "--time-factor".into(),
+                tf,
+            ],
         },
     ];
     let skillfab = skillfab_tests::bin("skillfab");

@@ -22,6 +22,9 @@ use std::time::{Duration, Instant};
 pub struct Faults {
     /// SIGKILL to a random unit (device or skill) every this many simulated seconds.
     pub kill_every_s: Option<f64>,
+    /// The killer's targets by name (`manager`, `plan`, a unit's name); empty: every process
+    /// of the fabric. `["denning"]` is the device hot-swapped.
+    pub kill_only: Vec<String>,
     /// SIGKILL to the simulator (the robot's serial side) every this many simulated seconds;
     /// it comes back where the robot was (`denning-sim --state`).
     pub kill_sim_every_s: Option<f64>,
@@ -130,19 +133,22 @@ fn units(board: &Board) -> Vec<(usize, String, u32, bool)> {
 
 impl Killer {
     /// Starts killing in `domain` every `every` (real time): a unit, the manager, or the
-    /// plan runner running the plan file `plan` (its recovery: a new runner resumed it).
+    /// plan runner running the plan file `plan` (its recovery: a new runner resumed it);
+    /// only those named in `only` if it names any.
     pub fn start(
         domain: &Domain,
         every: Duration,
         period: Duration,
         seed: u64,
         plan: Option<String>,
+        only: Vec<String>,
     ) -> Killer {
         let domain = domain.clone();
         Killer::spawn(move |st, ks| {
             let mut rng = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
             let armed = Instant::now();
             let mut next = armed + every;
+            let mut warned = false;
             while !st.load(Ordering::Acquire) {
                 if Instant::now() < next {
                     std::thread::sleep(Duration::from_millis(5));
@@ -165,6 +171,14 @@ impl Killer {
                 let runner = |plan: &str| process_with_args(&["sequence", plan]);
                 if let Some(pid) = plan.as_deref().and_then(runner) {
                     list.push((PLAN, PLAN_NAME.to_string(), pid, true));
+                }
+                if !only.is_empty() {
+                    let running = !list.is_empty();
+                    list.retain(|u| only.contains(&u.1));
+                    if running && list.is_empty() && !warned {
+                        warned = true;
+                        tracing::warn!(?only, "fault: no process of the fabric by these names");
+                    }
                 }
                 if list.is_empty() {
                     continue;

@@ -167,6 +167,15 @@ struct FaultArgs {
     /// each is restarted at once.
     #[arg(long, value_name = "SECONDS")]
     kill_every: Option<f64>,
+    /// With --kill-every: kill only these (`manager`, `plan`, or a unit's name such as
+    /// `denning`: the device hot-swapped).
+    #[arg(
+        long,
+        value_name = "NAME,...",
+        value_delimiter = ',',
+        requires = "kill_every"
+    )]
+    kill_only: Vec<String>,
     /// Fault injection: SIGKILL to the simulator every this many simulated seconds; it is
     /// restarted and resumes the robot where it was, the device reconnects.
     #[arg(long, value_name = "SECONDS")]
@@ -206,6 +215,7 @@ impl FaultArgs {
         }
         Ok(faults::Faults {
             kill_every_s: self.kill_every,
+            kill_only: self.kill_only.clone(),
             kill_sim_every_s: self.kill_sim_every,
             corrupt_rate: self.corrupt_rate,
             drop_rate: self.drop_rate,

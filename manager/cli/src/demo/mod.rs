@@ -607,6 +607,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             opts.plan
                 .as_ref()
                 .map(|_| net.dir.join(PLAN_FILE).to_string_lossy().into_owned()),
+            opts.faults.kill_only.clone(),
         )
     });
     if opts.lockstep && matches!(driver, Driver::Code(_)) {

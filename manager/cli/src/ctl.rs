@@ -65,6 +65,8 @@ pub enum CtlCmd {
     },
     /// List monitors.
     Monitors,
+    /// The processes `skillfab up` gave up restarting (and not back since).
+    GaveUp,
     /// Remove a monitor.
     Unmonitor {
         /// Its id.
@@ -379,6 +381,24 @@ pub fn run(
                     }
                 }
             }
+        }
+        CtlCmd::GaveUp => {
+            let list = c.gave_up()?;
+            let human = list
+                .iter()
+                .map(|g| {
+                    format!(
+                        "{}: given up at cycle {} after {} restarts ({})",
+                        g.process, g.cycle, g.restarts, g.status
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            let j = list
+                .iter()
+                .map(|g| json!({"process": g.process, "restarts": g.restarts, "status": g.status, "cycle": g.cycle}))
+                .collect();
+            print(human, Json::Array(j));
         }
         CtlCmd::Monitors => {
             let ms = c.monitors()?;

@@ -620,6 +620,20 @@ fn replay(opts: &replay::ReplayOptions, json: bool) -> anyhow::Result<()> {
             r.cycles,
             r.samples
         );
+        for k in &r.kills {
+            println!(
+                "killed {} after cycle {} (pid {} → {}{})",
+                k.skill,
+                k.cycle,
+                k.pid,
+                k.new_pid,
+                if k.forgot {
+                    ", its kept state removed"
+                } else {
+                    ""
+                }
+            );
+        }
         match &r.divergence {
             None => println!("no divergence"),
             Some(d) => println!(

@@ -10,6 +10,12 @@
 //! cycles with identical outputs and the first divergence (cycle, skill, port, field, both
 //! values). Skills are compared on the bytes of each field they published (a NaN counts,
 //! padding does not).
+//!
+//! `--kill SKILL@CYCLE` kills a replayed skill (SIGKILL) after its run of that cycle; `up`
+//! starts it again and the replay goes on once it is back. Its outputs after the kill are
+//! compared like the others: a skill that starts from the state of its last completed run
+//! (`Skill::STATE`) replays identically; one that forgot what it knew diverges (`--forget`
+//! removes the kept state before the restart, to show what that memory is worth).
 
 use anyhow::{Context, bail};
 use serde::Serialize;
@@ -45,6 +51,54 @@ pub struct ReplayOptions {
     /// Keep the replay's files (launch file, player script, its recording, log) here.
     #[arg(long, value_name = "DIR")]
     pub keep: Option<PathBuf>,
+    /// Kill a replayed skill (SIGKILL) after its run of a cycle; it is started again before
+    /// the next (comma-separated `SKILL@CYCLE`).
+    #[arg(long, value_name = "SKILL@CYCLE", value_delimiter = ',', value_parser = kill_at)]
+    pub kill: Vec<KillAt>,
+    /// With --kill: remove the killed skill's kept state before it is started again, as if
+    /// it kept none.
+    #[arg(long, requires = "kill")]
+    pub forget: bool,
+}
+
+/// A kill asked for: the skill, killed after its run of `cycle`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KillAt {
+    /// Instance name.
+    pub skill: String,
+    /// The cycle after whose run it is killed.
+    pub cycle: u64,
+}
+
+fn kill_at(text: &str) -> Result<KillAt, String> {
+    let (skill, cycle) = text
+        .rsplit_once('@')
+        .ok_or_else(|| format!("'{text}' is not SKILL@CYCLE"))?;
+    let cycle = cycle
+        .parse()
+        .map_err(|e| format!("'{text}': the cycle '{cycle}' is not a number ({e})"))?;
+    if skill.is_empty() {
+        return Err(format!("'{text}' names no skill"));
+    }
+    Ok(KillAt {
+        skill: skill.to_string(),
+        cycle,
+    })
+}
+
+/// A kill done, and the process that took the skill's place.
+#[derive(Debug, Clone, Serialize)]
+pub struct Killed {
+    /// Instance name.
+    pub skill: String,
+    /// The cycle after whose run it was killed.
+    pub cycle: u64,
+    /// The process killed.
+    pub pid: u32,
+    /// The process that replaced it.
+    pub new_pid: u32,
+    /// Whether its kept state was removed first (`--forget`).
+    pub forgot: bool,
 }
 
 /// One recorded sample.
@@ -170,6 +224,8 @@ pub struct Report {
     pub samples: u64,
     /// The first divergence, if any.
     pub divergence: Option<Divergence>,
+    /// The skills killed on the way (`--kill`).
+    pub kills: Vec<Killed>,
     /// Host time the replay took (s).
     pub wall_s: f64,
 }
@@ -213,6 +269,24 @@ pub fn replay(opts: &ReplayOptions) -> anyhow::Result<Report> {
     let to = opts.to.unwrap_or(last).min(last);
     if from > to {
         bail!("nothing to replay: cycles {from}..={to} (the recording has {first}..={last})");
+    }
+    for k in &opts.kill {
+        if !opts.skills.contains(&k.skill) {
+            bail!(
+                "--kill {}@{}: '{}' is not among --skills",
+                k.skill,
+                k.cycle,
+                k.skill
+            );
+        }
+        if !(from..to).contains(&k.cycle) {
+            bail!(
+                "--kill {}@{}: a kill after cycle {} is outside the replay's cycles {from}..{to}",
+                k.skill,
+                k.cycle,
+                k.cycle
+            );
+        }
     }
     // What the player publishes: every data topic the skills read and none of them produces.
     let produced: BTreeSet<String> = decls
@@ -260,12 +334,26 @@ pub fn replay(opts: &ReplayOptions) -> anyhow::Result<Report> {
     let child = up.spawn().context("starting skillfab up")?;
     let net = Net(child);
     let c = connect(&domain, opts.skills.len() + 1, &work)?;
-    drive(&c, &rec, &opts.skills, &decls, from, to)?;
+    let killer = Killer {
+        domain: &domain,
+        forget: opts.forget,
+        log: work.join("up.log"),
+    };
+    let kills = drive(
+        &c,
+        &rec,
+        &opts.skills,
+        &decls,
+        (from, to),
+        &opts.kill,
+        &killer,
+    )?;
     drop(c);
     // Stops the replay's network: its manager finishes the recording read next.
     drop(net);
     let replayed = Recording::read(&out).context("reading the replay's own recording")?;
     let mut report = compare(&rec, &replayed, &opts.skills, from, to);
+    report.kills = kills;
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
 }
@@ -346,11 +434,22 @@ fn launch_file(
             .filter(|(k, v)| d["defaults"].get(k.as_str()) != Some(v))
             .map(|(k, v)| (k.clone(), toml::Value::String(param_text(v))))
             .collect();
+        // Wired as recorded (a launch file's remaps: the demo's `go_through/progress`).
+        let remap = ["inputs", "outputs"]
+            .iter()
+            .flat_map(|side| Recording::ports(d, side, Some("Data")))
+            .filter(|(port, topic, _)| port != topic)
+            .map(|(port, topic, _)| (port, topic))
+            .collect();
         launch.process.push(ProcessEntry {
             name: name.into(),
             bin: text(program(kind)?),
             active: Some(false),
             params,
+            remap,
+            // Started again at once when killed (`--kill`), however often.
+            backoff_ms: Some(0),
+            max_restarts: Some(u32::MAX),
             ..ProcessEntry::default()
         });
     }
@@ -430,44 +529,121 @@ fn apply(c: &Client, ctl: &Json) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What happens at a cycle boundary of the replay.
+enum Action<'a> {
+    /// A replayed skill killed (before the boundary's control changes).
+    Kill(&'a KillAt),
+    /// A recorded control change applied.
+    Control(&'a Json),
+}
+
+/// Kills replayed skills and waits for `up` to start them again.
+struct Killer<'a> {
+    domain: &'a Domain,
+    forget: bool,
+    log: PathBuf,
+}
+
+impl Killer<'_> {
+    /// Kills `skill` (its kept state removed first with `forget`) and waits until a new
+    /// process has it again, in the state (active or not) it was in.
+    fn kill(&self, c: &Client, at: &KillAt) -> anyhow::Result<Killed> {
+        let find = || -> anyhow::Result<Option<(u32, SkillState)>> {
+            Ok(c.list()?
+                .into_iter()
+                .find(|s| s.name == at.skill)
+                .map(|s| (s.pid, s.state)))
+        };
+        let (pid, was) = find()?.with_context(|| format!("{} is not registered", at.skill))?;
+        if self.forget {
+            let name = skillfab_proto::names::state(&self.domain.prefix(), &at.skill);
+            // Removed while the process still runs (the fabric is stopped: it commits
+            // nothing), so the next one finds no state whatever instant `up` restarts it.
+            match nix::sys::mman::shm_unlink(name.as_str()) {
+                Ok(()) | Err(nix::errno::Errno::ENOENT) => {}
+                Err(e) => bail!("removing {name}: {e}"),
+            }
+        }
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(i32::try_from(pid)?),
+            nix::sys::signal::Signal::SIGKILL,
+        )
+        .with_context(|| format!("SIGKILL to {} ({pid})", at.skill))?;
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if let Some((new_pid, state)) = find()?
+                && new_pid != pid
+                && state == was
+            {
+                return Ok(Killed {
+                    skill: at.skill.clone(),
+                    cycle: at.cycle,
+                    pid,
+                    new_pid,
+                    forgot: self.forget,
+                });
+            }
+            if Instant::now() > deadline {
+                bail!(
+                    "{} killed after cycle {} was not back within 30 s (see {})",
+                    at.skill,
+                    at.cycle,
+                    self.log.display()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
 /// Sets the skills up as they were when cycle `from` started, then steps the manager from
-/// change to change up to `to`.
+/// boundary to boundary up to `to`: at each, the kills asked for, then the recorded control
+/// changes that took effect from the next cycle.
 fn drive(
     c: &Client,
     rec: &Recording,
     skills: &[String],
     decls: &[&Json],
-    from: u64,
-    to: u64,
-) -> anyhow::Result<()> {
+    (from, to): (u64, u64),
+    kills: &[KillAt],
+    killer: &Killer<'_>,
+) -> anyhow::Result<Vec<Killed>> {
     let ours = |j: &Json| skills.iter().any(|s| j["skill"] == s.as_str());
     for d in decls {
         if d["active"] == true && d["from"].as_u64().unwrap_or(0) <= from {
             c.activate(&[d["skill"].as_str().unwrap_or_default()])?;
         }
     }
-    let mut later: BTreeMap<u64, Vec<&Json>> = BTreeMap::new();
+    // Keyed by the last cycle run before the action.
+    let mut later: BTreeMap<u64, Vec<Action>> = BTreeMap::new();
+    for k in kills {
+        later.entry(k.cycle).or_default().push(Action::Kill(k));
+    }
     for ctl in rec.controls.iter().filter(|j| ours(j)) {
         let at = ctl["from"].as_u64().unwrap_or(0);
         if at <= from {
             apply(c, ctl)?;
         } else if at <= to {
-            later.entry(at).or_default().push(ctl);
+            later.entry(at - 1).or_default().push(Action::Control(ctl));
         }
     }
     let mut done = from - 1;
-    for (at, ctls) in later {
-        if at - 1 > done {
-            done = c.step(at - 1 - done)?;
+    let mut killed = Vec::new();
+    for (at, actions) in later {
+        if at > done {
+            done = c.step(at - done)?;
         }
-        for ctl in ctls {
-            apply(c, ctl)?;
+        for action in actions {
+            match action {
+                Action::Kill(k) => killed.push(killer.kill(c, k)?),
+                Action::Control(ctl) => apply(c, ctl)?,
+            }
         }
     }
     if to > done {
         c.step(to - done)?;
     }
-    Ok(())
+    Ok(killed)
 }
 
 /// The outputs of the replayed skills, by cycle: (skill, port) → sample.
@@ -628,6 +804,7 @@ fn compare(rec: &Recording, replayed: &Recording, skills: &[String], from: u64, 
         identical_cycles: 0,
         samples: 0,
         divergence: None,
+        kills: Vec::new(),
         wall_s: 0.0,
     };
     let empty = BTreeMap::new();

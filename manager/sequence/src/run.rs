@@ -84,6 +84,11 @@ impl Fabric for ClientFabric<'_> {
         Ok(list.into_iter().map(|m| (m.id, m.client)).collect())
     }
 
+    fn gave_up(&mut self) -> Result<Vec<String>, FabricError> {
+        let list = self.client.gave_up().map_err(fabric_error)?;
+        Ok(list.into_iter().map(|g| g.process).collect())
+    }
+
     /// The fabric's clock on this host (none while its manager restarts: time stands still
     /// for the plan's timers); over a bridge, the wall clock since the plan started.
     fn now(&mut self) -> Duration {
@@ -103,8 +108,11 @@ pub struct Sequencer {
     origin: Instant,
     overrides: Vec<Override>,
     keep: Option<Keeping>,
-    /// Processes `skillfab up` gave up restarting.
+    /// Processes `skillfab up` gave up restarting: those its events name, and those the
+    /// manager listed before the first tick (their events went by before this runner).
     gave_up: HashSet<String>,
+    /// Whether the manager was asked for them.
+    asked_gave_up: bool,
 }
 
 /// A plan whose state is kept ([`Sequencer::kept`]).
@@ -150,6 +158,7 @@ impl Sequencer {
             overrides: Vec::new(),
             keep: None,
             gave_up: HashSet::new(),
+            asked_gave_up: false,
         })
     }
 
@@ -438,6 +447,14 @@ impl Sequencer {
     /// Ticks the tree once (a kept plan's state is kept after it, and forgotten when the
     /// tree ends).
     pub fn tick(&mut self, fabric: &mut dyn Fabric) -> Result<Status, SeqError> {
+        if !self.asked_gave_up {
+            let listed = fabric.gave_up().map_err(|source| SeqError::Fabric {
+                what: "asking which processes `up` gave up on".into(),
+                source,
+            })?;
+            self.gave_up.extend(listed);
+            self.asked_gave_up = true;
+        }
         let keep = &mut self.keep;
         let mut keep = |o: &[Override]| {
             if let Some(k) = keep.as_mut() {

@@ -27,6 +27,8 @@ struct Mock {
     next: u64,
     now: Duration,
     log: Vec<String>,
+    /// Processes `up` gave up on, as the manager lists them.
+    gave_up: Vec<String>,
 }
 
 impl Mock {
@@ -167,6 +169,11 @@ impl Fabric for Mock {
             .collect())
     }
 
+    fn gave_up(&mut self) -> Result<Vec<String>, FabricError> {
+        self.request()?;
+        Ok(self.gave_up.clone())
+    }
+
     fn now(&mut self) -> Duration {
         self.now
     }
@@ -190,6 +197,31 @@ fn fire(seq: &mut Sequencer, f: &mut Mock, id: u64) {
         stamp_ns: 0,
     };
     assert!(seq.on_event(&f.client, &ev));
+}
+
+#[test]
+fn wait_gave_up_knows_a_give_up_from_before_the_runner_and_hears_one_after() {
+    let p = plan(
+        r#"<Sequence>
+             <WaitGaveUp process="denning"/>
+             <WaitGaveUp process="wander"/>
+             <Activate skills="avoid"/>
+           </Sequence>"#,
+    );
+    let mut f = Mock::new(&["wander", "avoid"]);
+    // `up` gave up on the device before this runner started: its event went by unheard.
+    f.gave_up = vec!["denning".into()];
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    let ev = skillfab_proto::control::EventKind::ProcessGaveUp {
+        process: "wander".into(),
+        restarts: 5,
+        status: "signal 9".into(),
+    };
+    assert!(seq.on_event("me", &ev));
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert_eq!(f.on(), ["avoid"]);
 }
 
 #[test]
@@ -654,9 +686,10 @@ fn a_runner_that_dies_anywhere_is_taken_over_and_the_plan_ends_as_an_uninterrupt
     assert_eq!(whole.params["avoid.safe_distance"], 0.6);
     assert_eq!(whole.monitors, 0);
     assert!(!store.exists(), "a plan that ended leaves nothing kept");
-    // Dying in each request the plan makes, in turn: inside the `WithParam` (between
-    // reading the parameter and setting it, too), the `Timeout`, each attempt of the retry.
-    assert_eq!(whole.requests, 9, "{whole:?}");
+    // Dying in each request the plan makes, in turn: asking which processes `up` gave up
+    // on, inside the `WithParam` (between reading the parameter and setting it, too), the
+    // `Timeout`, each attempt of the retry.
+    assert_eq!(whole.requests, 10, "{whole:?}");
     let same = |e: &End| (e.tick, e.status, e.params.clone(), e.on.clone(), e.monitors);
     for die_at in 1..=whole.requests {
         let (end, steps) = run_resumable(&store, Some(die_at));

@@ -58,6 +58,8 @@ pub trait Fabric {
     fn adopt_monitors(&mut self, ids: &[u64]) -> Result<Vec<MonitorFate>, FabricError>;
     /// Every installed monitor: (id, the client it belongs to).
     fn monitors(&mut self) -> Result<Vec<(u64, String)>, FabricError>;
+    /// The processes `skillfab up` gave up restarting and that have not come back since.
+    fn gave_up(&mut self) -> Result<Vec<String>, FabricError>;
     /// The fabric's time (cycle × period with a period; lock-step included).
     fn now(&mut self) -> Duration;
 }

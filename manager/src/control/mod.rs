@@ -36,6 +36,10 @@ pub(super) type Pending = ActiveRequest<ipc::Service, [u8], (), [u8], ()>;
 
 /// Most cycle latencies one `Latencies` answer carries (a console's history).
 const MAX_LATENCIES: usize = 1024;
+/// How long the monitors of a client whose process died are kept (evaluated, and a `Once`
+/// monitor that fires remembered as fired) before they are removed: a plan runner restarted
+/// by `up` takes them over in that time (`AdoptMonitors`) and misses no condition.
+pub const ORPHAN_GRACE: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// A request handed from the control thread to the engine.
 pub(crate) struct Incoming {
@@ -67,6 +71,34 @@ pub struct ControlPlane {
     seq: u64,
     /// `step` requests waiting for their cycles.
     steps: Vec<(u64, Option<String>)>,
+    /// Clients that hold monitors and whose process was first seen dead then.
+    orphans: Orphans,
+}
+
+/// The clients holding monitors whose process died, and since when.
+#[derive(Debug, Default)]
+struct Orphans(std::collections::HashMap<String, std::time::Instant>);
+
+impl Orphans {
+    /// Takes note of the clients of `dead` (those holding monitors whose process is gone)
+    /// at `now`; the clients among them dead for `grace` or longer, whose monitors go.
+    fn expired(
+        &mut self,
+        dead: std::collections::HashSet<String>,
+        now: std::time::Instant,
+        grace: std::time::Duration,
+    ) -> std::collections::HashSet<String> {
+        // A client no longer listed had its monitors taken over or removed.
+        self.0.retain(|c, _| dead.contains(c));
+        for c in dead {
+            self.0.entry(c).or_insert(now);
+        }
+        self.0
+            .iter()
+            .filter(|(_, since)| now.duration_since(**since) >= grace)
+            .map(|(c, _)| c.clone())
+            .collect()
+    }
 }
 
 /// A client id is `<pid>-<n>`; the pid tells whether it still lives.
@@ -108,6 +140,7 @@ impl ControlPlane {
             thread: Some(thread),
             seq: 0,
             steps: Vec::new(),
+            orphans: Orphans::default(),
         })
     }
 
@@ -182,16 +215,28 @@ impl ControlPlane {
         }
     }
 
-    /// Drops the monitors of clients whose process is gone — but not in lock-step: there a
-    /// monitor's firing pauses the fabric until its plan has reacted, and the fabric waits
-    /// for a plan runner that died (a restarted one takes its monitors over).
+    /// Drops the monitors of clients whose process has been gone for [`ORPHAN_GRACE`] — but
+    /// not in lock-step: there a monitor's firing pauses the fabric until its plan has
+    /// reacted, and the fabric waits for a plan runner that died (a restarted one takes its
+    /// monitors over).
     pub fn forget_dead_clients(&mut self, m: &mut Manager) {
         if matches!(m.config.pace, crate::engine::Pace::LockStep(_)) {
             return;
         }
+        let dead = m
+            .monitors
+            .iter()
+            .filter(|mon| client_pid(&mon.client).is_some_and(|p| !pid_alive(p)))
+            .map(|mon| mon.client.clone())
+            .collect();
+        let expired = self
+            .orphans
+            .expired(dead, std::time::Instant::now(), ORPHAN_GRACE);
+        if expired.is_empty() {
+            return;
+        }
         let before = m.monitors.len();
-        m.monitors
-            .retain(|mon| client_pid(&mon.client).is_none_or(pid_alive));
+        m.monitors.retain(|mon| !expired.contains(&mon.client));
         if m.monitors.len() != before {
             m.state_check = true;
             tracing::info!(
@@ -262,6 +307,15 @@ impl Manager {
                 status,
             } => {
                 tracing::error!(%process, restarts, %status, "skillfab up gave up restarting it");
+                self.gave_up.insert(
+                    process.clone(),
+                    skillfab_proto::control::GaveUpInfo {
+                        process: process.clone(),
+                        restarts,
+                        status: status.clone(),
+                        cycle: self.cycle,
+                    },
+                );
                 self.outbox
                     .push(skillfab_proto::control::EventKind::ProcessGaveUp {
                         process,
@@ -270,6 +324,7 @@ impl Manager {
                     });
                 Ok(Reply::Done)
             }
+            Request::GaveUp => Ok(Reply::GaveUp(self.gave_up.values().cloned().collect())),
             Request::ListMonitors => Ok(Reply::Monitors(
                 self.monitors.iter().map(Monitor::info).collect(),
             )),
@@ -304,5 +359,33 @@ impl Manager {
                 Ok(Reply::Done)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+    use std::time::{Duration, Instant};
+
+    fn set(names: &[&str]) -> HashSet<String> {
+        names.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn a_dead_clients_monitors_go_after_the_grace_and_not_if_taken_over() {
+        let grace = Duration::from_secs(10);
+        let t0 = Instant::now();
+        let mut o = Orphans::default();
+        assert!(o.expired(set(&["7-1", "8-1"]), t0, grace).is_empty());
+        // 8-1's monitors were taken over (no longer listed); 7-1 stays dead.
+        let t1 = t0 + Duration::from_secs(9);
+        assert!(o.expired(set(&["7-1"]), t1, grace).is_empty());
+        assert_eq!(o.expired(set(&["7-1"]), t0 + grace, grace), set(&["7-1"]));
+        // 8-1 seen dead again later (say, a restarted runner that died too): a grace of
+        // its own from then.
+        let t2 = t0 + Duration::from_secs(12);
+        assert!(o.expired(set(&["8-1"]), t2, grace).is_empty());
+        assert_eq!(o.expired(set(&["8-1"]), t2 + grace, grace), set(&["8-1"]));
     }
 }

@@ -249,6 +249,8 @@ pub struct Manager {
     /// The `Once` monitors that fired and were removed, with their cycle, newest last (at
     /// most [`FIRED_KEPT`]): a restarted plan runner asks what became of its monitors.
     pub(crate) fired_once: std::collections::VecDeque<(u64, u64)>,
+    /// The processes `skillfab up` gave up restarting and that have not registered since.
+    pub(crate) gave_up: std::collections::BTreeMap<String, skillfab_proto::control::GaveUpInfo>,
     /// Untyped readers of topics that monitors and queries read.
     pub(crate) readers: HashMap<String, RawReader>,
     /// Requests and events; taken out while the loop runs.
@@ -350,6 +352,7 @@ impl Manager {
             monitors: Vec::new(),
             next_monitor: 1,
             fired_once: std::collections::VecDeque::new(),
+            gave_up: std::collections::BTreeMap::new(),
             readers: HashMap::new(),
             control: Some(control),
             events_published: 0,

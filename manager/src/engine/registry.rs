@@ -122,6 +122,8 @@ impl Manager {
             skill = %decl.name, kind = %decl.kind, mode = %decl.mode, pid = decl.pid,
             active, "skill registered"
         );
+        // Back (started by hand, or by a new `up`): no longer given up on.
+        self.gave_up.remove(&decl.name);
         let (name, pid, device) = (decl.name.clone(), decl.pid, is_device(&decl));
         let restarted = self.skills.insert(
             i,

@@ -31,8 +31,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use skillfab_proto::board::Board;
 use skillfab_proto::control::{
-    self, ControlError, Event, MonitorFate, MonitorInfo, MonitorMode, ParamArg, Reply, Request,
-    SkillInfo, Stats,
+    self, ControlError, Event, GaveUpInfo, MonitorFate, MonitorInfo, MonitorMode, ParamArg, Reply,
+    Request, SkillInfo, Stats,
 };
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::{LogLine, LogReader};
@@ -592,6 +592,15 @@ impl Client {
         self.subscribe()?;
         match self.request(&Request::AdoptMonitors(ids.to_vec()))? {
             Reply::Adopted(f) if f.len() == ids.len() => Ok(f),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// The processes `skillfab up` gave up restarting and that have not come back since
+    /// (what its `ProcessGaveUp` events said, for a client that was not there to see them).
+    pub fn gave_up(&self) -> Result<Vec<GaveUpInfo>, ClientError> {
+        match self.request(&Request::GaveUp)? {
+            Reply::GaveUp(list) => Ok(list),
             other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
     }

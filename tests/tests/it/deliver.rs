@@ -17,6 +17,7 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
     let building = root.join("devices/denning-sim/buildings/building-a.toml");
     let plan = root.join("skills/plans/deliver.xml");
     let picture = t.dir.join("deliver.svg");
+    let rec = t.dir.join("deliver.mcap");
     let out = t
         .command("skillfab")
         .current_dir(&root)
@@ -27,6 +28,8 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
         .arg(&plan)
         .arg("--plot")
         .arg(&picture)
+        .arg("--record")
+        .arg(&rec)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -70,4 +73,27 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
     // The picture has a map of each floor the robot was on: the basement and the fourth.
     let svg = std::fs::read_to_string(&picture).unwrap();
     assert!(svg.contains(">floor 0<") && svg.contains(">floor 4 (the office: room 405)<"));
+
+    // Each skill of the building killed (SIGKILL) in the middle of its part of the mission
+    // and started again, in a replay of the recorded run: every output from there on is the
+    // uninterrupted run's (the skills of the lab are killed so in replay.rs).
+    let building = [
+        "hall_follow",
+        "intersection",
+        "door_detect",
+        "sign_read",
+        "car_watch",
+        "enter_car",
+        "leave_car",
+        "push_button",
+        "deliver",
+    ];
+    let (kills, kill_list) = crate::replay::mid_mission_kills(&rec, &building);
+    let (r, out) = crate::replay::replay(
+        &t,
+        &rec,
+        &["--skills", &building.join(","), "--kill", &kill_list],
+    );
+    assert!(out.status.success(), "{r}");
+    crate::replay::assert_identical_through(&r, &kills);
 }

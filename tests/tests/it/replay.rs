@@ -58,7 +58,7 @@ fn two_lockstep_runs_with_the_same_seed_give_identical_trajectories() {
 }
 
 /// Runs `skillfab replay` with `args`; returns its JSON report and exit status.
-fn replay(t: &TestDomain, file: &Path, args: &[&str]) -> (Json, Output) {
+pub(crate) fn replay(t: &TestDomain, file: &Path, args: &[&str]) -> (Json, Output) {
     let out = t.run(
         "skillfab",
         &[&["replay", file.to_str().unwrap(), "--json"], args].concat(),
@@ -83,17 +83,75 @@ fn records(file: &Path) -> Vec<Json> {
         .collect()
 }
 
+/// The cycle after which to kill each of `skills` in a replay of `rec`: the middle of the
+/// cycles it published in (it runs then, with what it learnt since its activation), in the
+/// order of those cycles; and the `--kill` argument that asks for them.
+pub(crate) fn mid_mission_kills(rec: &Path, skills: &[&str]) -> (Vec<(String, u64)>, String) {
+    /// What is read of each record (a long mission's are many: not every value decoded).
+    #[derive(serde::Deserialize)]
+    struct Head {
+        kind: String,
+        skill: Option<String>,
+        cycle: Option<u64>,
+    }
+    let bytes = std::fs::read(rec).unwrap();
+    let heads: Vec<Head> =
+        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .unwrap()
+            .map_while(Result::ok)
+            .map(|m| serde_json::from_slice(&m.data).unwrap())
+            .filter(|h: &Head| h.kind == "sample")
+            .collect();
+    let mut kills: Vec<(String, u64)> = skills
+        .iter()
+        .map(|skill| {
+            let cycles: Vec<u64> = heads
+                .iter()
+                .filter(|h| h.skill.as_deref() == Some(*skill))
+                .filter_map(|h| h.cycle)
+                .collect();
+            // (`deliver` publishes only when its progress changes: a few samples.)
+            assert!(cycles.len() >= 3, "{skill} ran in the recorded mission");
+            (skill.to_string(), cycles[cycles.len() / 2])
+        })
+        .collect();
+    kills.sort_by_key(|k| k.1);
+    let arg = kills
+        .iter()
+        .map(|(s, c)| format!("{s}@{c}"))
+        .collect::<Vec<_>>()
+        .join(",");
+    (kills, arg)
+}
+
+/// Asserts that a replay with kills (`--kill`) did them all and diverged nowhere.
+pub(crate) fn assert_identical_through(r: &Json, kills: &[(String, u64)]) {
+    assert_eq!(r["divergence"], Json::Null, "{r}");
+    assert_eq!(r["identical_cycles"], r["cycles"], "{r}");
+    let done = r["kills"].as_array().unwrap();
+    assert_eq!(done.len(), kills.len(), "every kill done: {r}");
+    for (k, (skill, cycle)) in done.iter().zip(kills) {
+        assert_eq!(
+            (k["skill"].as_str(), k["cycle"].as_u64()),
+            (Some(skill.as_str()), Some(*cycle))
+        );
+        assert_ne!(k["pid"], k["new_pid"], "a new process: {k}");
+    }
+}
+
 #[test]
-fn a_recorded_lockstep_mission_replays_identically_and_a_changed_default_is_named() {
+fn a_recorded_lockstep_mission_replays_identically_through_kills_and_a_changed_default_is_named() {
     let t = TestDomain::new("replaymission");
     let rec = t.dir.join("mission.mcap");
+    // The shipped lab: every skill of the mission has its part in it.
+    let exit_lab = skillfab_tests::repo_root().join("devices/denning-sim/worlds/exit-lab.toml");
     let out = t.run(
         "skillfab",
         &[
             "demo",
             "exit-lab",
             "--world",
-            world(&t).to_str().unwrap(),
+            exit_lab.to_str().unwrap(),
             "--lockstep",
             "--record",
             rec.to_str().unwrap(),
@@ -106,14 +164,37 @@ fn a_recorded_lockstep_mission_replays_identically_and_a_changed_default_is_name
         String::from_utf8_lossy(&out.stderr)
     );
     let skills = ["--skills", "avoid,explore,barcode_track,home"];
-    let (r, out) = replay(&t, &rec, &skills);
+
+    // Each skill of the mission killed (SIGKILL) mid-mission, between two runs, and started
+    // again: its first run after the restart starts from the state of its last completed run,
+    // so every output it makes from there on is the one the uninterrupted run made.
+    let ours = [
+        "avoid",
+        "explore",
+        "barcode_track",
+        "home",
+        "wall_follow",
+        "door_locate",
+        "go_through",
+    ];
+    let (kills, kill_list) = mid_mission_kills(&rec, &ours);
+    let all = ["--skills", &ours.join(","), "--kill", &kill_list];
+    let (r, out) = replay(&t, &rec, &all);
     assert!(out.status.success(), "{r}");
-    assert_eq!(r["divergence"], Json::Null, "{r}");
-    assert_eq!(r["identical_cycles"], r["cycles"], "{r}");
+    assert_identical_through(&r, &kills);
     assert!(r["cycles"].as_u64().unwrap() > 1000, "{r}");
     assert!(
         r["samples"].as_u64().unwrap() > 1000,
         "outputs compared: {r}"
+    );
+    // The same kills, the kept state removed before each restart (as a skill that keeps
+    // nothing): the replay diverges after a kill — the comparison sees a forgotten state.
+    let (r, out) = replay(&t, &rec, &[&all[..], &["--forget"]].concat());
+    assert!(!out.status.success(), "a skill that forgot diverges: {r}");
+    let first_kill = kills.iter().map(|k| k.1).min().unwrap();
+    assert!(
+        r["divergence"]["cycle"].as_u64().unwrap() > first_kill,
+        "not before the first kill: {r}"
     );
 
     // home as if rebuilt with another default speed (0.3 m/s instead of 0.35): a wrapper

@@ -403,7 +403,8 @@ fn up_supervises_a_plan_a_killed_runner_is_restarted_and_resumes_and_a_plan_that
 }
 
 #[test]
-fn when_up_gives_up_on_a_crashing_process_an_event_says_so_and_a_plan_reacts() {
+fn when_up_gives_up_on_a_crashing_process_an_event_says_so_a_plan_reacts_and_a_later_runner_knows()
+{
     let mut t = TestDomain::new("seqgaveup");
     // A process that fails at once, every time: restarted twice (1 s, then 2 s later), then
     // given up.
@@ -455,4 +456,27 @@ fn when_up_gives_up_on_a_crashing_process_an_event_says_so_and_a_plan_reacts() {
     }
     assert_eq!(heard, Some(("crasher".to_string(), 2)));
     assert!(c.monitors().unwrap().is_empty(), "{text}");
+
+    // The manager lists it for a client that was not there to hear it: a runner started
+    // after the event goes past the same leaf at once.
+    let listed: Vec<(String, u32)> = c
+        .gave_up()
+        .unwrap()
+        .into_iter()
+        .map(|g| (g.process, g.restarts))
+        .collect();
+    assert_eq!(listed, [("crasher".to_string(), 2)]);
+    let later = plan(
+        &t,
+        r#"<Sequence>
+             <WaitGaveUp name="crasher gone before" process="crasher"/>
+             <SetParam skill="scale" param="gain" value="4"/>
+           </Sequence>"#,
+    );
+    let (out, text) = sequence(&t, &later);
+    assert!(out.status.success(), "{text}");
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(4.0)
+    );
 }

@@ -136,6 +136,10 @@ pub struct RunOutcome {
     /// Where the robot was at the end (ground truth): floor, x, y (m). A failed run's
     /// first clue.
     pub end: Option<(i32, f64, f64)>,
+    /// A failed run's directory, kept for its diagnosis: `up.log` (every process's log and
+    /// the plan's steps), the simulator's ground truth (`trajectory.csv`), the launch file
+    /// and the plan. A run that succeeded leaves nothing.
+    pub run_dir: Option<PathBuf>,
     #[serde(skip)]
     trajectory: Vec<TruthRecord>,
 }
@@ -162,6 +166,8 @@ struct Network {
     child: Child,
     dir: PathBuf,
     domain: Domain,
+    /// Keep `dir` when dropped (a run that failed, or ended in an error).
+    keep: bool,
 }
 
 impl Drop for Network {
@@ -182,7 +188,12 @@ impl Drop for Network {
         let _ = self.child.kill();
         let _ = self.child.wait();
         self.domain.remove_all_files();
-        let _ = std::fs::remove_dir_all(&self.dir);
+        // An interrupted demo leaves nothing behind.
+        if self.keep && !interrupted() {
+            tracing::info!(dir = %self.dir.display(), "the run's files are kept");
+        } else {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
     }
 }
 
@@ -373,7 +384,16 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         });
     }
     let child = cmd.spawn().context("starting skillfab up")?;
-    Ok((Network { child, dir, domain }, traj))
+    Ok((
+        Network {
+            child,
+            dir,
+            domain,
+            // Until the run is known to have succeeded.
+            keep: true,
+        },
+        traj,
+    ))
 }
 
 /// The plan's copy in a run's directory.
@@ -534,7 +554,7 @@ fn verdict(
 /// One run of the experiment.
 pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOutcome> {
     let wall = Instant::now();
-    let (net, traj) = start(opts, seed, run)?;
+    let (mut net, traj) = start(opts, seed, run)?;
     let mut c = connect(&net, opts.site.skills())?;
     c.subscribe()?;
     let mut out = RunOutcome {
@@ -556,6 +576,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         link: None,
         safety: None,
         end: None,
+        run_dir: None,
         trajectory: Vec::new(),
     };
     let record = |c: &Client, steps: &mut Vec<(String, u64, f64)>, what: &str| {
@@ -736,6 +757,8 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     out.wall_s = wall.elapsed().as_secs_f64();
     (out.max_command_gap_s, out.max_stale_drive_s) = command_gaps(&out.trajectory);
     drop(c);
+    net.keep = !out.success;
+    out.run_dir = net.keep.then(|| net.dir.clone());
     drop(net);
     Ok(out)
 }
@@ -803,6 +826,9 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
                 r.wall_s,
                 r.collisions
             );
+            if let Some(d) = &r.run_dir {
+                println!("  its files (up.log, trajectory.csv): {}", d.display());
+            }
         }
         if run == 0
             && let Some(p) = &opts.plot

@@ -135,6 +135,9 @@ pub enum Request {
         /// How it last exited.
         status: String,
     },
+    /// The processes `skillfab up` gave up restarting, and not back since (a plan runner
+    /// started after the event asks: it would not have seen it).
+    GaveUp,
 }
 
 /// Encodes a request.

@@ -211,6 +211,21 @@ pub enum Reply {
     Schema(crate::schema::MessageSchema),
     /// What became of the monitors a client asked to take over, in the order asked.
     Adopted(Vec<MonitorFate>),
+    /// The processes `skillfab up` gave up restarting ([`crate::control::Request::GaveUp`]).
+    GaveUp(Vec<GaveUpInfo>),
+}
+
+/// A process `skillfab up` gave up restarting, as it told the manager.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GaveUpInfo {
+    /// The launch file's name of the process.
+    pub process: String,
+    /// Restarts in a row before `up` gave up.
+    pub restarts: u32,
+    /// How it last exited.
+    pub status: String,
+    /// The manager's cycle when it was told.
+    pub cycle: u64,
 }
 
 /// What became of a monitor ([`crate::control::Request::AdoptMonitors`]).

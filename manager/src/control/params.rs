@@ -158,15 +158,33 @@ impl Manager {
 
     /// A parameter's current value.
     pub(super) fn get_param(&self, skill: &str, param: String) -> Response {
-        let s = self.slot_of(skill)?;
-        let e = self
-            .skills
-            .get(s)
-            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
-        e.values
-            .iter()
-            .find(|(n, _)| *n == param)
-            .map(|(_, v)| Reply::Param(*v))
+        let value = match self.skills.away(skill) {
+            // A skill that is away has the value it will be given when it is back: what a
+            // client set, else what its last process started with (a plan that reads it
+            // to restore it later, while the skill is being restarted, reads that).
+            Some(decl) => self
+                .skills
+                .kept(skill)
+                .and_then(|k| k.params.iter().find(|(n, _)| *n == param))
+                .or_else(|| decl.param_values.iter().find(|(n, _)| *n == param))
+                .map(|(_, v)| *v)
+                .or_else(|| {
+                    decl.params
+                        .iter()
+                        .find(|p| p.name == param)
+                        .map(|p| p.default)
+                }),
+            None => {
+                let s = self.slot_of(skill)?;
+                let e = self
+                    .skills
+                    .get(s)
+                    .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+                e.values.iter().find(|(n, _)| *n == param).map(|(_, v)| *v)
+            }
+        };
+        value
+            .map(Reply::Param)
             .ok_or_else(|| param_err(skill, ParamError::Unknown { param }))
     }
 

@@ -517,7 +517,19 @@ fn requests_for_a_skill_that_is_away_apply_when_it_is_back() {
         matches!(k, EventKind::SkillDied { skill, .. } if skill == "scale").then_some(())
     });
     // Nobody restarts it yet: requests are checked against its last declaration and kept.
+    // Read, a parameter has the value it will have when the skill is back (a plan's
+    // `WithParam` reads it to restore it later).
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.0),
+        "the value its last process started with"
+    );
     c.set_param("scale", "gain", "6").unwrap();
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(6.0)
+    );
+    assert!(c.get_param("scale", "nope").is_err());
     c.deactivate(&["scale"]).unwrap();
     c.set_priority("scale", 3).unwrap();
     assert!(matches!(

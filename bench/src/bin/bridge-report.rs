@@ -28,7 +28,8 @@
 
 use serde_json::json;
 use skill_sdk::prelude::Message;
-use skillfab_client::{Client, ZenohOptions};
+use skillfab_bridge::ZenohOptions;
+use skillfab_client::Client;
 use skillfab_proto::header::now_ns;
 use skillfab_proto::names;
 use skillfab_proto::services::{self, RawReader};
@@ -280,7 +281,7 @@ struct Raw {
 fn raw(t: &mut TestDomain) -> Raw {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     t.spawn("zenoh-pong", &["--listen", &endpoint]);
-    let session = skillfab_client::open_zenoh(&ZenohOptions {
+    let session = skillfab_bridge::link::open(&ZenohOptions {
         connect: vec![endpoint],
         ..Default::default()
     })

@@ -29,11 +29,11 @@ fn main() -> ExitCode {
 }
 
 fn run(listen: &str) -> Result<(), String> {
-    let options = skillfab_client::ZenohOptions {
+    let options = skillfab_bridge::ZenohOptions {
         listen: vec![listen.to_string()],
         ..Default::default()
     };
-    let session = skillfab_client::open_zenoh(&options).map_err(|e| e.to_string())?;
+    let session = skillfab_bridge::link::open(&options).map_err(|e| e.to_string())?;
     let pong = session
         .declare_publisher("raw/pong")
         .congestion_control(zenoh::qos::CongestionControl::Block)

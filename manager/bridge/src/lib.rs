@@ -6,7 +6,12 @@
 //! - [`import`](crate::import): remote topics republished here by the bridge's own async skill;
 //! - [`remote`](crate::remote): the control plane, events and logs served to remote clients;
 //! - [`figures`](crate::figures): samples, losses and latency per topic, reported to the
-//!   manager (`ctl stats`).
+//!   manager (`ctl stats`);
+//! - [`link`]: the client's side — a [`Client`] of a domain on another host, through that
+//!   domain's bridge ([`connect`], [`address`]), and the Zenoh options both sides share.
+//!
+//! The only crate of the workspace that links Zenoh: `skillfab` has it with its `bridge`
+//! feature, and programs that never leave their host (skills, the C library) never do.
 //!
 //! Sync skills stay on their manager's host: the cycle is a shared-memory protocol. A remote
 //! producer reaches local skills as an async producer does (latest sample, with its age); an
@@ -15,10 +20,13 @@
 mod export;
 mod figures;
 mod import;
+pub mod link;
 mod remote;
 
+pub use link::{ZenohMode, ZenohOptions, address, connect};
+
 use figures::TopicFigures;
-use skillfab_client::{Client, ClientError, ZenohMode, ZenohOptions};
+use skillfab_client::{Client, ClientError};
 use skillfab_proto::bridge::BridgeStats;
 use skillfab_proto::control::Request;
 use skillfab_proto::domain::Domain;
@@ -67,12 +75,13 @@ pub struct BridgeArgs {
 #[non_exhaustive]
 pub enum BridgeError {
     /// Zenoh refused something.
-    #[error("zenoh: {what}: {reason}")]
+    #[error("zenoh: {what}")]
     Zenoh {
         /// What was being done.
         what: String,
-        /// Zenoh's reason.
-        reason: String,
+        /// Zenoh's error.
+        #[source]
+        source: zenoh::Error,
     },
     /// The local fabric (iceoryx2) failed.
     #[error(transparent)]
@@ -94,10 +103,10 @@ pub enum BridgeError {
     Usage(String),
 }
 
-pub(crate) fn zenoh_error(what: &str, e: impl std::fmt::Display) -> BridgeError {
+pub(crate) fn zenoh_error(what: &str, e: zenoh::Error) -> BridgeError {
     BridgeError::Zenoh {
         what: what.to_string(),
-        reason: e.to_string(),
+        source: e,
     }
 }
 
@@ -210,7 +219,7 @@ pub fn run(domain: &Domain, args: &BridgeArgs) -> Result<(), BridgeError> {
         listen: args.listen.clone(),
         config_file: args.zenoh_config.clone(),
     };
-    let session = skillfab_client::open_zenoh(&options)?;
+    let session = link::open(&options)?;
     tracing::info!(domain = %domain, zid = %session.zid(), "bridge up");
     // Termination is seen through iceoryx2's handler, installed by a node's wait.
     let node = services::node(&domain, &format!("{}-main", args.name))?;

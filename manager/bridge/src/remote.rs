@@ -1,5 +1,5 @@
 //! The domain's control plane, events and log lines, served to clients on other hosts
-//! (`skillfab ctl --remote`, `console --remote`, `Client::connect_remote`).
+//! (`skillfab ctl --remote`, `console --remote`, `skillfab_bridge::connect`).
 //!
 //! A request arrives as a Zenoh query holding the same encoded request a local client sends;
 //! the bridge carries it out through a local [`Client`] of its own per remote client (so a

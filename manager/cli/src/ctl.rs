@@ -6,7 +6,7 @@
 use anyhow::{Context, bail};
 use clap::Subcommand;
 use serde_json::{Value as Json, json};
-use skillfab_client::{Client, ZenohOptions};
+use skillfab_client::{Address, Client};
 use skillfab_proto::control::{EventKind, MonitorMode};
 use skillfab_proto::domain::Domain;
 pub use skillfab_proto::json::{event_json, param_json, skill_json, stats_json, value_json};
@@ -270,26 +270,18 @@ fn changes(text: &str, only: Option<&str>) -> anyhow::Result<Vec<Change>> {
     Ok(out)
 }
 
-/// Runs one `ctl` command.
-/// Carries out `cmd` on the manager of `domain`: on this host, or through the domain's bridge
-/// when `remote` says where it is.
-pub fn run(
-    domain: &Domain,
-    remote: Option<ZenohOptions>,
-    json_out: bool,
-    cmd: CtlCmd,
-) -> anyhow::Result<()> {
-    let connect = || match &remote {
-        Some(o) => Client::connect_remote(domain.name(), o),
-        None => Client::connect(domain),
-    };
+/// Carries out one `ctl` command on the manager at `address`: on this host, or through the
+/// domain's bridge.
+pub fn run(address: Address, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> {
     if let CtlCmd::Logs { skill, level } = &cmd {
-        return match &remote {
-            Some(_) => remote_logs(connect()?, json_out, skill.as_deref(), level),
-            None => logs(domain, json_out, skill.as_deref(), level),
+        return match &address {
+            Address::Remote { .. } => {
+                remote_logs(address.connect()?, json_out, skill.as_deref(), level)
+            }
+            Address::Local(domain) => logs(domain, json_out, skill.as_deref(), level),
         };
     }
-    let mut c = connect()?;
+    let mut c = address.connect()?;
     let print = |human: String, j: Json| {
         if json_out {
             println!("{j}");

@@ -8,7 +8,7 @@
 //! kept, and `up` starts a runner again.
 
 use anyhow::Context;
-use skillfab_client::{Client, ZenohOptions};
+use skillfab_client::{Address, Client};
 use skillfab_proto::control::SkillState;
 use skillfab_proto::domain::Domain;
 use skillfab_sequence::{Plan, PlanStore, Sequencer, Status};
@@ -80,11 +80,12 @@ fn connect_waiting(domain: &Domain, wait_for: &[String], wait: Duration) -> anyh
     }
 }
 
-/// Runs the plan in `file` on the manager of `domain`, printing each step with the cycle and
-/// the fabric's time; an error when the plan fails.
+/// Runs the plan in `file` on the manager at `address` (its progress kept in this host's
+/// `domain`), printing each step with the cycle and the fabric's time; an error when the plan
+/// fails.
 pub fn run(
     domain: &Domain,
-    remote: Option<ZenohOptions>,
+    address: Address,
     file: &Path,
     opts: &RunOptions,
 ) -> anyhow::Result<()> {
@@ -101,9 +102,11 @@ pub fn run(
         );
         return Ok(());
     }
-    let mut client = match &remote {
-        Some(o) => Client::connect_remote(domain.name(), o).map_err(|e| Unfinished(e.into()))?,
-        None => connect_waiting(domain, &opts.wait_for, opts.wait).map_err(Unfinished)?,
+    let mut client = match &address {
+        Address::Remote { .. } => address.connect().map_err(|e| Unfinished(e.into()))?,
+        Address::Local(domain) => {
+            connect_waiting(domain, &opts.wait_for, opts.wait).map_err(Unfinished)?
+        }
     };
     crate::demo::catch_interrupts()?;
     let mut print = |c: &Client, what: &str| {

@@ -21,9 +21,8 @@ pub use view::render;
 use anyhow::Context;
 use app::{Dir, PortView, Snapshot};
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
-use skillfab_client::{Client, ClientError, ZenohOptions};
+use skillfab_client::{Address, Client, ClientError};
 use skillfab_proto::control::{PortInfo, SkillInfo};
-use skillfab_proto::domain::Domain;
 use skillfab_proto::log::LogReader;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::time::{Duration, Instant};
@@ -38,18 +37,18 @@ const REQUEST_TIMEOUT: Duration = Duration::from_secs(2);
 const HISTORY: u32 = 400;
 
 /// Runs the console on the current terminal until `q` (or SIGINT/SIGTERM), on the domain
-/// of this host, or of another through its bridge when `remote` says where.
-pub fn run(domain: &Domain, remote: Option<ZenohOptions>) -> anyhow::Result<()> {
+/// `address` names: on this host, or on another through its bridge.
+pub fn run(address: Address) -> anyhow::Result<()> {
     let (cmd_tx, cmd_rx) = channel();
     let (up_tx, up_rx) = channel();
-    let d = domain.clone();
+    let app = App::new(address.domain());
     let worker = std::thread::Builder::new()
         .name("console-worker".into())
-        .spawn(move || Worker::new(d, remote, up_tx).run(&cmd_rx))
+        .spawn(move || Worker::new(address, up_tx).run(&cmd_rx))
         .context("starting the console's worker thread")?;
     // ratatui's init puts the terminal back on a panic too.
     let mut terminal = ratatui::try_init().context("setting up the terminal")?;
-    let result = ui_loop(&mut terminal, App::new(domain.name()), &cmd_tx, &up_rx);
+    let result = ui_loop(&mut terminal, app, &cmd_tx, &up_rx);
     ratatui::restore();
     drop(cmd_tx);
     let _ = worker.join();
@@ -85,9 +84,8 @@ fn ui_loop(
 
 /// The console's control client, on its own thread.
 struct Worker {
-    domain: Domain,
-    /// Where the domain's bridge is, for a domain on another host.
-    remote: Option<ZenohOptions>,
+    /// Where the domain's manager is.
+    address: Address,
     updates: Sender<Update>,
     client: Option<Client>,
     /// The local log stream (a remote domain's lines come through the client).
@@ -101,18 +99,19 @@ fn describe(e: &ClientError) -> String {
 }
 
 impl Worker {
-    fn new(domain: Domain, remote: Option<ZenohOptions>, updates: Sender<Update>) -> Worker {
-        let logs = match remote {
-            Some(_) => None,
-            None => LogReader::open(&domain, &format!("console-{}", std::process::id()))
-                .map_err(|e| {
-                    let _ = updates.send(Update::Failed(format!("no log stream: {e}")));
-                })
-                .ok(),
+    fn new(address: Address, updates: Sender<Update>) -> Worker {
+        let logs = match &address {
+            Address::Remote { .. } => None,
+            Address::Local(domain) => {
+                LogReader::open(domain, &format!("console-{}", std::process::id()))
+                    .map_err(|e| {
+                        let _ = updates.send(Update::Failed(format!("no log stream: {e}")));
+                    })
+                    .ok()
+            }
         };
         Worker {
-            domain,
-            remote,
+            address,
             updates,
             client: None,
             logs,
@@ -175,11 +174,7 @@ impl Worker {
     /// The client, connecting if needed.
     fn client(&mut self) -> Option<&Client> {
         if self.client.is_none() {
-            let connected = match &self.remote {
-                Some(o) => Client::connect_remote(self.domain.name(), o),
-                None => Client::connect(&self.domain),
-            };
-            match connected {
+            match self.address.connect() {
                 Ok(mut c) => {
                     c.set_timeout(REQUEST_TIMEOUT);
                     self.client = Some(c);

@@ -20,9 +20,9 @@
 
 pub use skillfab_proto::json;
 
-mod remote;
+mod address;
 
-pub use remote::{ZenohMode, ZenohOptions, open as open_zenoh, zenoh_config};
+pub use address::{Address, RemoteLink};
 
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
@@ -71,13 +71,15 @@ pub enum ClientError {
     /// An answer of the wrong kind for the request.
     #[error("unexpected answer: {0}")]
     Unexpected(String),
-    /// A Zenoh session could not be opened or configured, or refused a request.
-    #[error("zenoh: {what}: {reason}")]
-    Zenoh {
+    /// The link to another host (a Zenoh session to a bridge) could not be opened or
+    /// configured, or refused a request.
+    #[error("{what}")]
+    Link {
         /// What was being done.
         what: String,
-        /// Zenoh's reason.
-        reason: String,
+        /// The link's own error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// No bridge of the remote domain answered (not running, not reachable, or another
     /// domain name on that host).
@@ -156,7 +158,8 @@ fn control_port(node: &Node<ipc::Service>, deadline: Instant) -> Result<ControlP
 }
 
 /// A connection to a domain's manager: on this host through shared memory, or on another
-/// through that domain's bridge ([`Client::connect_remote`]). Both behave the same.
+/// through that domain's bridge ([`Client::over`], which `skillfab-bridge` opens). Both behave
+/// the same.
 pub struct Client {
     id: String,
     /// The domain's name.
@@ -172,7 +175,7 @@ pub struct Client {
 /// How requests reach the manager.
 enum Link {
     Local(Box<Local>),
-    Remote(Box<Mutex<remote::Remote>>),
+    Remote(Box<Mutex<dyn RemoteLink>>),
 }
 
 /// The shared-memory link of a client on the manager's host.
@@ -245,26 +248,24 @@ impl Client {
         })
     }
 
-    /// Connects to the manager of `domain` on another host through that domain's bridge
-    /// (`skillfab bridge`), over the Zenoh session `options` open (usually
-    /// `connect: ["tcp/HOST:PORT"]` in client mode). Requests, answers, errors and events are
-    /// those of a local client; a monitor belongs to this client as locally. The first
-    /// request tells whether the bridge and its manager are there.
-    pub fn connect_remote(domain: &str, options: &ZenohOptions) -> Result<Client, ClientError> {
+    /// A client of the manager of `domain` on another host, whose requests, events and log
+    /// lines travel over `link` (`skillfab_bridge::connect` opens one over Zenoh). Requests,
+    /// answers, errors and events are those of a local client; a monitor belongs to this
+    /// client as locally. The first request tells whether the other end is there.
+    pub fn over(domain: &str, link: impl RemoteLink + 'static) -> Result<Client, ClientError> {
         names::check_name("domain", domain, false)?;
         let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
             .map(|h| h.trim().to_string())
             .unwrap_or_default();
-        let client = Client {
+        Ok(Client {
             id: format!("{host}-{}", next_id()),
             domain: domain.to_string(),
-            link: Link::Remote(Box::new(Mutex::new(remote::Remote::open(domain, options)?))),
+            link: Link::Remote(Box::new(Mutex::new(link))),
             seq: AtomicU64::new(0),
             last_seq: 0,
             lost: 0,
             timeout: Duration::from_secs(10),
-        };
-        Ok(client)
+        })
     }
 
     /// Whether this client reaches its domain through a bridge.

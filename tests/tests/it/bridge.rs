@@ -7,7 +7,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use nix::sys::signal::Signal;
-use skillfab_client::{Client, ClientError, ZenohMode, ZenohOptions};
+use skillfab_bridge::{ZenohMode, ZenohOptions};
+use skillfab_client::{Client, ClientError};
 use skillfab_proto::bridge::BridgeStats;
 use skillfab_proto::control::{EventKind, MonitorMode};
 use skillfab_proto::param::ParamValue;
@@ -178,7 +179,7 @@ fn remote_ctl_ls_set_query_monitor_and_logs_behave_as_local_ones() {
     // three skills registered.
     let mut r = None;
     a.wait_until("the bridge to answer", || {
-        r = Client::connect_remote(&name, &remote(port))
+        r = skillfab_bridge::connect(&name, &remote(port))
             .ok()
             .filter(|c| c.list().is_ok_and(|l| l.len() == 3));
         r.is_some()
@@ -264,7 +265,7 @@ fn remote_ctl_ls_set_query_monitor_and_logs_behave_as_local_ones() {
     );
 
     // A domain whose bridge is not there: a clear error, not a hang.
-    let nobody = Client::connect_remote("nobody-here", &remote(port)).unwrap();
+    let nobody = skillfab_bridge::connect("nobody-here", &remote(port)).unwrap();
     let mut nobody = nobody;
     nobody.set_timeout(Duration::from_millis(500));
     match nobody.list() {

@@ -1,9 +1,9 @@
-//! The client's link to a domain on another host: a Zenoh session to that domain's bridge
+//! A client's link to a domain on another host: a Zenoh session to that domain's bridge
 //! (`skillfab bridge`), which carries requests to its manager and forwards the events and
-//! log lines. Also the one place where a Zenoh configuration is made from skillfab's options
-//! (the bridge uses it too).
+//! log lines ([`connect`]: a [`Client`] over it). Also the one place where a Zenoh
+//! configuration is made from skillfab's options (the bridge uses it too).
 
-use crate::ClientError;
+use skillfab_client::{Address, Client, ClientError, RemoteLink};
 use skillfab_proto::bridge::RemoteFailure;
 use skillfab_proto::control::{self, Reply};
 use skillfab_proto::log::LogLine;
@@ -38,11 +38,39 @@ pub struct ZenohOptions {
     pub config_file: Option<PathBuf>,
 }
 
-/// Why a Zenoh session could not be opened.
-fn zenoh_error(what: &str, e: impl std::fmt::Display) -> ClientError {
-    ClientError::Zenoh {
-        what: what.to_string(),
-        reason: e.to_string(),
+/// Why a Zenoh session could not be opened, or a request not sent.
+fn zenoh_error(what: &str, e: zenoh::Error) -> ClientError {
+    ClientError::Link {
+        what: format!("zenoh: {what}"),
+        source: e,
+    }
+}
+
+/// A client of the manager of `domain` on another host, through that domain's bridge
+/// (`skillfab bridge`) over the Zenoh session `options` open (usually
+/// `connect: ["tcp/HOST:PORT"]` in client mode). The first request tells whether the bridge
+/// and its manager are there.
+pub fn connect(domain: &str, options: &ZenohOptions) -> Result<Client, ClientError> {
+    Client::over(domain, Remote::open(domain, options)?)
+}
+
+/// Where the manager of `domain` is reached through its bridge: what `skillfab ctl`, the
+/// console and the plan runner are given with `--remote`.
+pub fn address(domain: &str, options: ZenohOptions) -> Address {
+    let name = domain.to_string();
+    Address::Remote {
+        domain: domain.to_string(),
+        through: endpoints(&options),
+        connect: std::sync::Arc::new(move || connect(&name, &options)),
+    }
+}
+
+/// The endpoints of `o`, for messages.
+fn endpoints(o: &ZenohOptions) -> String {
+    if o.connect.is_empty() {
+        "through the endpoints of the Zenoh configuration".to_string()
+    } else {
+        format!("through {}", o.connect.join(", "))
     }
 }
 
@@ -104,7 +132,7 @@ pub fn open(o: &ZenohOptions) -> Result<zenoh::Session, ClientError> {
 const REMOTE_BUFFER: usize = 2048;
 
 /// A remote domain, seen through its bridge.
-pub(crate) struct Remote {
+struct Remote {
     session: zenoh::Session,
     /// The remote domain's name.
     domain: String,
@@ -123,23 +151,39 @@ struct Feed {
 impl Remote {
     /// A session to the bridge of `domain` (the bridge must answer a request to count as
     /// reached: see [`Remote::request`]).
-    pub(crate) fn open(domain: &str, o: &ZenohOptions) -> Result<Remote, ClientError> {
+    fn open(domain: &str, o: &ZenohOptions) -> Result<Remote, ClientError> {
         Ok(Remote {
             session: open(o)?,
             domain: domain.to_string(),
-            endpoint: if o.connect.is_empty() {
-                "through the endpoints of the Zenoh configuration".to_string()
-            } else {
-                format!("through {}", o.connect.join(", "))
-            },
+            endpoint: endpoints(o),
             events: None,
             logs: None,
         })
     }
 
+    fn feed(&self, key: String) -> Result<Feed, ClientError> {
+        let (tx, rx): (SyncSender<Vec<u8>>, _) = sync_channel(REMOTE_BUFFER);
+        let subscriber = self
+            .session
+            .declare_subscriber(key)
+            .callback(
+                move |s| match tx.try_send(s.payload().to_bytes().into_owned()) {
+                    Ok(()) | Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
+                },
+            )
+            .wait()
+            .map_err(|e| zenoh_error("remote subscription", e))?;
+        Ok(Feed {
+            _subscriber: subscriber,
+            rx,
+        })
+    }
+}
+
+impl RemoteLink for Remote {
     /// Sends an encoded request to the domain's bridge and waits for its manager's answer
     /// (the bridge waits `timeout` for the manager; this side a little longer).
-    pub(crate) fn request(&self, bytes: Vec<u8>, timeout: Duration) -> Result<Reply, ClientError> {
+    fn request(&self, bytes: Vec<u8>, timeout: Duration) -> Result<Reply, ClientError> {
         let replies = self
             .session
             .get(names::remote_control(&self.domain))
@@ -181,26 +225,8 @@ impl Remote {
         }
     }
 
-    fn feed(&self, key: String) -> Result<Feed, ClientError> {
-        let (tx, rx): (SyncSender<Vec<u8>>, _) = sync_channel(REMOTE_BUFFER);
-        let subscriber = self
-            .session
-            .declare_subscriber(key)
-            .callback(
-                move |s| match tx.try_send(s.payload().to_bytes().into_owned()) {
-                    Ok(()) | Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
-                },
-            )
-            .wait()
-            .map_err(|e| zenoh_error("remote subscription", e))?;
-        Ok(Feed {
-            _subscriber: subscriber,
-            rx,
-        })
-    }
-
     /// Subscribes to the remote events stream.
-    pub(crate) fn subscribe(&mut self) -> Result<(), ClientError> {
+    fn subscribe(&mut self) -> Result<(), ClientError> {
         if self.events.is_none() {
             self.events = Some(self.feed(names::remote_events(&self.domain))?);
         }
@@ -208,7 +234,7 @@ impl Remote {
     }
 
     /// The next encoded event, waiting at most `timeout`.
-    pub(crate) fn next_event(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, ClientError> {
+    fn next_event(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, ClientError> {
         self.subscribe()?;
         let Some(feed) = &self.events else {
             return Ok(None);
@@ -220,7 +246,7 @@ impl Remote {
     }
 
     /// The log lines that arrived since the last call (the first call subscribes).
-    pub(crate) fn log_lines(&mut self) -> Result<Vec<LogLine>, ClientError> {
+    fn log_lines(&mut self) -> Result<Vec<LogLine>, ClientError> {
         if self.logs.is_none() {
             self.logs = Some(self.feed(names::remote_logs(&self.domain))?);
         }

@@ -10,6 +10,7 @@
 //! - [`floors`]: the same topology without fabric logic — a token passed around a ring (or
 //!   out to a star and back) by raw iceoryx2 publish + event, by pipes, and by threads.
 
+#![warn(missing_docs)]
 // Benchmark set-up: a failed step should stop the run right there, with its message.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -16,6 +16,7 @@ use std::time::Duration;
 /// The period when none is given: 100 Hz.
 pub const DEFAULT_PERIOD: Duration = Duration::from_millis(10);
 
+/// How cycles are paced: a period, free-running, or lock-step.
 #[derive(Args, Debug, Clone)]
 pub struct PaceArgs {
     /// Cycle period in milliseconds (default 10: 100 Hz).
@@ -113,6 +114,7 @@ pub fn init_tracing() {
 /// `manager`: run the skill manager of a domain.
 #[derive(Args, Debug, Clone)]
 pub struct ManagerArgs {
+    /// How cycles are paced.
     #[command(flatten)]
     pub pace: PaceArgs,
     /// Longest a cycle may take before it counts as an overrun (default: the period).
@@ -134,6 +136,7 @@ pub struct ManagerArgs {
 pub struct UpArgs {
     /// The launch file (TOML).
     pub launch: PathBuf,
+    /// How cycles are paced.
     #[command(flatten)]
     pub pace: PaceArgs,
     /// Seconds to wait for every skill to register before the first cycle.

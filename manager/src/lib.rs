@@ -17,6 +17,8 @@
 //!   processes.
 //! - [`args`]: the command-line arguments of `manager` and `up`, shared with `skillfab`.
 
+#![warn(missing_docs)]
+
 pub mod args;
 pub mod control;
 pub mod engine;

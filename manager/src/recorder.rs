@@ -17,7 +17,7 @@
 //! {"kind":"sample","cycle":1401,"time_ns":…,"skill":"scale","dir":"out","port":"scaled","topic":"scaled","type":"skillfab.Scaled","stamp_ns":…,"value":{"value":2802.0}}
 //! ```
 //!
-//! `skillfab ctl replay FILE` applies the `param` and `priority` lines of a file again, in order.
+//! `skillfab ctl reapply FILE` applies the `param` and `priority` lines of a file again, in order.
 //!
 //! A file named `*.mcap` gets the same records in an [MCAP](https://mcap.dev) container instead
 //! (what Foxglove and rosbag2 users open): one channel per logged port,

@@ -55,10 +55,26 @@ pub struct Step {
 }
 
 impl Step {
-    /// The value written to output `port`, if the body wrote it.
+    /// The value written to output `port`, `None` if the body did not write it.
+    ///
+    /// # Panics
+    /// If the skill has no output `port`, or `port` carries another type than `T`: a
+    /// misspelt name must fail the test, not pass an `is_none()` that tests nothing.
     pub fn output<T: Message>(&self, port: &str) -> Option<&T> {
-        let i = self.names.iter().position(|n| n == port)?;
-        self.values.get(i)?.as_ref()?.downcast_ref::<T>()
+        let Some(i) = self.names.iter().position(|n| n == port) else {
+            panic!(
+                "the skill has no output '{port}' (its outputs: {})",
+                self.names.join(", ")
+            );
+        };
+        let value = self.values.get(i)?.as_ref()?;
+        match value.downcast_ref::<T>() {
+            Some(v) => Some(v),
+            None => panic!(
+                "output '{port}' does not carry {}",
+                std::any::type_name::<T>()
+            ),
+        }
     }
 }
 
@@ -191,19 +207,30 @@ impl<S: Skill> Harness<S> {
     /// # Panics
     /// If the skill has no input `port` (a mistake in the test itself).
     pub fn input_aged<T: Message>(&mut self, port: &str, value: T, age: u64) -> &mut Self {
-        let i = self.input_names.iter().position(|n| n == port);
-        #[allow(clippy::expect_used)]
-        let i = i.expect("no input port of that name");
+        let i = self.input_index(port);
         self.inputs[i] = Some((Box::new(value), (self.cycle + 1).saturating_sub(age)));
         self
     }
 
     /// Removes input `port`.
+    ///
+    /// # Panics
+    /// If the skill has no input `port`.
     pub fn clear_input(&mut self, port: &str) -> &mut Self {
-        if let Some(i) = self.input_names.iter().position(|n| n == port) {
-            self.inputs[i] = None;
-        }
+        let i = self.input_index(port);
+        self.inputs[i] = None;
         self
+    }
+
+    /// The index of input `port`; a test naming an input the skill lacks is wrong, and stops.
+    fn input_index(&self, port: &str) -> usize {
+        match self.input_names.iter().position(|n| n == port) {
+            Some(i) => i,
+            None => panic!(
+                "the skill has no input '{port}' (its inputs: {})",
+                self.input_names.join(", ")
+            ),
+        }
     }
 
     /// Runs one cycle: the body on the current inputs. An error from the body is returned.
@@ -247,5 +274,73 @@ impl<S: Skill> Harness<S> {
             cycle,
             skipped: false,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Harness;
+    use crate::prelude::*;
+    use skillfab_msgs::{Scaled, Tick};
+
+    #[derive(Params, Debug, Clone)]
+    struct P {
+        /// Ticks above this are scaled; the others write nothing.
+        #[param(default = 0)]
+        above: i64,
+    }
+    #[derive(Inputs)]
+    struct In<'a> {
+        tick: Input<'a, Tick>,
+    }
+    #[derive(Outputs)]
+    struct Out<'a> {
+        scaled: Output<'a, Scaled>,
+    }
+    #[derive(Default)]
+    struct Scale;
+    impl Skill for Scale {
+        type Params = P;
+        type Inputs<'a> = In<'a>;
+        type Outputs<'a> = Out<'a>;
+        fn compute(&mut self, c: &Ctx<P>, i: In, o: &mut Out) -> SkillResult {
+            if i.tick.value as i64 > c.params.above {
+                o.scaled.set(Scaled {
+                    value: i.tick.value as f64,
+                });
+            }
+            Ok(())
+        }
+    }
+
+    fn stepped(tick: u64) -> super::Step {
+        let mut h = Harness::<Scale>::new();
+        h.set_param("above=3").unwrap();
+        h.input("tick", Tick { value: tick });
+        h.step().unwrap()
+    }
+
+    #[test]
+    fn an_output_the_body_did_not_write_is_none() {
+        assert!(stepped(2).output::<Scaled>("scaled").is_none());
+        assert_eq!(stepped(5).output::<Scaled>("scaled").unwrap().value, 5.0);
+    }
+
+    #[test]
+    #[should_panic(expected = "the skill has no output 'scald' (its outputs: scaled)")]
+    fn a_misspelt_output_fails_the_test_instead_of_reading_none() {
+        let _ = stepped(2).output::<Scaled>("scald");
+    }
+
+    #[test]
+    #[should_panic(expected = "output 'scaled' does not carry")]
+    fn an_output_read_as_another_type_fails_the_test() {
+        let _ = stepped(5).output::<Tick>("scaled");
+    }
+
+    #[test]
+    #[should_panic(expected = "the skill has no input 'tik' (its inputs: tick)")]
+    fn a_misspelt_input_fails_the_test() {
+        Harness::<Scale>::new().clear_input("tik");
     }
 }

@@ -1,18 +1,20 @@
 //! # skill-sdk
 //!
-//! Everything a skillfab skill is written with, and the client side of the fabric.
+//! Everything a skillfab skill is written with: the `Skill` trait, ports, parameters, the
+//! runtime that makes a skill a process, and its test harness. (Sequencers and tools talk to
+//! the manager through `skillfab-client`; the message types are in `skillfab-msgs`.)
 //!
 //! ## Layout
 //! - [`skill`]: the [`Skill`](skill::Skill) trait a skill author implements; [`state`]: what
 //!   of a skill the runtime keeps across the deaths of its process.
-//! - [`ports`], [`params`], [`schema`], [`msg`]: inputs/outputs, typed parameters, message
-//!   layouts, and the shared message types.
-//! - [`runtime`]: turns a `Skill` into a process (registration, cycles, shutdown); [`main`]
-//!   is a skill binary's whole `main`.
+//! - [`ports`], [`params`]: inputs/outputs and typed parameters; [`Message`]: what a port
+//!   carries (derived for the types of `skillfab-msgs`).
+//! - [`actuation`]: proposing on actuator channels; [`device`]: device processes (the
+//!   arbitration's other side); [`foreign`]: skills declared at run time (the C ABI, replay).
+//! - `runtime`: turns a `Skill` into a process (registration, cycles, shutdown); [`main`]
+//!   is a skill binary's whole `main`, [`device_main`] a device's.
 //! - [`logs`]: each skill's tracing lines, forwarded over the domain's log stream.
 //! - [`harness`]: runs a skill body in-process on scripted inputs, for unit tests.
-//! - [`board`], [`names`], [`services`], [`domain`], [`header`]: the wiring shared with the
-//!   manager (cycle board, service names, iceoryx2 settings, domains, sample header).
 //!
 //! A minimal skill (see `skills/src/bin/scale.rs`):
 //! ```no_run
@@ -34,6 +36,8 @@
 //! }
 //! fn main() -> std::process::ExitCode { skill_sdk::main::<Scale>() }
 //! ```
+
+#![warn(missing_docs)]
 
 extern crate self as skill_sdk;
 
@@ -111,7 +115,10 @@ pub enum SdkError {
 
 impl SdkError {
     /// A failed iceoryx2 operation: `what` was attempted, `e` is iceoryx2's error.
-    pub(crate) fn transport(what: &str, e: impl std::fmt::Debug) -> SdkError {
+    pub(crate) fn transport(
+        what: &str,
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> SdkError {
         SdkError::Fabric(skillfab_proto::Error::transport(what, e))
     }
 }

@@ -344,20 +344,26 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
         self.pending.is_some()
     }
     fn commit(&mut self, header: SampleHeader) -> Result<bool, crate::SdkError> {
-        let send_err = |e: &dyn std::fmt::Debug| {
-            crate::SdkError::transport(&format!("send on {}", T::TYPE_NAME), e)
-        };
+        fn send_err(
+            ty: &str,
+            e: impl std::error::Error + Send + Sync + 'static,
+        ) -> crate::SdkError {
+            crate::SdkError::transport(&format!("send on {ty}"), e)
+        }
         match self.pending.take() {
             None => return Ok(false),
             Some(Pending::Shm(mut s)) => {
                 *s.user_header_mut() = header;
-                s.send().map_err(|e| send_err(&e))?;
+                s.send().map_err(|e| send_err(T::TYPE_NAME, e))?;
             }
             Some(Pending::Heap(b)) => match &self.publisher {
                 Some(p) => {
-                    let mut s = p.loan_uninit().map_err(|e| send_err(&e))?.write_payload(*b);
+                    let mut s = p
+                        .loan_uninit()
+                        .map_err(|e| send_err(T::TYPE_NAME, e))?
+                        .write_payload(*b);
                     *s.user_header_mut() = header;
-                    s.send().map_err(|e| send_err(&e))?;
+                    s.send().map_err(|e| send_err(T::TYPE_NAME, e))?;
                 }
                 None => {
                     self.pending = Some(Pending::Heap(b));

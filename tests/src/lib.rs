@@ -8,6 +8,7 @@
 //! Binaries of the other packages (`skillfab`, `ticker`, ...) are found next to this
 //! package's own (`target/<profile>/`); the README's test command builds them first.
 
+#![warn(missing_docs)]
 // Test support: a failed set-up step should stop the test right there, with its message.
 #![allow(clippy::expect_used, clippy::unwrap_used)]
 

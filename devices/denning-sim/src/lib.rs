@@ -11,6 +11,8 @@
 //!   or a building.
 //! - [`truth`]: its ground-truth record, written and read back.
 
+#![warn(missing_docs)]
+
 pub mod building;
 pub mod elevator;
 pub mod sim;

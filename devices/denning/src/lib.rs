@@ -11,6 +11,8 @@
 //!
 //! The device process that puts this robot on a fabric is `device/` (crate `denning-device`).
 
+#![warn(missing_docs)]
+
 pub mod codec;
 pub mod driver;
 pub mod safety;

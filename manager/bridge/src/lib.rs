@@ -17,6 +17,8 @@
 //! producer reaches local skills as an async producer does (latest sample, with its age); an
 //! actuator channel cannot be imported.
 
+#![warn(missing_docs)]
+
 mod export;
 mod figures;
 mod import;

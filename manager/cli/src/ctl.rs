@@ -116,8 +116,9 @@ pub enum CtlCmd {
         #[arg(long, value_delimiter = ',')]
         topics: Vec<String>,
     },
-    /// Apply the parameter and priority changes of a fabric log file again, in order.
-    Replay {
+    /// Apply the parameter and priority changes of a fabric log file again, in order (not
+    /// `skillfab replay`, which runs skills again against a recording).
+    Reapply {
         /// The JSON-lines file (`skillfab up/manager --param-log`).
         file: std::path::PathBuf,
         /// Only this skill's changes.
@@ -504,7 +505,7 @@ samples logged of: {}",
                 json!({"file": file, "io_skills": io}),
             );
         }
-        CtlCmd::Replay { file, skill } => {
+        CtlCmd::Reapply { file, skill } => {
             let text = skillfab_manager::recorder::read_records(&file)?;
             let todo = changes(&text, skill.as_deref())?;
             for ch in &todo {

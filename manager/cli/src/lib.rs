@@ -7,6 +7,8 @@
 //! `new` (skill and message templates). `bridge` and `--remote` are compiled in with the
 //! `bridge` feature (Zenoh, through `skillfab-bridge`); without it they say how to build them.
 
+#![warn(missing_docs)]
+
 pub mod ctl;
 mod demo;
 mod faults;

@@ -9,6 +9,8 @@
 //!   only draws and reads keys. A slow or absent manager never freezes the screen, and the
 //!   console never holds up a cycle: the manager answers it between cycles like any client.
 
+#![warn(missing_docs)]
+
 pub mod app;
 pub mod view;
 
@@ -94,8 +96,15 @@ struct Worker {
     last_down: Option<String>,
 }
 
+/// The error with its causes, as one line.
 fn describe(e: &ClientError) -> String {
-    format!("{e}")
+    let mut text = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(cause) = source {
+        text.push_str(&format!(": {cause}"));
+        source = cause.source();
+    }
+    text
 }
 
 impl Worker {

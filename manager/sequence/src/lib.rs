@@ -12,6 +12,8 @@
 //! [`tree::Fabric`] (unit-tested without a fabric); [`run`] drives a real one through the
 //! client library.
 
+#![warn(missing_docs)]
+
 pub mod keep;
 pub mod plan;
 pub mod run;

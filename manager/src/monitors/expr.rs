@@ -22,40 +22,58 @@ pub use skillfab_proto::value::OutputPath as PathRef;
 
 /// Arithmetic operators.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[allow(missing_docs)]
 pub enum Arith {
+    /// `+`
     Add,
+    /// `-`
     Sub,
+    /// `*`
     Mul,
+    /// `/`
     Div,
 }
 
 /// Comparison operators.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[allow(missing_docs)]
 pub enum Cmp {
+    /// `<`
     Lt,
+    /// `<=`
     Le,
+    /// `>`
     Gt,
+    /// `>=`
     Ge,
+    /// `==`
     Eq,
+    /// `!=`
     Ne,
 }
 
 /// A parsed expression.
 #[derive(Debug, Clone, PartialEq)]
-#[allow(missing_docs)]
 pub enum Expr {
+    /// A number literal.
     Num(f64),
+    /// `true` or `false`.
     Bool(bool),
+    /// A value of a skill's output (`skill.port.field`).
     Path(PathRef),
+    /// `min(skill.port.field)`: the least number in an array field.
     Min(PathRef),
+    /// `max(skill.port.field)`: the greatest number in an array field.
     Max(PathRef),
+    /// `-e`
     Neg(Box<Expr>),
+    /// `a + b`, `a - b`, `a * b`, `a / b`
     Arith(Arith, Box<Expr>, Box<Expr>),
+    /// `a < b` and the other comparisons.
     Cmp(Cmp, Box<Expr>, Box<Expr>),
+    /// `a && b`
     And(Box<Expr>, Box<Expr>),
+    /// `a || b`
     Or(Box<Expr>, Box<Expr>),
+    /// `!e`
     Not(Box<Expr>),
 }
 

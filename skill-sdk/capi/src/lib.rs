@@ -20,6 +20,7 @@
 //! UTF-8, unknown message types, wrong sizes and out-of-range indexes are errors, and a
 //! panic inside the library is caught at the boundary and reported as `SF_ERR_INTERNAL`.
 
+#![warn(missing_docs)]
 #![allow(non_camel_case_types)]
 
 mod client;

@@ -18,6 +18,8 @@
 //! # Ok(()) }
 //! ```
 
+#![warn(missing_docs)]
+
 pub use skillfab_proto::json;
 
 mod address;
@@ -102,7 +104,7 @@ pub enum ClientError {
     },
 }
 
-fn sdk(what: &str, e: impl std::fmt::Debug) -> ClientError {
+fn sdk(what: &str, e: impl std::error::Error + Send + Sync + 'static) -> ClientError {
     ClientError::Fabric(skillfab_proto::Error::transport(what, e))
 }
 

@@ -4,6 +4,8 @@
 //! `skillfab schema --c` / `--python` print the first two; tests check the committed files
 //! are what these functions produce and that every language agrees on every offset.
 
+#![warn(missing_docs)]
+
 use skillfab_proto::schema::{FieldKind, MessageSchema, Prim};
 use std::fmt::Write;
 

@@ -12,6 +12,8 @@
 //!   doc comments become the parameter's doc.
 //! - [`Inputs`] / [`Outputs`]: a struct of `Input<'a, T>` / `Output<'a, T>` fields, one per port.
 
+#![warn(missing_docs)]
+
 use proc_macro::TokenStream;
 use quote::quote;
 use syn::{Data, DeriveInput, Expr, Fields, Lit, parse_macro_input, spanned::Spanned};

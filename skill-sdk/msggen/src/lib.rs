@@ -21,23 +21,35 @@
 //! This crate has no dependencies, so a skill's build script can use it
 //! ([`rust_module`]) to turn its own package into Rust types.
 
+#![warn(missing_docs)]
+
 use std::fmt;
 use std::path::PathBuf;
 
 /// A primitive field type.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[allow(missing_docs)]
 pub enum Prim {
+    /// One byte, 0 or 1 (`bool`).
     Bool,
+    /// A 8-bit unsigned integer (`u8`).
     U8,
+    /// A 16-bit unsigned integer (`u16`).
     U16,
+    /// A 32-bit unsigned integer (`u32`).
     U32,
+    /// A 64-bit unsigned integer (`u64`).
     U64,
+    /// A 8-bit signed integer (`i8`).
     I8,
+    /// A 16-bit signed integer (`i16`).
     I16,
+    /// A 32-bit signed integer (`i32`).
     I32,
+    /// A 64-bit signed integer (`i64`).
     I64,
+    /// A 32-bit IEEE 754 float (`f32`).
     F32,
+    /// A 64-bit IEEE 754 float (`f64`).
     F64,
 }
 

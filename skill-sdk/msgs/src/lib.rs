@@ -2,6 +2,8 @@
 //! (docs/messages.md); the build script generates the Rust types from them, and the C header
 //! and the Python module are generated from the same schemas (`skillfab schema`).
 
+#![warn(missing_docs)]
+
 use skill_sdk::foreign::MessageType;
 
 pub mod dynamic;

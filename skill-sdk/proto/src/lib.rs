@@ -19,6 +19,8 @@
 //! - [`log`]: the log stream's lines and its reader.
 //! - [`json`]: values, skills and events as JSON (`ctl --json`, the fabric log, the C ABI).
 
+#![warn(missing_docs)]
+
 extern crate self as skillfab_proto;
 
 pub mod board;
@@ -101,13 +103,15 @@ pub enum Error {
         /// What is wrong.
         reason: String,
     },
-    /// An iceoryx2 operation failed.
-    #[error("{what}: {detail}")]
+    /// An iceoryx2 operation failed: iceoryx2's error is the source (match it to tell an
+    /// exhausted segment from too many loans; `{:#}` or the source chain shows it).
+    #[error("{what}")]
     Transport {
         /// What was attempted.
         what: String,
         /// iceoryx2's error.
-        detail: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// Encoding or decoding a declaration failed.
     #[error("declaration encoding: {0}")]
@@ -115,11 +119,12 @@ pub enum Error {
 }
 
 impl Error {
-    /// A failed iceoryx2 operation: `what` was attempted, `e` is iceoryx2's error.
-    pub fn transport(what: &str, e: impl std::fmt::Debug) -> Error {
+    /// A failed iceoryx2 operation: `what` was attempted, `e` is iceoryx2's error (kept as
+    /// the source).
+    pub fn transport(what: &str, e: impl std::error::Error + Send + Sync + 'static) -> Error {
         Error::Transport {
             what: what.to_string(),
-            detail: format!("{e:?}"),
+            source: Box::new(e),
         }
     }
 }

@@ -31,12 +31,16 @@ const MAX_SUBSCRIBERS: usize = 8;
 
 /// Severity, most severe first (tracing's order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[allow(missing_docs)]
 pub enum Level {
+    /// Something failed.
     Error,
+    /// Something is wrong but went on.
     Warn,
+    /// What happened.
     Info,
+    /// Detail for a developer.
     Debug,
+    /// Every step.
     Trace,
 }
 

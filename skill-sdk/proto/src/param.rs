@@ -7,11 +7,14 @@ use std::fmt;
 
 /// The type of a parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[allow(missing_docs)]
 pub enum ParamKind {
+    /// `true` or `false`.
     Bool,
+    /// A signed 64-bit integer.
     Int,
+    /// An unsigned 64-bit integer.
     UInt,
+    /// A 64-bit float.
     Float,
 }
 
@@ -28,11 +31,14 @@ impl fmt::Display for ParamKind {
 
 /// A parameter value.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[allow(missing_docs)]
 pub enum ParamValue {
+    /// A [`ParamKind::Bool`] value.
     Bool(bool),
+    /// A [`ParamKind::Int`] value.
     Int(i64),
+    /// A [`ParamKind::UInt`] value.
     UInt(u64),
+    /// A [`ParamKind::Float`] value.
     Float(f64),
 }
 

@@ -10,15 +10,23 @@ use std::fmt;
 
 /// A decoded value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[allow(missing_docs)]
 pub enum Value {
+    /// A `bool` field.
     Bool(bool),
+    /// A signed integer field, widened.
     Int(i64),
+    /// An unsigned integer field, widened.
     UInt(u64),
+    /// An `f32` or `f64` field, widened.
     Float(f64),
+    /// A fixed-size array field, element by element.
     Array(Vec<Value>),
+    /// A nested message: its fields by name, in declaration order.
     Struct(Vec<(String, Value)>),
+    /// Text the manager adds: a channel's device, policy and winner in a channel query, or
+    /// the "… N more" marker of a shortened event.
     Text(String),
+    /// Nothing there (a channel with no winner or no command yet).
     Null,
 }
 

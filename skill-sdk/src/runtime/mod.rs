@@ -94,6 +94,7 @@ pub struct SkillArgs {
 #[derive(Parser, Debug, Clone)]
 #[command(about = "A skillfab device process")]
 pub struct DeviceArgs {
+    /// What every skill process takes (domain, name, parameters).
     #[command(flatten)]
     pub skill: SkillArgs,
     /// The serial port (a tty, or a simulator's pty link).

@@ -91,7 +91,7 @@ fn an_mcap_log_holds_changes_and_samples_and_replays() {
         client.get_param("scale", "gain").unwrap(),
         ParamValue::Float(2.0)
     );
-    t2.ctl(&["replay", file.to_str().unwrap()]);
+    t2.ctl(&["reapply", file.to_str().unwrap()]);
     assert_eq!(
         client.get_param("scale", "gain").unwrap(),
         ParamValue::Float(4.0)

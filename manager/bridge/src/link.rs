@@ -201,7 +201,7 @@ impl RemoteLink for Remote {
         match reply.result() {
             Ok(sample) => {
                 let response = control::decode_response(&sample.payload().to_bytes())
-                    .map_err(|e| ClientError::Decode(e.to_string()))?;
+                    .map_err(ClientError::Decode)?;
                 Ok(response?)
             }
             Err(e) => {
@@ -214,11 +214,10 @@ impl RemoteLink for Remote {
                     Ok(RemoteFailure::Full(max)) => ClientError::Full { max: max as usize },
                     Ok(failure) => ClientError::Remote {
                         domain: self.domain.clone(),
-                        reason: failure.to_string(),
+                        failure,
                     },
-                    Err(_) => ClientError::Remote {
+                    Err(_) => ClientError::RemoteUnreadable {
                         domain: self.domain.clone(),
-                        reason: String::from_utf8_lossy(&bytes).into_owned(),
                     },
                 })
             }

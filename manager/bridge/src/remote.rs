@@ -97,10 +97,7 @@ pub(crate) fn serve_control(
         if let Err(back) = worker.jobs.send((query, envelope)) {
             // Its thread is gone (it panicked): said, and a fresh one serves the next request.
             workers.remove(&id);
-            fail(
-                &(back.0).0,
-                &RemoteFailure::Other("the bridge's worker for this client failed".into()),
-            );
+            fail(&(back.0).0, &RemoteFailure::WorkerFailed);
         }
     }
     Ok(())
@@ -164,7 +161,13 @@ fn failure(e: &ClientError) -> RemoteFailure {
         ClientError::NoManager(d) => RemoteFailure::NoManager(d.clone()),
         ClientError::Timeout(t) => RemoteFailure::Timeout(t.as_millis() as u64),
         ClientError::Full { max } => RemoteFailure::Full(*max as u32),
-        other => RemoteFailure::Other(other.to_string()),
+        other => {
+            tracing::warn!(
+                error = other as &dyn std::error::Error,
+                "a remote request failed here"
+            );
+            RemoteFailure::BridgeClient
+        }
     }
 }
 

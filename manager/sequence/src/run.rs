@@ -27,8 +27,8 @@ impl<'a> ClientFabric<'a> {
 
 fn fabric_error(e: ClientError) -> FabricError {
     match e {
-        ClientError::Refused(why) => FabricError::Refused(why.to_string()),
-        other => FabricError::Failed(other.to_string()),
+        ClientError::Refused(why) => why.into(),
+        other => FabricError::Failed(std::sync::Arc::new(other)),
     }
 }
 
@@ -628,7 +628,7 @@ fn drive(
     let failed = |what: &'static str| {
         move |e: ClientError| SeqError::Fabric {
             what: what.into(),
-            source: FabricError::Failed(e.to_string()),
+            source: FabricError::Failed(std::sync::Arc::new(e)),
         }
     };
     client

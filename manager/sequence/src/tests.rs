@@ -4,8 +4,8 @@
 use crate::plan::Plan;
 use crate::run::Sequencer;
 use crate::tree::{Fabric, FabricError, Status};
-use skillfab_proto::control::MonitorFate;
-use skillfab_proto::param::ParamValue;
+use skillfab_proto::control::{ControlError, MonitorFate};
+use skillfab_proto::param::{ParamError, ParamKind, ParamValue};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -46,14 +46,18 @@ impl Mock {
     fn request(&mut self) -> Result<(), FabricError> {
         self.requests += 1;
         if self.die_at == Some(self.requests) {
-            return Err(FabricError::Failed("the runner died here".into()));
+            return Err(FabricError::Failed(std::sync::Arc::from(Box::<
+                dyn std::error::Error + Send + Sync,
+            >::from(
+                "the runner died here",
+            ))));
         }
         Ok(())
     }
 
     fn known(&self, skills: &[String]) -> Result<(), FabricError> {
         match skills.iter().find(|s| !self.active.contains_key(*s)) {
-            Some(s) => Err(FabricError::Refused(format!("unknown skill '{s}'"))),
+            Some(s) => Err(ControlError::UnknownSkill(s.clone()).into()),
             None => Ok(()),
         }
     }
@@ -74,6 +78,16 @@ impl Mock {
             .map(|(s, _)| s.as_str())
             .collect()
     }
+}
+
+fn unknown_param(skill: &str, param: &str) -> FabricError {
+    ControlError::Param {
+        skill: skill.into(),
+        error: ParamError::Unknown {
+            param: param.into(),
+        },
+    }
+    .into()
 }
 
 impl Fabric for Mock {
@@ -100,20 +114,23 @@ impl Fabric for Mock {
         self.params
             .get(&format!("{skill}.{param}"))
             .map(|v| ParamValue::Float(*v))
-            .ok_or_else(|| FabricError::Refused(format!("{skill}: unknown parameter '{param}'")))
+            .ok_or_else(|| unknown_param(skill, param))
     }
 
     fn set_param(&mut self, skill: &str, param: &str, value: &str) -> Result<(), FabricError> {
         self.request()?;
         let key = format!("{skill}.{param}");
         if !self.params.contains_key(&key) {
-            return Err(FabricError::Refused(format!(
-                "{skill}: unknown parameter '{param}'"
-            )));
+            return Err(unknown_param(skill, param));
         }
-        let v = value
-            .parse()
-            .map_err(|_| FabricError::Refused(format!("'{value}' is not a number")))?;
+        let v = value.parse().map_err(|_| ControlError::Param {
+            skill: skill.into(),
+            error: ParamError::Unparsable {
+                param: param.into(),
+                expected: ParamKind::Float,
+                text: value.into(),
+            },
+        })?;
         self.params.insert(key.clone(), v);
         self.log.push(format!("{key}={value}"));
         Ok(())
@@ -131,7 +148,7 @@ impl Fabric for Mock {
     fn add_monitor(&mut self, condition: &str, _hold: u32) -> Result<u64, FabricError> {
         self.request()?;
         if condition.contains("nobody") {
-            return Err(FabricError::Refused("unknown skill 'nobody'".into()));
+            return Err(ControlError::UnknownSkill("nobody".into()).into());
         }
         self.next += 1;
         self.monitors.insert(self.next, condition.to_string());

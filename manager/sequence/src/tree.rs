@@ -4,7 +4,7 @@
 
 use crate::plan::{Kind, Plan, PlanError, Spec};
 use serde::{Deserialize, Serialize};
-use skillfab_proto::control::MonitorFate;
+use skillfab_proto::control::{ControlError, MonitorFate};
 use skillfab_proto::param::ParamValue;
 use std::collections::HashSet;
 use std::time::Duration;
@@ -21,15 +21,21 @@ pub enum Status {
 }
 
 /// Why a fabric request did not do what was asked.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum FabricError {
     /// The manager refused it (an unknown skill, a value out of range, …): the action fails,
     /// and the plan can fall back.
-    #[error("{0}")]
-    Refused(String),
+    #[error(transparent)]
+    Refused(Box<ControlError>),
     /// The fabric could not be asked (no manager, a broken link): the plan stops.
-    #[error("{0}")]
-    Failed(String),
+    #[error(transparent)]
+    Failed(std::sync::Arc<dyn std::error::Error + Send + Sync>),
+}
+
+impl From<ControlError> for FabricError {
+    fn from(e: ControlError) -> FabricError {
+        FabricError::Refused(Box::new(e))
+    }
 }
 
 /// What a plan needs of the fabric: the client library's requests, and the fabric's time.

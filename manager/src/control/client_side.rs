@@ -100,11 +100,10 @@ impl ClientSide {
                 self.next_id += 1;
                 let bytes = request.payload();
                 let decoded = if bytes.len() > control::MAX_REQUEST_BYTES {
-                    Err(control::ControlError::Malformed(format!(
-                        "a request of {} bytes (at most {})",
-                        bytes.len(),
-                        control::MAX_REQUEST_BYTES
-                    )))
+                    Err(control::ControlError::RequestTooLarge {
+                        bytes: bytes.len(),
+                        max: control::MAX_REQUEST_BYTES,
+                    })
                 } else {
                     control::decode_request(bytes)
                 };

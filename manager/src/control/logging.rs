@@ -25,18 +25,17 @@ impl Manager {
             return Ok(Reply::Done);
         }
         if self.recorder.is_none() {
-            return Err(ControlError::Refused(
-                "the manager has no fabric log file (see its start-up warning)".into(),
-            ));
+            return Err(ControlError::NoFabricLog);
         }
         let mut ports = Vec::new();
         let sides = [("in", &e.decl.inputs), ("out", &e.decl.outputs)];
         for (dir, decls) in sides {
             for p in decls {
-                let field = value::resolve(&p.schema, "").map_err(|err| ControlError::BadPath {
-                    path: format!("{skill}.{}", p.port),
-                    reason: err.reason,
-                })?;
+                let field =
+                    value::resolve(&p.schema, "").map_err(|error| ControlError::BadPath {
+                        path: format!("{skill}.{}", p.port),
+                        error,
+                    })?;
                 let slot = (dir == "out" && p.kind == skillfab_proto::decl::PortKind::Proposal)
                     .then_some(s as u32);
                 ports.push((
@@ -53,7 +52,7 @@ impl Manager {
         for (dir, port, topic, schema, field, slot) in ports {
             if !self.readers.contains_key(&topic) {
                 let reader = RawReader::open(&self.node, &topic, &schema)
-                    .map_err(|e| ControlError::Refused(e.to_string()))?;
+                    .map_err(|e| super::cannot_read(&topic, &e))?;
                 self.readers.insert(topic.clone(), reader);
             }
             logged.push(crate::engine::IoPort {

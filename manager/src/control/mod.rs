@@ -21,7 +21,7 @@ use iceoryx2::node::Node;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use skillfab_proto::board::pid_alive;
-use skillfab_proto::control::{ControlError, Event, ParamErrorText, Reply, Request, Response};
+use skillfab_proto::control::{ControlError, Event, Reply, Request, Response};
 use skillfab_proto::domain::Domain;
 use skillfab_proto::header::now_ns;
 use skillfab_proto::param::ParamError;
@@ -257,10 +257,19 @@ impl Drop for ControlPlane {
     }
 }
 
+/// The refusal of a request that needs a reader of `topic` iceoryx2 would not open or poll
+/// (the cause goes to the manager's log).
+fn cannot_read(topic: &str, error: &skillfab_proto::Error) -> ControlError {
+    tracing::warn!(%topic, error = error as &dyn std::error::Error, "cannot read topic");
+    ControlError::CannotRead {
+        topic: topic.into(),
+    }
+}
+
 fn param_err(skill: &str, e: ParamError) -> ControlError {
     ControlError::Param {
         skill: skill.to_string(),
-        error: ParamErrorText::from(e),
+        error: e,
     }
 }
 

@@ -23,9 +23,9 @@ impl Manager {
         for p in expr::paths(&parsed) {
             let aggregate = !parsed_is_scalar_use(&parsed, p);
             let (topic, field, slot) = self.resolve_path(&p.skill, &p.output, &p.field, &p.text)?;
-            check_numeric(&field, aggregate).map_err(|reason| ControlError::BadPath {
+            check_numeric(&field, aggregate).map_err(|error| ControlError::BadPath {
                 path: p.text.clone(),
-                reason,
+                error,
             })?;
             self.open_reader(&p.skill, &p.output)?;
             paths.push(Resolved {

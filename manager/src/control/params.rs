@@ -125,12 +125,17 @@ impl Manager {
                 Some(slot) => slot.1 = value,
                 None => e.values.push((param.to_string(), value)),
             }
-            let bytes = postcard::to_allocvec(&e.values)
-                .map_err(|err| ControlError::Refused(err.to_string()))?;
+            let cannot = |error: &(dyn std::error::Error + 'static)| {
+                tracing::warn!(%skill, error, "cannot write parameters");
+                ControlError::CannotWriteParams {
+                    skill: skill.into(),
+                }
+            };
+            let bytes = postcard::to_allocvec(&e.values).map_err(|err| cannot(&err))?;
             self.board
                 .slot(s)
                 .write_params(&bytes)
-                .map_err(|err| ControlError::Refused(err.to_string()))?;
+                .map_err(|err| cannot(&err))?;
         }
         let kept = &mut self.skills.keep(skill).params;
         match kept.iter_mut().find(|(n, _)| n == param) {

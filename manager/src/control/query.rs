@@ -2,7 +2,7 @@
 
 use super::*;
 use skillfab_proto::services::RawReader;
-use skillfab_proto::value::{self, FieldPath, OutputPath, Value};
+use skillfab_proto::value::{self, FieldPath, OutputPath, PathError, Value};
 
 impl Manager {
     /// Topic and field of `skill.output[.field]`.
@@ -13,9 +13,9 @@ impl Manager {
         field: &str,
         text: &str,
     ) -> Result<(String, FieldPath, Option<u32>), ControlError> {
-        let bad = |reason: String| ControlError::BadPath {
+        let bad = |error: PathError| ControlError::BadPath {
             path: text.to_string(),
-            reason,
+            error,
         };
         // A skill that is away (restarting) is resolved against its last declaration.
         let live = self.skills.slot_of(skill);
@@ -29,21 +29,21 @@ impl Manager {
             .iter()
             .find(|p| p.port == output)
             .ok_or_else(|| {
-                let names: Vec<&str> = decl.outputs.iter().map(|p| p.port.as_str()).collect();
-                bad(format!(
-                    "skill '{skill}' has no output '{output}' (outputs: {})",
-                    names.join(", ")
-                ))
+                bad(PathError::NoOutput {
+                    skill: skill.into(),
+                    output: output.into(),
+                    outputs: decl.outputs.iter().map(|p| p.port.clone()).collect(),
+                })
             })?;
-        let f = value::resolve(&port.schema, field).map_err(|err| bad(err.reason))?;
+        let f = value::resolve(&port.schema, field).map_err(bad)?;
         // Every proposer publishes on its channel's topic: read this skill's own proposals.
         let slot = match (port.kind == skillfab_proto::decl::PortKind::Proposal, live) {
             (false, _) => None,
             (true, Some(s)) => Some(s as u32),
             (true, None) => {
-                return Err(ControlError::Refused(format!(
-                    "'{skill}' is restarting: its proposals can be read once it is back"
-                )));
+                return Err(ControlError::SkillAway {
+                    skill: skill.into(),
+                });
             }
         };
         Ok((port.topic.clone(), f, slot))
@@ -65,7 +65,7 @@ impl Manager {
         };
         if !self.readers.contains_key(&port.topic) {
             let reader = RawReader::open(&self.node, &port.topic, &port.schema)
-                .map_err(|e| ControlError::Refused(e.to_string()))?;
+                .map_err(|e| super::cannot_read(&port.topic, &e))?;
             self.readers.insert(port.topic.clone(), reader);
         }
         Ok(())
@@ -83,11 +83,14 @@ impl Manager {
             .cloned()
             .ok_or_else(|| ControlError::BadPath {
                 path: text.into(),
-                reason: format!("no channel '{name}' has been arbitrated (channels: {})", {
-                    let mut c: Vec<&str> = self.channels.keys().map(String::as_str).collect();
-                    c.sort();
-                    c.join(", ")
-                }),
+                error: PathError::NoChannel {
+                    channel: name.into(),
+                    channels: {
+                        let mut c: Vec<String> = self.channels.keys().cloned().collect();
+                        c.sort();
+                        c
+                    },
+                },
             })?;
         let schema = self
             .skills
@@ -102,7 +105,7 @@ impl Manager {
         let topic = skillfab_proto::names::command_topic(name);
         if !self.readers.contains_key(&topic) {
             let r = RawReader::open(&self.node, &topic, &schema)
-                .map_err(|e| ControlError::Refused(e.to_string()))?;
+                .map_err(|e| super::cannot_read(&topic, &e))?;
             self.readers.insert(topic.clone(), r);
         }
         let field = match sub {
@@ -111,12 +114,12 @@ impl Manager {
                 .strip_prefix("command")
                 .ok_or_else(|| ControlError::BadPath {
                     path: text.into(),
-                    reason: "a channel has '.command[.field]' and nothing else".into(),
+                    error: PathError::NotACommand,
                 })?,
         };
-        let f = value::resolve(&schema, field).map_err(|e| ControlError::BadPath {
+        let f = value::resolve(&schema, field).map_err(|error| ControlError::BadPath {
             path: text.into(),
-            reason: e.reason,
+            error,
         })?;
         let reader = self.polled_reader(&topic, text)?;
         let command = reader
@@ -162,9 +165,7 @@ impl Manager {
             .readers
             .get_mut(topic)
             .ok_or_else(|| ControlError::NoValue(text.into()))?;
-        reader
-            .poll()
-            .map_err(|e| ControlError::Refused(e.to_string()))?;
+        reader.poll().map_err(|e| super::cannot_read(topic, &e))?;
         Ok(reader)
     }
 
@@ -174,9 +175,9 @@ impl Manager {
         if let Some(rest) = text.strip_prefix("channel.") {
             return self.query_channel(text, rest);
         }
-        let path = OutputPath::parse(text).map_err(|e| ControlError::BadPath {
+        let path = OutputPath::parse(text).map_err(|error| ControlError::BadPath {
             path: text.into(),
-            reason: e.reason,
+            error,
         })?;
         let (topic, f, slot) = self.resolve_path(&path.skill, &path.output, &path.field, text)?;
         self.open_reader(&path.skill, &path.output)?;
@@ -195,14 +196,14 @@ impl Manager {
 }
 
 /// A plain path must name one number; inside min()/max() an array or range of numbers.
-pub(super) fn check_numeric(f: &FieldPath, aggregate: bool) -> Result<(), String> {
+pub(super) fn check_numeric(f: &FieldPath, aggregate: bool) -> Result<(), PathError> {
     use skillfab_proto::schema::FieldKind;
     let prim = |k: &FieldKind| matches!(k, FieldKind::Prim(_));
     match (aggregate, &f.kind, f.count) {
         (false, k, None) if prim(k) => Ok(()),
-        (false, _, _) => Err("names more than one number: use min() or max(), or index it".into()),
+        (false, _, _) => Err(PathError::NotOneNumber),
         (true, k, Some(_)) if prim(k) => Ok(()),
         (true, FieldKind::Array { elem, .. }, None) if prim(elem) => Ok(()),
-        (true, _, _) => Err("min()/max() need an array or a range of numbers".into()),
+        (true, _, _) => Err(PathError::NotNumbers),
     }
 }

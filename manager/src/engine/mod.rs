@@ -20,7 +20,7 @@ mod registry;
 mod skills;
 mod state;
 
-pub use record::RecordSpec;
+pub use record::{RecordError, RecordSpec};
 
 use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
@@ -183,11 +183,8 @@ pub enum ManagerError {
         detail: String,
     },
     /// The recording asked for cannot be written.
-    #[error("recording: {detail}")]
-    Record {
-        /// What failed.
-        detail: String,
-    },
+    #[error("recording")]
+    Record(#[from] RecordError),
     /// Skills named in `wait_for` did not register in time.
     #[error("skills did not register within {waited:?}: {}", missing.join(", "))]
     MissingSkills {
@@ -376,7 +373,7 @@ impl Manager {
         if let Some(spec) = manager.config.record.clone() {
             manager
                 .start_recording(spec)
-                .map_err(|detail| ManagerError::Record { detail })?;
+                .map_err(ManagerError::Record)?;
         }
         Ok(manager)
     }

@@ -13,6 +13,7 @@
 
 use super::*;
 use serde_json::json;
+use skillfab_proto::control::ControlError;
 use skillfab_proto::schema::MessageSchema;
 use skillfab_proto::value;
 
@@ -48,16 +49,51 @@ struct RecTopic {
     last: HashMap<String, u64>,
 }
 
+/// Why a recording cannot start.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RecordError {
+    /// The file is not named `*.mcap`.
+    #[error("a recording is an MCAP file: {} does not end in .mcap", path.display())]
+    NotMcap {
+        /// The file asked for.
+        path: PathBuf,
+    },
+    /// The file cannot be created or written.
+    #[error("cannot record to {}", path.display())]
+    Io {
+        /// The file asked for.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl From<RecordError> for ControlError {
+    fn from(e: RecordError) -> ControlError {
+        match e {
+            RecordError::NotMcap { path } => ControlError::NotMcap {
+                file: path.display().to_string(),
+            },
+            RecordError::Io { path, source } => ControlError::CannotRecord {
+                file: path.display().to_string(),
+                os_error: source.raw_os_error(),
+            },
+        }
+    }
+}
+
 impl Recording {
     /// Starts writing `spec.path` (which must name an `.mcap` file).
-    pub(crate) fn start(spec: RecordSpec, manager: &Manager) -> Result<Recording, String> {
+    pub(crate) fn start(spec: RecordSpec, manager: &Manager) -> Result<Recording, RecordError> {
         if !crate::recorder::is_mcap(&spec.path) {
-            return Err(format!(
-                "a recording is an MCAP file: {} does not end in .mcap",
-                spec.path.display()
-            ));
+            return Err(RecordError::NotMcap { path: spec.path });
         }
-        let cannot = |e: std::io::Error| format!("cannot record to {}: {e}", spec.path.display());
+        let cannot = |source: std::io::Error| RecordError::Io {
+            path: spec.path.clone(),
+            source,
+        };
         if let Some(dir) = spec.path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(cannot)?;
         }
@@ -105,7 +141,7 @@ impl Recording {
 
 impl Manager {
     /// Starts recording (replacing a recording in progress).
-    pub(crate) fn start_recording(&mut self, spec: RecordSpec) -> Result<(), String> {
+    pub(crate) fn start_recording(&mut self, spec: RecordSpec) -> Result<(), RecordError> {
         self.recording = None;
         let r = Recording::start(spec, self)?;
         tracing::info!(file = %r.path().display(), "recording");
@@ -120,11 +156,9 @@ impl Manager {
         file: Option<String>,
         topics: Vec<String>,
     ) -> skillfab_proto::control::Response {
-        use skillfab_proto::control::{ControlError, Reply};
+        use skillfab_proto::control::Reply;
         match file {
-            None if self.recording.is_none() => {
-                Err(ControlError::Refused("no recording in progress".into()))
-            }
+            None if self.recording.is_none() => Err(ControlError::NotRecording),
             None => {
                 if let Some(r) = self.recording.take() {
                     tracing::info!(file = %r.path().display(), samples = r.samples, "recording stopped");
@@ -137,7 +171,7 @@ impl Manager {
                     topics,
                 })
                 .map(|()| Reply::Done)
-                .map_err(ControlError::Refused),
+                .map_err(ControlError::from),
         }
     }
 

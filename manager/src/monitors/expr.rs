@@ -77,7 +77,7 @@ pub enum Expr {
     Not(Box<Expr>),
 }
 
-pub use skillfab_proto::control::ExprError;
+pub use skillfab_proto::control::{ExprError, ExprProblem};
 
 #[derive(Debug, Clone, PartialEq)]
 enum Tok {
@@ -93,7 +93,7 @@ fn lex(src: &str) -> Result<Vec<(usize, Tok)>, ExprError> {
     let b = src.as_bytes();
     let mut out = Vec::new();
     let mut i = 0;
-    let err = |position, message: String| ExprError { position, message };
+    let err = |position, problem: ExprProblem| ExprError { position, problem };
     while i < b.len() {
         let c = b[i];
         if c.is_ascii_whitespace() {
@@ -114,9 +114,14 @@ fn lex(src: &str) -> Result<Vec<(usize, Tok)>, ExprError> {
                 }
             }
             let text = &src[start..i];
-            let v: f64 = text
-                .parse()
-                .map_err(|_| err(start, format!("bad number '{text}'")))?;
+            let v: f64 = text.parse().map_err(|_| {
+                err(
+                    start,
+                    ExprProblem::BadNumber {
+                        text: text.to_string(),
+                    },
+                )
+            })?;
             out.push((start, Tok::Num(v)));
         } else if c.is_ascii_alphabetic() || c == b'_' {
             let start = i;
@@ -135,7 +140,7 @@ fn lex(src: &str) -> Result<Vec<(usize, Tok)>, ExprError> {
                     Some(b'[') if dotted => {
                         let end = src[i..]
                             .find(']')
-                            .ok_or_else(|| err(i, "missing ']'".into()))?;
+                            .ok_or_else(|| err(i, ExprProblem::UnclosedIndex))?;
                         i += end + 1;
                     }
                     _ => break,
@@ -171,7 +176,7 @@ fn lex(src: &str) -> Result<Vec<(usize, Tok)>, ExprError> {
                     b')' => (Tok::RParen, 1),
                     _ => {
                         let ch = src[i..].chars().next().unwrap_or('?');
-                        return Err(err(i, format!("unexpected character '{ch}'")));
+                        return Err(err(i, ExprProblem::UnexpectedChar { ch }));
                     }
                 },
             };
@@ -195,10 +200,10 @@ impl Parser {
     fn at(&self) -> usize {
         self.toks.get(self.pos).map_or(self.end, |(p, _)| *p)
     }
-    fn err(&self, message: impl Into<String>) -> ExprError {
+    fn err(&self, problem: ExprProblem) -> ExprError {
         ExprError {
             position: self.at(),
-            message: message.into(),
+            problem,
         }
     }
     fn eat_op(&mut self, op: &str) -> bool {
@@ -281,7 +286,7 @@ impl Parser {
     fn path(&mut self, text: String, at: usize) -> Result<PathRef, ExprError> {
         PathRef::parse(&text).map_err(|e| ExprError {
             position: at,
-            message: e.reason,
+            problem: e.into(),
         })
     }
     fn atom(&mut self) -> Result<Expr, ExprError> {
@@ -289,7 +294,7 @@ impl Parser {
         let tok = self
             .peek()
             .cloned()
-            .ok_or_else(|| self.err("expression ends too early"))?;
+            .ok_or_else(|| self.err(ExprProblem::EndsEarly))?;
         self.pos += 1;
         match tok {
             Tok::Num(v) => Ok(Expr::Num(v)),
@@ -297,7 +302,7 @@ impl Parser {
             Tok::LParen => {
                 let e = self.or()?;
                 if self.peek() != Some(&Tok::RParen) {
-                    return Err(self.err("expected ')'"));
+                    return Err(self.err(ExprProblem::UnclosedParen));
                 }
                 self.pos += 1;
                 Ok(e)
@@ -306,19 +311,17 @@ impl Parser {
             Tok::Ident(w) if w == "false" => Ok(Expr::Bool(false)),
             Tok::Ident(w) if w == "min" || w == "max" => {
                 if self.peek() != Some(&Tok::LParen) {
-                    return Err(self.err(format!("expected '(' after {w}")));
+                    return Err(self.err(ExprProblem::CallWithoutParen { function: w }));
                 }
                 self.pos += 1;
                 let at = self.at();
                 let Some(Tok::Path(p)) = self.peek().cloned() else {
-                    return Err(self.err(format!(
-                        "{w}() takes one path, e.g. {w}(skill.output.field[0..3])"
-                    )));
+                    return Err(self.err(ExprProblem::CallWithoutPath { function: w }));
                 };
                 self.pos += 1;
                 let path = self.path(p, at)?;
                 if self.peek() != Some(&Tok::RParen) {
-                    return Err(self.err("expected ')'"));
+                    return Err(self.err(ExprProblem::UnclosedParen));
                 }
                 self.pos += 1;
                 Ok(if w == "min" {
@@ -329,15 +332,17 @@ impl Parser {
             }
             Tok::Ident(w) => Err(ExprError {
                 position: at,
-                message: format!("'{w}' is not a value: write skill.output[.field]"),
+                problem: ExprProblem::NotAValue { word: w },
             }),
             Tok::Op(o) => Err(ExprError {
                 position: at,
-                message: format!("unexpected '{o}'"),
+                problem: ExprProblem::UnexpectedToken {
+                    token: o.to_string(),
+                },
             }),
             Tok::RParen => Err(ExprError {
                 position: at,
-                message: "unexpected ')'".into(),
+                problem: ExprProblem::UnexpectedToken { token: ")".into() },
             }),
         }
     }
@@ -349,16 +354,16 @@ enum Ty {
     Bool,
 }
 
-fn type_of(e: &Expr) -> Result<Ty, String> {
-    let want = |e: &Expr, t: Ty, what: &str| -> Result<(), String> {
+fn type_of(e: &Expr) -> Result<Ty, ExprProblem> {
+    let want = |e: &Expr, t: Ty, what: &str| -> Result<(), ExprProblem> {
         let got = type_of(e)?;
         if got == t {
             Ok(())
         } else {
-            Err(format!(
-                "{what} needs a {}",
-                if t == Ty::Num { "number" } else { "condition" }
-            ))
+            Err(ExprProblem::WrongOperand {
+                operator: what.into(),
+                number: t == Ty::Num,
+            })
         }
     };
     Ok(match e {
@@ -392,10 +397,12 @@ fn type_of(e: &Expr) -> Result<Ty, String> {
 
 /// Parses a condition. Never panics, whatever the input.
 pub fn parse(src: &str) -> Result<Expr, ExprError> {
-    if src.len() > 4096 {
+    if src.len() > ExprProblem::MAX_LEN {
         return Err(ExprError {
-            position: 4096,
-            message: "expression longer than 4096 bytes".into(),
+            position: ExprProblem::MAX_LEN,
+            problem: ExprProblem::TooLong {
+                max: ExprProblem::MAX_LEN,
+            },
         });
     }
     let toks = lex(src)?;
@@ -406,17 +413,17 @@ pub fn parse(src: &str) -> Result<Expr, ExprError> {
     };
     let e = p.or_depth_checked()?;
     if p.pos != p.toks.len() {
-        return Err(p.err("unexpected text after the expression"));
+        return Err(p.err(ExprProblem::TrailingText));
     }
     match type_of(&e) {
         Ok(Ty::Bool) => Ok(e),
         Ok(Ty::Num) => Err(ExprError {
             position: 0,
-            message: "a monitor needs a condition, e.g. 'x.y.z < 3'".into(),
+            problem: ExprProblem::NotACondition,
         }),
-        Err(message) => Err(ExprError {
+        Err(problem) => Err(ExprError {
             position: 0,
-            message,
+            problem,
         }),
     }
 }
@@ -426,7 +433,10 @@ impl Parser {
         // Deep nesting would recurse deeply; 64 open parentheses is far past any monitor.
         let depth = self.toks.iter().filter(|(_, t)| *t == Tok::LParen).count();
         if depth > 64 {
-            return Err(self.err("more than 64 parentheses"));
+            return Err(self.err(ExprProblem::TooDeep {
+                what: "parentheses".into(),
+                max: 64,
+            }));
         }
         let nots = self
             .toks
@@ -434,7 +444,10 @@ impl Parser {
             .filter(|(_, t)| matches!(t, Tok::Op("not" | "-")))
             .count();
         if nots > 64 {
-            return Err(self.err("more than 64 'not'/'-' operators"));
+            return Err(self.err(ExprProblem::TooDeep {
+                what: "'not'/'-' operators".into(),
+                max: 64,
+            }));
         }
         self.or()
     }
@@ -564,35 +577,46 @@ mod tests {
         assert!(
             parse("t.tick.value")
                 .unwrap_err()
-                .message
+                .problem
+                .to_string()
                 .contains("condition")
         );
         assert!(
             parse("t.tick.value > 1 2")
                 .unwrap_err()
-                .message
+                .problem
+                .to_string()
                 .contains("after")
         );
         assert!(
             parse("foo > 1")
                 .unwrap_err()
-                .message
+                .problem
+                .to_string()
                 .contains("not a value")
         );
         assert!(
             parse("(a.b > 1) + 1 > 0")
                 .unwrap_err()
-                .message
+                .problem
+                .to_string()
                 .contains("number")
         );
         assert!(
             parse("a.b > 1 and 3")
                 .unwrap_err()
-                .message
+                .problem
+                .to_string()
                 .contains("condition")
         );
         assert!(parse("min(3) < 1").is_err());
-        assert!(parse("a.b # 1").unwrap_err().message.contains("'#'"));
+        assert!(
+            parse("a.b # 1")
+                .unwrap_err()
+                .problem
+                .to_string()
+                .contains("'#'")
+        );
         assert!(parse(&"(".repeat(100)).is_err());
     }
 

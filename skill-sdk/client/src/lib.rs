@@ -61,9 +61,9 @@ pub enum ClientError {
     /// No answer in time.
     #[error("no answer from the manager within {0:?}")]
     Timeout(Duration),
-    /// An answer that does not decode.
-    #[error("undecodable answer: {0}")]
-    Decode(String),
+    /// An answer or event that does not decode, or a request that does not encode.
+    #[error("undecodable answer")]
+    Decode(#[source] postcard::Error),
     /// Every place on the control plane stayed taken for as long as the client waits.
     #[error("the manager serves at most {max} clients at once and none left")]
     Full {
@@ -71,8 +71,11 @@ pub enum ClientError {
         max: usize,
     },
     /// An answer of the wrong kind for the request.
-    #[error("unexpected answer: {0}")]
-    Unexpected(String),
+    #[error("unexpected answer: {0:?}")]
+    Unexpected(Box<Reply>),
+    /// Another thread sharing this client panicked while it held the client's port.
+    #[error("the client was poisoned by a thread that panicked while using it")]
+    Poisoned,
     /// The link to another host (a Zenoh session to a bridge) could not be opened or
     /// configured, or refused a request.
     #[error("{what}")]
@@ -95,12 +98,20 @@ pub enum ClientError {
         timeout: Duration,
     },
     /// The remote domain's bridge could not carry the request out.
-    #[error("the bridge of domain '{domain}': {reason}")]
+    #[error("the bridge of domain '{domain}'")]
     Remote {
         /// The remote domain.
         domain: String,
         /// The bridge's reason.
-        reason: String,
+        #[source]
+        failure: skillfab_proto::bridge::RemoteFailure,
+    },
+    /// The remote domain's bridge answered with a failure this client cannot read (another
+    /// skillfab version).
+    #[error("the bridge of domain '{domain}' failed, with an answer this client cannot read")]
+    RemoteUnreadable {
+        /// The remote domain.
+        domain: String,
     },
 }
 
@@ -317,15 +328,13 @@ impl Client {
     /// a second monitor.
     pub fn request(&self, request: &Request) -> Result<Reply, ClientError> {
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
-        let bytes = control::encode_request(&self.id, seq, request)
-            .map_err(|e| ClientError::Decode(e.to_string()))?;
+        let bytes = control::encode_request(&self.id, seq, request).map_err(ClientError::Decode)?;
         if bytes.len() > control::MAX_REQUEST_BYTES {
             // What the manager would answer; the port's samples could not even hold it.
-            return Err(ClientError::Refused(ControlError::Malformed(format!(
-                "a request of {} bytes (at most {})",
-                bytes.len(),
-                control::MAX_REQUEST_BYTES
-            ))));
+            return Err(ClientError::Refused(ControlError::RequestTooLarge {
+                bytes: bytes.len(),
+                max: control::MAX_REQUEST_BYTES,
+            }));
         }
         let patient = matches!(request, Request::Step(_));
         match &self.link {
@@ -339,7 +348,7 @@ impl Client {
                 };
                 // The session is shared; requests of threads sharing the client take turns.
                 r.lock()
-                    .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
+                    .map_err(|_| ClientError::Poisoned)?
                     .request(bytes, timeout)
             }
         }
@@ -355,10 +364,7 @@ impl Local {
         timeout: Duration,
     ) -> Result<Reply, ClientError> {
         // One request at a time on the port (threads sharing a client take turns).
-        let _turn = self
-            .turn
-            .lock()
-            .map_err(|_| ClientError::Unexpected("client poisoned".into()))?;
+        let _turn = self.turn.lock().map_err(|_| ClientError::Poisoned)?;
         let mut serving = self.manager_pid();
         let mut pending = Some(self.send(bytes, timeout)?);
         let start = Instant::now();
@@ -370,8 +376,8 @@ impl Local {
             if let Some(p) = &pending
                 && let Some(answer) = p.receive().map_err(|e| sdk("receive answer", e))?
             {
-                let response = control::decode_response(answer.payload())
-                    .map_err(|e| ClientError::Decode(e.to_string()))?;
+                let response =
+                    control::decode_response(answer.payload()).map_err(ClientError::Decode)?;
                 return Ok(response?);
             }
             if !patient && start.elapsed() > timeout {
@@ -410,15 +416,10 @@ impl Local {
 
     /// Sends an encoded request and wakes the control plane.
     fn send(&self, bytes: &[u8], timeout: Duration) -> Result<Pending, ClientError> {
-        let mut port = self
-            .port
-            .lock()
-            .map_err(|_| ClientError::Unexpected("control port poisoned".into()))?;
-        if port.is_none() {
-            *port = Some(control_port(&self.node, Instant::now() + timeout)?);
-        }
-        let Some(port) = port.as_ref() else {
-            return Err(ClientError::Unexpected("no control port".into()));
+        let mut port = self.port.lock().map_err(|_| ClientError::Poisoned)?;
+        let port = match &mut *port {
+            Some(p) => p,
+            none => none.insert(control_port(&self.node, Instant::now() + timeout)?),
         };
         let pending = port
             .loan_slice_uninit(bytes.len())
@@ -434,10 +435,7 @@ impl Local {
 
     /// Replaces the control port by a new one (the manager's server connects to it anew).
     fn renew_port(&self, timeout: Duration) -> Result<(), ClientError> {
-        let mut port = self
-            .port
-            .lock()
-            .map_err(|_| ClientError::Unexpected("control port poisoned".into()))?;
+        let mut port = self.port.lock().map_err(|_| ClientError::Poisoned)?;
         // The old one goes first: a client holds one of the control plane's places.
         drop(port.take());
         *port = Some(control_port(&self.node, Instant::now() + timeout)?);
@@ -453,9 +451,7 @@ impl Local {
     }
 
     fn events(&self) -> Result<std::sync::MutexGuard<'_, Option<EventsPort>>, ClientError> {
-        self.events
-            .lock()
-            .map_err(|_| ClientError::Unexpected("client poisoned".into()))
+        self.events.lock().map_err(|_| ClientError::Poisoned)
     }
 
     /// Subscribes to the events stream.
@@ -498,7 +494,7 @@ impl Client {
     fn done(&self, request: Request) -> Result<(), ClientError> {
         match self.request(&request)? {
             Reply::Done => Ok(()),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -506,7 +502,7 @@ impl Client {
     pub fn list(&self) -> Result<Vec<SkillInfo>, ClientError> {
         match self.request(&Request::List)? {
             Reply::Skills(s) => Ok(s),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -554,7 +550,7 @@ impl Client {
             param: param.into(),
         })? {
             Reply::Param(v) => Ok(v),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -562,7 +558,7 @@ impl Client {
     pub fn query(&self, path: &str) -> Result<(Value, u64), ClientError> {
         match self.request(&Request::Query(path.into()))? {
             Reply::Value { value, cycle } => Ok((value, cycle)),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -583,7 +579,7 @@ impl Client {
             hold,
         })? {
             Reply::MonitorAdded(id) => Ok(id),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -595,7 +591,7 @@ impl Client {
         self.subscribe()?;
         match self.request(&Request::AdoptMonitors(ids.to_vec()))? {
             Reply::Adopted(f) if f.len() == ids.len() => Ok(f),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -604,7 +600,7 @@ impl Client {
     pub fn gave_up(&self) -> Result<Vec<GaveUpInfo>, ClientError> {
         match self.request(&Request::GaveUp)? {
             Reply::GaveUp(list) => Ok(list),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -620,7 +616,7 @@ impl Client {
     ) -> Result<skillfab_proto::schema::MessageSchema, ClientError> {
         match self.request(&Request::TopicSchema(topic.into()))? {
             Reply::Schema(s) => Ok(s),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -628,7 +624,7 @@ impl Client {
     pub fn monitors(&self) -> Result<Vec<MonitorInfo>, ClientError> {
         match self.request(&Request::ListMonitors)? {
             Reply::Monitors(m) => Ok(m),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -646,7 +642,7 @@ impl Client {
     pub fn step(&self, n: u64) -> Result<u64, ClientError> {
         match self.request(&Request::Step(n))? {
             Reply::Stepped(c) => Ok(c),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -654,7 +650,7 @@ impl Client {
     pub fn stats(&self) -> Result<Stats, ClientError> {
         match self.request(&Request::Stats)? {
             Reply::Stats(s) => Ok(s),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -683,7 +679,7 @@ impl Client {
                 latency_us,
                 round_trip_us,
             }),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -716,7 +712,7 @@ impl Client {
     pub fn logging(&self) -> Result<(Option<String>, Vec<String>), ClientError> {
         match self.request(&Request::Logging)? {
             Reply::Logging { file, io_skills } => Ok((file, io_skills)),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+            other => Err(ClientError::Unexpected(Box::new(other))),
         }
     }
 
@@ -725,10 +721,7 @@ impl Client {
     pub fn subscribe(&self) -> Result<(), ClientError> {
         match &self.link {
             Link::Local(l) => l.subscribe(),
-            Link::Remote(r) => r
-                .lock()
-                .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
-                .subscribe(),
+            Link::Remote(r) => r.lock().map_err(|_| ClientError::Poisoned)?.subscribe(),
         }
     }
 
@@ -738,13 +731,13 @@ impl Client {
             Link::Local(l) => l.next_event(timeout)?,
             Link::Remote(r) => r
                 .get_mut()
-                .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
+                .map_err(|_| ClientError::Poisoned)?
                 .next_event(timeout)?,
         };
         let Some(bytes) = bytes else {
             return Ok(None);
         };
-        let ev = control::decode_event(&bytes).map_err(|e| ClientError::Decode(e.to_string()))?;
+        let ev = control::decode_event(&bytes).map_err(ClientError::Decode)?;
         if self.last_seq != 0 && ev.seq > self.last_seq + 1 {
             self.lost += ev.seq - self.last_seq - 1;
         }
@@ -765,10 +758,7 @@ impl Client {
                     None => Ok(Vec::new()),
                 }
             }
-            Link::Remote(r) => r
-                .get_mut()
-                .map_err(|_| ClientError::Unexpected("client poisoned".into()))?
-                .log_lines(),
+            Link::Remote(r) => r.get_mut().map_err(|_| ClientError::Poisoned)?.log_lines(),
         }
     }
 

@@ -49,12 +49,17 @@ pub enum RemoteFailure {
     /// The manager did not answer in time (ms).
     #[error("no answer from the manager within {0} ms")]
     Timeout(u64),
-    /// Anything else, as text.
-    #[error("{0}")]
-    Other(String),
+    /// The bridge's worker for this client stopped (it panicked); the next request gets a
+    /// new one.
+    #[error("the bridge's worker for this client failed")]
+    WorkerFailed,
     /// Every place on the manager's control plane stayed taken (how many it serves).
     #[error("the manager serves at most {0} clients at once and none left")]
     Full(u32),
+    /// The bridge's own client of the manager failed (shared memory, or an answer it could
+    /// not read); the bridge's log says how.
+    #[error("the bridge could not reach its manager (see the bridge's log)")]
+    BridgeClient,
 }
 
 /// Wall-clock time in ns since the Unix epoch (one-way latency between hosts needs a shared

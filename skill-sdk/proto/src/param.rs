@@ -128,7 +128,7 @@ pub struct ParamSpec {
 }
 
 /// Why a parameter value was refused.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
 #[non_exhaustive]
 pub enum ParamError {
     /// No parameter of that name.

@@ -149,16 +149,100 @@ pub fn decode_message(schema: &MessageSchema, bytes: &[u8]) -> Option<Value> {
         .map(Value::Struct)
 }
 
-/// Why a field path does not fit a schema.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{reason}")]
-pub struct PathError {
-    /// What is wrong, naming the offending part.
-    pub reason: String,
-}
-
-fn perr(reason: String) -> PathError {
-    PathError { reason }
+/// Why a value path does not name a value: each variant names the offending part. Sent to
+/// clients as is (a `query` or a monitor refused).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum PathError {
+    /// Not of the form `skill.output[.field][index]`.
+    #[error("'{text}' is not skill.output[.field][index]")]
+    NotAnOutputPath {
+        /// As given.
+        text: String,
+    },
+    /// The skill has no output of that name.
+    #[error("skill '{skill}' has no output '{output}' (outputs: {})", outputs.join(", "))]
+    NoOutput {
+        /// The skill.
+        skill: String,
+        /// The output asked for.
+        output: String,
+        /// Its outputs.
+        outputs: Vec<String>,
+    },
+    /// Something after a range `[a..b]`.
+    #[error("nothing may follow a range in '{path}'")]
+    AfterRange {
+        /// The field path.
+        path: String,
+    },
+    /// A `[` with no `]`.
+    #[error("missing ']' in '{path}'")]
+    UnclosedIndex {
+        /// The field path.
+        path: String,
+    },
+    /// An index on something that is not an array.
+    #[error("'{path}': [{index}] indexes something that is not an array")]
+    NotAnArray {
+        /// The field path.
+        path: String,
+        /// The index as written.
+        index: String,
+    },
+    /// An index that is not a number.
+    #[error("'{path}': '{index}' is not an index")]
+    NotAnIndex {
+        /// The field path.
+        path: String,
+        /// The index as written.
+        index: String,
+    },
+    /// An index or range past the array's end.
+    #[error("'{path}': index {index} is out of bounds (length {len})")]
+    OutOfBounds {
+        /// The field path.
+        path: String,
+        /// The index or range as written.
+        index: String,
+        /// The array's length.
+        len: u32,
+    },
+    /// A field name on something that has no fields.
+    #[error("'{path}': '{field}' is a field of something that has none")]
+    NotAStruct {
+        /// The field path.
+        path: String,
+        /// The field asked for.
+        field: String,
+    },
+    /// A field the message does not have.
+    #[error("{type_name} has no field '{field}' (fields: {})", fields.join(", "))]
+    NoField {
+        /// The message type.
+        type_name: String,
+        /// The field asked for.
+        field: String,
+        /// Its fields.
+        fields: Vec<String>,
+    },
+    /// A single value was needed and the path names several.
+    #[error("names more than one number: use min() or max(), or index it")]
+    NotOneNumber,
+    /// `min()`/`max()` of something that is not numbers.
+    #[error("min()/max() need an array or a range of numbers")]
+    NotNumbers,
+    /// A channel query names something other than its command.
+    #[error("a channel has '.command[.field]' and nothing else")]
+    NotACommand,
+    /// No channel of that name has been arbitrated.
+    #[error("no channel '{channel}' has been arbitrated (channels: {})", channels.join(", "))]
+    NoChannel {
+        /// The channel asked for.
+        channel: String,
+        /// The channels arbitrated so far.
+        channels: Vec<String>,
+    },
 }
 
 /// A reference to a value of a skill's output, `skill.output[.field][index]`: the one parser
@@ -180,7 +264,9 @@ impl OutputPath {
     /// that needs the output's schema ([`resolve`]).
     pub fn parse(text: &str) -> Result<OutputPath, PathError> {
         let text = text.trim();
-        let bad = || perr(format!("'{text}' is not skill.output[.field][index]"));
+        let bad = || PathError::NotAnOutputPath {
+            text: text.to_string(),
+        };
         let (skill, rest) = text.split_once('.').ok_or_else(bad)?;
         let split = rest.find(['.', '[']).unwrap_or(rest.len());
         let (output, field) = (&rest[..split], &rest[split..]);
@@ -233,23 +319,27 @@ pub fn resolve(schema: &MessageSchema, path: &str) -> Result<FieldPath, PathErro
     let mut rest = path.trim();
     while !rest.is_empty() {
         if count.is_some() {
-            return Err(perr(format!("nothing may follow a range in '{path}'")));
+            return Err(PathError::AfterRange { path: path.into() });
         }
         if let Some(r) = rest.strip_prefix('[') {
             let end = r
                 .find(']')
-                .ok_or_else(|| perr(format!("missing ']' in '{path}'")))?;
+                .ok_or_else(|| PathError::UnclosedIndex { path: path.into() })?;
             let inside = r[..end].trim();
             rest = &r[end + 1..];
             let FieldKind::Array { elem, len } = kind else {
-                return Err(perr(format!(
-                    "'{path}': [{inside}] indexes something that is not an array"
-                )));
+                return Err(PathError::NotAnArray {
+                    path: path.into(),
+                    index: inside.into(),
+                });
             };
             let num = |s: &str| {
                 s.trim()
                     .parse::<usize>()
-                    .map_err(|_| perr(format!("'{path}': '{s}' is not an index")))
+                    .map_err(|_| PathError::NotAnIndex {
+                        path: path.into(),
+                        index: s.trim().into(),
+                    })
             };
             let (a, b) = if let Some((a, b)) = inside.split_once("..=") {
                 (num(a)?, num(b)? + 1)
@@ -260,9 +350,11 @@ pub fn resolve(schema: &MessageSchema, path: &str) -> Result<FieldPath, PathErro
                 (i, i + 1)
             };
             if a >= b || b > len as usize {
-                return Err(perr(format!(
-                    "'{path}': index {inside} is out of bounds (length {len})"
-                )));
+                return Err(PathError::OutOfBounds {
+                    path: path.into(),
+                    index: inside.into(),
+                    len,
+                });
             }
             offset += a * kind_size(&elem);
             if inside.contains("..") {
@@ -275,18 +367,20 @@ pub fn resolve(schema: &MessageSchema, path: &str) -> Result<FieldPath, PathErro
             let name = &r[..end];
             rest = &r[end..];
             let FieldKind::Struct(s) = &kind else {
-                return Err(perr(format!(
-                    "'{path}': '{name}' is a field of something that has none"
-                )));
+                return Err(PathError::NotAStruct {
+                    path: path.into(),
+                    field: name.into(),
+                });
             };
-            let f = s.fields.iter().find(|f| f.name == name).ok_or_else(|| {
-                let names: Vec<&str> = s.fields.iter().map(|f| f.name.as_str()).collect();
-                perr(format!(
-                    "{} has no field '{name}' (fields: {})",
-                    s.type_name,
-                    names.join(", ")
-                ))
-            })?;
+            let f = s
+                .fields
+                .iter()
+                .find(|f| f.name == name)
+                .ok_or_else(|| PathError::NoField {
+                    type_name: s.type_name.clone(),
+                    field: name.into(),
+                    fields: s.fields.iter().map(|f| f.name.clone()).collect(),
+                })?;
             offset += f.offset as usize;
             kind = f.ty.clone();
         }
@@ -373,15 +467,23 @@ mod tests {
     }
 
     #[test]
-    fn bad_paths_say_why() {
+    fn bad_paths_say_why_as_values_a_client_can_match() {
         let s = Outer::schema();
-        let e = |p: &str| resolve(&s, p).unwrap_err().reason;
-        assert!(e("nope").contains("no field 'nope'"));
-        assert!(e("range[4]").contains("out of bounds"));
-        assert!(e("id[0]").contains("not an array"));
-        assert!(e("range[x]").contains("not an index"));
-        assert!(e("range[0..2].y").contains("nothing may follow"));
-        assert!(e("range[1").contains("missing ']'"));
+        let e = |p: &str| resolve(&s, p).unwrap_err();
+        assert!(matches!(e("nope"), PathError::NoField { field, .. } if field == "nope"));
+        assert!(e("nope").to_string().contains("no field 'nope'"));
+        assert!(matches!(
+            e("range[4]"),
+            PathError::OutOfBounds { len: 4, .. }
+        ));
+        assert!(matches!(e("id[0]"), PathError::NotAnArray { .. }));
+        assert!(matches!(e("range[x]"), PathError::NotAnIndex { index, .. } if index == "x"));
+        assert!(matches!(e("range[0..2].y"), PathError::AfterRange { .. }));
+        assert!(e("range[1").to_string().contains("missing ']'"));
+        // On the wire and back, unchanged.
+        let err = e("nope");
+        let bytes = postcard::to_allocvec(&err).unwrap();
+        assert_eq!(postcard::from_bytes::<PathError>(&bytes).unwrap(), err);
     }
 
     #[test]

@@ -159,12 +159,12 @@ pub fn decode_request(bytes: &[u8]) -> Result<RequestEnvelope, ControlError> {
     // The version is the envelope's first field: read it alone so that a client of another
     // version gets a version error rather than a decoding error.
     let (version, _): (u16, _) =
-        postcard::take_from_bytes(bytes).map_err(|e| ControlError::Malformed(e.to_string()))?;
+        postcard::take_from_bytes(bytes).map_err(ControlError::Malformed)?;
     if version != PROTOCOL_VERSION {
         return Err(ControlError::Version {
             client: version,
             manager: PROTOCOL_VERSION,
         });
     }
-    postcard::from_bytes(bytes).map_err(|e| ControlError::Malformed(e.to_string()))
+    postcard::from_bytes(bytes).map_err(ControlError::Malformed)
 }

@@ -2,7 +2,7 @@
 
 use crate::decl::Mode;
 use crate::param::{ParamError, ParamSpec, ParamValue};
-use crate::value::Value;
+use crate::value::{PathError, Value};
 use serde::{Deserialize, Serialize};
 
 use super::MonitorMode;
@@ -241,7 +241,8 @@ pub enum MonitorFate {
     Gone,
 }
 
-/// Why a request was refused. Every variant names what was wrong.
+/// Why a request was refused. Every variant names what was wrong and is a value a client can
+/// match; the text is made from it where it is shown.
 #[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
 #[non_exhaustive]
 pub enum ControlError {
@@ -254,15 +255,17 @@ pub enum ControlError {
         /// Skill instance.
         skill: String,
         /// Why.
-        error: ParamErrorText,
+        #[source]
+        error: ParamError,
     },
     /// A value path that does not resolve.
-    #[error("bad path '{path}': {reason}")]
+    #[error("bad path '{path}': {error}")]
     BadPath {
         /// As given.
         path: String,
         /// Why.
-        reason: String,
+        #[source]
+        error: PathError,
     },
     /// Nothing has been published at that path yet.
     #[error("no value yet at '{0}'")]
@@ -276,6 +279,7 @@ pub enum ControlError {
         /// As given.
         expr: String,
         /// Where and why.
+        #[source]
         error: ExprError,
     },
     /// No monitor with that id.
@@ -290,22 +294,66 @@ pub enum ControlError {
         manager: u16,
     },
     /// The request bytes do not decode.
-    #[error("malformed request: {0}")]
-    Malformed(String),
-    /// Something the request needs is not possible now.
-    #[error("{0}")]
-    Refused(String),
-}
-
-/// A parameter error as text that survives encoding.
-#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
-#[error("{0}")]
-pub struct ParamErrorText(pub String);
-
-impl From<ParamError> for ParamErrorText {
-    fn from(e: ParamError) -> Self {
-        ParamErrorText(e.to_string())
-    }
+    #[error("malformed request")]
+    Malformed(#[source] postcard::Error),
+    /// A request larger than the manager reads.
+    #[error("a request of {bytes} bytes (at most {max})")]
+    RequestTooLarge {
+        /// Its encoded size.
+        bytes: usize,
+        /// [`MAX_REQUEST_BYTES`].
+        max: usize,
+    },
+    /// An answer larger than an answer may be (a query of a whole large message).
+    #[error(
+        "the answer is {bytes} bytes, more than the {max} an answer may have: ask for a field \
+         or a range of it"
+    )]
+    AnswerTooLarge {
+        /// Its encoded size.
+        bytes: usize,
+        /// [`MAX_ANSWER_BYTES`].
+        max: usize,
+    },
+    /// A recording asked of a file not named `*.mcap`.
+    #[error("a recording is an MCAP file: {file} does not end in .mcap")]
+    NotMcap {
+        /// The file asked for.
+        file: String,
+    },
+    /// The recording's file cannot be created or written.
+    #[error("cannot record to {file}{}", os_error.map(|e| format!(": {}", std::io::Error::from_raw_os_error(e))).unwrap_or_default())]
+    CannotRecord {
+        /// The file asked for.
+        file: String,
+        /// The operating system's error number, if there is one.
+        os_error: Option<i32>,
+    },
+    /// `record stop` with no recording running.
+    #[error("no recording in progress")]
+    NotRecording,
+    /// I/O logging asked of a manager whose fabric log file could not be opened.
+    #[error("the manager has no fabric log file (see its start-up warning)")]
+    NoFabricLog,
+    /// A proposer's proposals asked for while it restarts.
+    #[error("'{skill}' is restarting: its proposals can be read once it is back")]
+    SkillAway {
+        /// The skill.
+        skill: String,
+    },
+    /// The manager could not open or poll a reader of the topic (iceoryx2 refused; the
+    /// manager's log says why).
+    #[error("the manager cannot read topic '{topic}' (see its log)")]
+    CannotRead {
+        /// The topic.
+        topic: String,
+    },
+    /// The manager could not hand the skill its new parameters (the manager's log says why).
+    #[error("the manager cannot write the parameters of '{skill}' (see its log)")]
+    CannotWriteParams {
+        /// The skill.
+        skill: String,
+    },
 }
 
 /// `text` cut to at most `max` characters for an error message (a client's 1 MB string is
@@ -331,28 +379,113 @@ pub type Response = Result<Reply, ControlError>;
 
 /// A syntax or type error in a monitor expression, with the byte position it was found at.
 #[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
-#[error("at {position}: {message}")]
+#[error("at {position}: {problem}")]
 pub struct ExprError {
     /// Byte offset into the expression.
     pub position: usize,
     /// What is wrong.
-    pub message: String,
+    pub problem: ExprProblem,
+}
+
+/// What is wrong in a monitor expression.
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum ExprProblem {
+    /// More than [`ExprProblem::MAX_LEN`] bytes.
+    #[error("expression longer than {max} bytes")]
+    TooLong {
+        /// The longest accepted.
+        max: usize,
+    },
+    /// Deeper than the parser goes.
+    #[error("more than {max} {what}")]
+    TooDeep {
+        /// What nests: "parentheses", "'not'/'-' operators".
+        what: String,
+        /// The most accepted.
+        max: usize,
+    },
+    /// A number that does not parse.
+    #[error("bad number '{text}'")]
+    BadNumber {
+        /// As written.
+        text: String,
+    },
+    /// A `[` with no `]`.
+    #[error("missing ']'")]
+    UnclosedIndex,
+    /// A character the language does not use.
+    #[error("unexpected character '{ch}'")]
+    UnexpectedChar {
+        /// The character.
+        ch: char,
+    },
+    /// A token where none may be.
+    #[error("unexpected '{token}'")]
+    UnexpectedToken {
+        /// The token.
+        token: String,
+    },
+    /// The expression stops in the middle.
+    #[error("expression ends too early")]
+    EndsEarly,
+    /// Text after a complete expression.
+    #[error("unexpected text after the expression")]
+    TrailingText,
+    /// A `(` with no `)`.
+    #[error("expected ')'")]
+    UnclosedParen,
+    /// `min`/`max` without its parenthesis.
+    #[error("expected '(' after {function}")]
+    CallWithoutParen {
+        /// `min` or `max`.
+        function: String,
+    },
+    /// `min(…)`/`max(…)` of something other than one path.
+    #[error("{function}() takes one path, e.g. {function}(skill.output.field[0..3])")]
+    CallWithoutPath {
+        /// `min` or `max`.
+        function: String,
+    },
+    /// A word that is not a value.
+    #[error("'{word}' is not a value: write skill.output[.field]")]
+    NotAValue {
+        /// The word.
+        word: String,
+    },
+    /// A path that does not parse.
+    #[error(transparent)]
+    Path(#[from] PathError),
+    /// An operand of the wrong type.
+    #[error("{operator} needs a {}", if *number { "number" } else { "condition" })]
+    WrongOperand {
+        /// The operator: "'-'", "arithmetic", "a comparison", "'and'/'or'", "'not'".
+        operator: String,
+        /// A number was needed (else a condition).
+        number: bool,
+    },
+    /// The whole expression is a number, not a condition.
+    #[error("a monitor needs a condition, e.g. 'x.y.z < 3'")]
+    NotACondition,
+}
+
+impl ExprProblem {
+    /// The longest expression accepted (bytes).
+    pub const MAX_LEN: usize = 4096;
 }
 
 /// Encodes a response; one over [`MAX_ANSWER_BYTES`] becomes an error answer saying so.
 pub fn encode_response(response: &Response) -> Vec<u8> {
-    let error = |text: String| {
-        postcard::to_allocvec(&Response::Err(ControlError::Refused(text))).unwrap_or_default()
-    };
-    // Encoding into a Vec of plain data cannot fail; fall back to an error reply anyway.
+    // Encoding into a Vec of plain data cannot fail; an empty answer would not decode and
+    // the client would say so.
     match postcard::to_allocvec(response) {
         Ok(b) if b.len() <= MAX_ANSWER_BYTES => b,
-        Ok(b) => error(format!(
-            "the answer is {} bytes, more than the {MAX_ANSWER_BYTES} an answer may have: \
-             ask for a field or a range of it",
-            b.len()
-        )),
-        Err(e) => error(format!("encoding reply: {e}")),
+        Ok(b) => postcard::to_allocvec(&Response::Err(ControlError::AnswerTooLarge {
+            bytes: b.len(),
+            max: MAX_ANSWER_BYTES,
+        }))
+        .unwrap_or_default(),
+        Err(_) => Vec::new(),
     }
 }
 

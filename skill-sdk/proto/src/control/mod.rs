@@ -18,7 +18,7 @@ pub use manager_to_client::*;
 use crate::schema::MessageSchema;
 
 /// Version of this protocol; bumped on any incompatible change.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// The declared type names of a skill's schema, for lists.
 pub fn type_name(schema: &MessageSchema) -> String {

@@ -235,14 +235,10 @@ impl ControlPlane {
         if expired.is_empty() {
             return;
         }
-        let before = m.monitors.len();
-        m.monitors.retain(|mon| !expired.contains(&mon.client));
-        if m.monitors.len() != before {
+        let removed = m.monitors.remove_clients(&expired);
+        if removed > 0 {
             m.state_check = true;
-            tracing::info!(
-                removed = before - m.monitors.len(),
-                "monitors of departed clients removed"
-            );
+            tracing::info!(removed, "monitors of departed clients removed");
         }
     }
 }

@@ -3,8 +3,8 @@
 use super::query::check_numeric;
 use super::*;
 use crate::monitors::expr;
-use crate::monitors::{Monitor, Resolved};
-use skillfab_proto::control::{MonitorFate, MonitorMode};
+use crate::monitors::Resolved;
+use skillfab_proto::control::MonitorMode;
 
 impl Manager {
     /// Parses and type-checks a monitor expression against the outputs it reads; installs it.
@@ -35,44 +35,21 @@ impl Manager {
                 slot,
             });
         }
-        let id = self.next_monitor;
-        self.next_monitor += 1;
-        self.monitors.push(Monitor::new(
-            id,
-            expr,
-            parsed,
-            mode,
-            hold,
-            client.to_string(),
-            paths,
-        ));
+        let id = self
+            .monitors
+            .install(client, expr, parsed, mode, hold, paths);
         Ok(Reply::MonitorAdded(id))
     }
 
     /// Hands monitors over to `client` (a restarted plan runner taking its predecessor's):
     /// what became of each.
     pub(super) fn adopt_monitors(&mut self, client: &str, ids: &[u64]) -> Response {
-        let fates = ids
-            .iter()
-            .map(|id| {
-                if let Some(m) = self.monitors.iter_mut().find(|m| m.id == *id) {
-                    m.client = client.to_string();
-                    MonitorFate::Live
-                } else if let Some((_, cycle)) = self.fired_once.iter().find(|(i, _)| i == id) {
-                    MonitorFate::Fired(*cycle)
-                } else {
-                    MonitorFate::Gone
-                }
-            })
-            .collect();
-        Ok(Reply::Adopted(fates))
+        Ok(Reply::Adopted(self.monitors.adopt(client, ids)))
     }
 
     /// Removes one of the monitors.
     pub(super) fn remove_monitor(&mut self, id: u64) -> Response {
-        let before = self.monitors.len();
-        self.monitors.retain(|m| m.id != id);
-        if self.monitors.len() == before {
+        if !self.monitors.remove(id) {
             return Err(ControlError::UnknownMonitor(id));
         }
         Ok(Reply::Done)

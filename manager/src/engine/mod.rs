@@ -24,7 +24,7 @@ pub use record::{RecordError, RecordSpec};
 
 use crate::control::ControlPlane;
 use crate::graph::{self, Plan, PlanNode};
-use crate::monitors::Monitor;
+use crate::monitors::Monitors;
 use crate::recorder::{IoSample, Recorder};
 use crate::stats::{CycleStats, Report, SkillReport};
 use iceoryx2::node::{Node, NodeView};
@@ -44,9 +44,6 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-
-/// How many fired `Once` monitors the manager remembers for [`Manager::fired_once`].
-pub(crate) const FIRED_KEPT: usize = 4096;
 
 /// How often the manager checks that registered processes are alive (and its longest sleep).
 /// A sync skill that dies mid-cycle is also found when the cycle's deadline passes; each
@@ -240,12 +237,8 @@ pub struct Manager {
     last_node_sweep: Instant,
     /// Events to publish at the end of this loop iteration.
     pub(crate) outbox: Vec<EventKind>,
-    /// Installed monitors.
-    pub(crate) monitors: Vec<Monitor>,
-    pub(crate) next_monitor: u64,
-    /// The `Once` monitors that fired and were removed, with their cycle, newest last (at
-    /// most [`FIRED_KEPT`]): a restarted plan runner asks what became of its monitors.
-    pub(crate) fired_once: std::collections::VecDeque<(u64, u64)>,
+    /// Installed monitors, and the `Once` ones that fired.
+    pub(crate) monitors: Monitors,
     /// The processes `skillfab up` gave up restarting and that have not registered since.
     pub(crate) gave_up: std::collections::BTreeMap<String, skillfab_proto::control::GaveUpInfo>,
     /// Untyped readers of topics that monitors and queries read.
@@ -346,9 +339,7 @@ impl Manager {
             next_start: now,
             stop_at: None,
             outbox: Vec::new(),
-            monitors: Vec::new(),
-            next_monitor: 1,
-            fired_once: std::collections::VecDeque::new(),
+            monitors: Monitors::default(),
             gave_up: std::collections::BTreeMap::new(),
             readers: HashMap::new(),
             control: Some(control),

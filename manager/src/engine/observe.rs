@@ -108,12 +108,7 @@ impl Manager {
     /// its owner reacts and resumes (`run`, `step`), so what a sequencer does in reaction
     /// lands in the same cycle every run.
     pub(super) fn evaluate_monitors(&mut self) {
-        let topics: HashSet<String> = self
-            .monitors
-            .iter()
-            .flat_map(|m| m.paths.iter().map(|p| p.topic.clone()))
-            .collect();
-        for t in &topics {
+        for t in &self.monitors.topics() {
             if let Some(r) = self.readers.get_mut(t)
                 && let Err(e) = r.poll()
             {
@@ -121,52 +116,19 @@ impl Manager {
             }
         }
         let readers = &self.readers;
-        let read = |r: &crate::monitors::Resolved| {
-            let (bytes, _) = readers.get(&r.topic)?.latest_of(r.slot)?;
-            r.field.read(bytes)
-        };
-        let mut fired = false;
-        for m in &mut self.monitors {
-            if let Some(values) = m.step(&read) {
-                fired = true;
-                let stamp_ns = m
-                    .paths
-                    .iter()
-                    .filter_map(|p| {
-                        readers
-                            .get(&p.topic)?
-                            .latest_of(p.slot)
-                            .map(|(_, h)| h.stamp_ns)
-                    })
-                    .max()
-                    .unwrap_or(0);
-                self.outbox.push(EventKind::MonitorFired {
-                    id: m.id,
-                    client: m.client.clone(),
-                    expr: m.text.clone(),
-                    values,
-                    stamp_ns,
-                });
-            }
-        }
-        if fired && matches!(self.config.pace, Pace::LockStep(_)) {
+        let latest = |r: &crate::monitors::Resolved| readers.get(&r.topic)?.latest_of(r.slot);
+        let value = |r: &crate::monitors::Resolved| r.field.read(latest(r)?.0);
+        let stamp = |r: &crate::monitors::Resolved| latest(r).map(|(_, h)| h.stamp_ns);
+        let before = self.monitors.len();
+        let fired = self.monitors.evaluate(self.cycle, &value, &stamp);
+        if !fired.is_empty() && matches!(self.config.pace, Pace::LockStep(_)) {
             self.set_paused(true);
             // A `step` in progress ends here too (its answer says at which cycle): its client
             // reacts to the firing first.
             self.stop_at = None;
         }
-        let before = self.monitors.len();
-        let cycle = self.cycle;
-        let spent = &mut self.fired_once;
-        self.monitors.retain(|m| {
-            if m.spent() {
-                spent.push_back((m.id, cycle));
-            }
-            !m.spent()
-        });
-        while spent.len() > FIRED_KEPT {
-            spent.pop_front();
-        }
+        // A `Once` monitor that fired is gone from the state file.
         self.state_check |= self.monitors.len() != before;
+        self.outbox.extend(fired);
     }
 }

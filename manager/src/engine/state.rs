@@ -112,7 +112,7 @@ impl Manager {
                     client: m.client.clone(),
                 })
                 .collect(),
-            next_monitor: self.next_monitor,
+            next_monitor: self.monitors.next_id(),
             paused: self.paused,
         }
     }
@@ -153,12 +153,13 @@ impl Manager {
         self.paused = saved.paused;
         let mut lost = Vec::new();
         for m in saved.monitors {
-            self.next_monitor = m.id;
+            self.monitors.set_next_id(m.id);
             if let Err(e) = self.add_monitor(&m.client, m.text.clone(), m.mode, m.hold) {
                 lost.push(format!("{} ({e})", m.text));
             }
         }
-        self.next_monitor = saved.next_monitor.max(self.next_monitor);
+        let next = saved.next_monitor.max(self.monitors.next_id());
+        self.monitors.set_next_id(next);
         if !lost.is_empty() {
             tracing::warn!(lost = ?lost, "monitors not restored");
         }

@@ -2,11 +2,164 @@
 //! cycle, that push an event when they fire (the paper's "send an asynchronous event back when
 //! the front sonar reads < 10 inches").
 
-use skillfab_proto::control::{MonitorInfo, MonitorMode};
+use skillfab_proto::control::{EventKind, MonitorFate, MonitorInfo, MonitorMode};
 pub mod expr;
 
 use expr::{Expr, PathRef};
 use skillfab_proto::value::{FieldPath, Value};
+use std::collections::{HashSet, VecDeque};
+
+/// How many fired `Once` monitors [`Monitors`] remembers, for a restarted plan runner asking
+/// what became of its monitors ([`Monitors::adopt`]).
+pub const FIRED_KEPT: usize = 4096;
+
+/// The installed monitors: their ids, their owners, and the `Once` monitors that fired and
+/// were removed. Pure bookkeeping: what they read is handed to [`Monitors::evaluate`].
+#[derive(Debug)]
+pub struct Monitors {
+    /// Installed, oldest first.
+    list: Vec<Monitor>,
+    /// The id the next one gets.
+    next_id: u64,
+    /// `Once` monitors that fired and were removed, with their cycle, newest last (at most
+    /// [`FIRED_KEPT`]).
+    fired_once: VecDeque<(u64, u64)>,
+}
+
+impl Default for Monitors {
+    fn default() -> Self {
+        Monitors {
+            list: Vec::new(),
+            next_id: 1,
+            fired_once: VecDeque::new(),
+        }
+    }
+}
+
+impl Monitors {
+    /// Installs a monitor of `client` on a parsed, resolved condition; returns its id.
+    pub fn install(
+        &mut self,
+        client: &str,
+        text: String,
+        expr: Expr,
+        mode: MonitorMode,
+        hold: u32,
+        paths: Vec<Resolved>,
+    ) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        self.list.push(Monitor::new(
+            id,
+            text,
+            expr,
+            mode,
+            hold,
+            client.to_string(),
+            paths,
+        ));
+        id
+    }
+
+    /// The id the next monitor gets, and setting it (a manager taking over a predecessor's
+    /// monitors installs them under their old ids).
+    pub fn next_id(&self) -> u64 {
+        self.next_id
+    }
+
+    /// See [`Monitors::next_id`].
+    pub fn set_next_id(&mut self, id: u64) {
+        self.next_id = id;
+    }
+
+    /// Hands monitors over to `client` (a restarted plan runner taking its predecessor's):
+    /// what became of each.
+    pub fn adopt(&mut self, client: &str, ids: &[u64]) -> Vec<MonitorFate> {
+        ids.iter()
+            .map(|id| {
+                if let Some(m) = self.list.iter_mut().find(|m| m.id == *id) {
+                    m.client = client.to_string();
+                    MonitorFate::Live
+                } else if let Some((_, cycle)) = self.fired_once.iter().find(|(i, _)| i == id) {
+                    MonitorFate::Fired(*cycle)
+                } else {
+                    MonitorFate::Gone
+                }
+            })
+            .collect()
+    }
+
+    /// Removes monitor `id`; whether it was installed.
+    pub fn remove(&mut self, id: u64) -> bool {
+        let before = self.list.len();
+        self.list.retain(|m| m.id != id);
+        self.list.len() != before
+    }
+
+    /// Removes the monitors of `clients`; how many.
+    pub fn remove_clients(&mut self, clients: &HashSet<String>) -> usize {
+        let before = self.list.len();
+        self.list.retain(|m| !clients.contains(&m.client));
+        before - self.list.len()
+    }
+
+    /// The installed monitors, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &Monitor> {
+        self.list.iter()
+    }
+
+    /// Whether none is installed.
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+
+    /// How many are installed.
+    pub fn len(&self) -> usize {
+        self.list.len()
+    }
+
+    /// The topics the monitors read.
+    pub fn topics(&self) -> HashSet<String> {
+        self.list
+            .iter()
+            .flat_map(|m| m.paths.iter().map(|p| p.topic.clone()))
+            .collect()
+    }
+
+    /// Evaluates every monitor on the newest samples at the end of `cycle` (`value` gives the
+    /// value at a resolved path, `stamp` the stamp of the sample it is read from): the events
+    /// of those that fired. `Once` monitors that fired are removed and remembered.
+    pub fn evaluate(
+        &mut self,
+        cycle: u64,
+        value: &dyn Fn(&Resolved) -> Option<Value>,
+        stamp: &dyn Fn(&Resolved) -> Option<u64>,
+    ) -> Vec<EventKind> {
+        let mut events = Vec::new();
+        for m in &mut self.list {
+            if let Some(values) = m.step(value) {
+                events.push(EventKind::MonitorFired {
+                    id: m.id,
+                    client: m.client.clone(),
+                    expr: m.text.clone(),
+                    values,
+                    stamp_ns: m.paths.iter().filter_map(stamp).max().unwrap_or(0),
+                });
+            }
+        }
+        let spent = &mut self.fired_once;
+        self.list.retain(|m| {
+            if m.spent() {
+                spent.push_back((m.id, cycle));
+            }
+            !m.spent()
+        });
+        while spent.len() > FIRED_KEPT {
+            spent.pop_front();
+        }
+        events
+    }
+}
 
 /// A path of a monitor, resolved against its message schema.
 #[derive(Debug, Clone)]

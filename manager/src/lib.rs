@@ -9,8 +9,8 @@
 //!   (`cycle.rs`), registration and liveness (`registry.rs`), end-of-cycle reads (`observe.rs`).
 //! - [`graph`]: wiring checks and the per-cycle plan, pure.
 //! - [`control`]: the control plane (requests, events), one file per family of requests;
-//!   [`monitors`]: conditions on live
-//!   outputs, with their expression language.
+//!   [`monitors`]: conditions on live outputs — the installed ones and their bookkeeping
+//!   ([`monitors::Monitors`]), and their expression language.
 //! - [`stats`]: latency percentiles and the run report.
 //! - [`recorder`]: the fabric log (parameter changes, I/O samples) as JSON lines or MCAP.
 //! - [`launch`]: launch files, parsed then validated; [`up`]: a manager plus supervised

@@ -278,6 +278,7 @@ fn tell_gave_up(domain: &Domain, process: &str, restarts: u32, status: &str) {
             if let Some(answer) = pending.receive().map_err(|e| format!("receive: {e:?}"))? {
                 return control::decode_response(answer.payload())
                     .map_err(|e| e.to_string())?
+                    .1
                     .map(|_| ())
                     .map_err(|e| e.to_string());
             }

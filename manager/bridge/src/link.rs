@@ -200,7 +200,7 @@ impl RemoteLink for Remote {
         };
         match reply.result() {
             Ok(sample) => {
-                let response = control::decode_response(&sample.payload().to_bytes())
+                let (_, response) = control::decode_response(&sample.payload().to_bytes())
                     .map_err(ClientError::Decode)?;
                 Ok(response?)
             }

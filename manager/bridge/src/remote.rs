@@ -110,7 +110,8 @@ struct Worker {
 }
 
 fn reply(query: &Query, response: &Response) {
-    let bytes = control::encode_response(response);
+    // A Zenoh reply belongs to its query: no request number needed.
+    let bytes = control::encode_response(0, response);
     if let Err(e) = query.reply(query.key_expr().clone(), bytes).wait() {
         tracing::warn!(error = %e, "remote answer not sent");
     }

@@ -148,7 +148,8 @@ impl ClientSide {
                         response,
                     } => {
                         if let Some((req, from)) = self.pending.remove(&id) {
-                            let bytes = control::encode_response(&response);
+                            let seq = from.as_ref().map_or(0, |(_, seq)| *seq);
+                            let bytes = control::encode_response(seq, &response);
                             self.send_answer(&req, client.as_deref(), &bytes);
                             if let Some((client, seq)) = from {
                                 self.in_flight.remove(&(client.clone(), seq));

@@ -2,8 +2,8 @@
 
 use super::query::check_numeric;
 use super::*;
-use crate::monitors::expr;
 use crate::monitors::Resolved;
+use crate::monitors::expr;
 use skillfab_proto::control::MonitorMode;
 
 impl Manager {

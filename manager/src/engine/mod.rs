@@ -1,8 +1,9 @@
 //! The cycle engine (the paper's skill manager): registry, cycle plan, readiness, liveness.
 //!
-//! One loop on one thread, woken by its WaitSet: by skills (registration, leaving, the run
-//! that completes a cycle, a run that passed nothing on), by its own timers (period start,
-//! cycle deadline, liveness tick) and by SIGINT/SIGTERM.
+//! One loop on one thread, asleep on the board's doorbell until the next timer (period
+//! start, cycle deadline, liveness tick): rung by skills (registration, leaving, the run that
+//! completes a cycle, a run that passed nothing on) and by the control thread (a request);
+//! SIGINT/SIGTERM end the sleep too.
 //!
 //! A cycle k: the manager marks the expected sync skills on the board, arms the completion
 //! counter with their number, publishes k and wakes only the sources (skills whose inputs are
@@ -173,12 +174,9 @@ pub enum ManagerError {
     /// Board, node or service set-up failed.
     #[error(transparent)]
     Sdk(#[from] SdkError),
-    /// The WaitSet failed.
-    #[error("manager wait: {detail}")]
-    Wait {
-        /// iceoryx2's error.
-        detail: String,
-    },
+    /// [`Manager::run`] was called a second time (a manager runs once).
+    #[error("the manager has run already: a manager runs once")]
+    RanAlready,
     /// The recording asked for cannot be written.
     #[error("recording")]
     Record(#[from] RecordError),
@@ -372,9 +370,7 @@ impl Manager {
     /// Runs until SIGINT/SIGTERM, until `stop(cycles_done)` returns true, or until
     /// `max_cycles` cycles are done; returns the report of the run.
     pub fn run(&mut self, stop: &dyn Fn(u64) -> bool) -> Result<Report, ManagerError> {
-        let mut control = self.control.take().ok_or_else(|| ManagerError::Wait {
-            detail: "the manager runs once".into(),
-        })?;
+        let mut control = self.control.take().ok_or(ManagerError::RanAlready)?;
         tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
         let result = self.serve_loop(&mut control, stop);
         self.control = Some(control);

@@ -338,7 +338,7 @@ impl Client {
         }
         let patient = matches!(request, Request::Step(_));
         match &self.link {
-            Link::Local(l) => l.request(&bytes, patient, self.timeout),
+            Link::Local(l) => l.request(seq, &bytes, patient, self.timeout),
             Link::Remote(r) => {
                 // `step` waits as long as the manager lives: an hour stands for that here.
                 let timeout = if patient {
@@ -359,6 +359,7 @@ impl Local {
     /// See [`Client::request`].
     fn request(
         &self,
+        seq: u64,
         bytes: &[u8],
         patient: bool,
         timeout: Duration,
@@ -376,9 +377,14 @@ impl Local {
             if let Some(p) = &pending
                 && let Some(answer) = p.receive().map_err(|e| sdk("receive answer", e))?
             {
-                let response =
+                let (answers, response) =
                     control::decode_response(answer.payload()).map_err(ClientError::Decode)?;
-                return Ok(response?);
+                // The answer to an earlier request of this client, delivered late: not ours.
+                if answers == seq {
+                    return Ok(response?);
+                }
+                tracing::debug!(seq, answers, "a stale answer ignored");
+                continue;
             }
             if !patient && start.elapsed() > timeout {
                 return Err(ClientError::Timeout(timeout));

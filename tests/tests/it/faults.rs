@@ -138,7 +138,11 @@ fn raw_request(
     let mut answer = None;
     t.wait_until("an answer to raw bytes", || {
         if let Some(a) = pending.receive().unwrap() {
-            answer = Some(skillfab_proto::control::decode_response(a.payload()).unwrap());
+            answer = Some(
+                skillfab_proto::control::decode_response(a.payload())
+                    .unwrap()
+                    .1,
+            );
         }
         answer.is_some()
     });

@@ -474,22 +474,28 @@ impl ExprProblem {
     pub const MAX_LEN: usize = 4096;
 }
 
-/// Encodes a response; one over [`MAX_ANSWER_BYTES`] becomes an error answer saying so.
-pub fn encode_response(response: &Response) -> Vec<u8> {
+/// Encodes the response to the client's request number `seq` (0: a request that did not
+/// say); one over [`MAX_ANSWER_BYTES`] becomes an error answer saying so. The number lets a
+/// client tell its answer from a stale one: under a crowd of clients connecting at once,
+/// iceoryx2 0.10 has handed a client's new request the answer to its previous one.
+pub fn encode_response(seq: u64, response: &Response) -> Vec<u8> {
     // Encoding into a Vec of plain data cannot fail; an empty answer would not decode and
     // the client would say so.
-    match postcard::to_allocvec(response) {
+    match postcard::to_allocvec(&(seq, response)) {
         Ok(b) if b.len() <= MAX_ANSWER_BYTES => b,
-        Ok(b) => postcard::to_allocvec(&Response::Err(ControlError::AnswerTooLarge {
-            bytes: b.len(),
-            max: MAX_ANSWER_BYTES,
-        }))
+        Ok(b) => postcard::to_allocvec(&(
+            seq,
+            Response::Err(ControlError::AnswerTooLarge {
+                bytes: b.len(),
+                max: MAX_ANSWER_BYTES,
+            }),
+        ))
         .unwrap_or_default(),
         Err(_) => Vec::new(),
     }
 }
 
-/// Decodes a response.
-pub fn decode_response(bytes: &[u8]) -> Result<Response, postcard::Error> {
+/// Decodes a response: the request number it answers, and the response.
+pub fn decode_response(bytes: &[u8]) -> Result<(u64, Response), postcard::Error> {
     postcard::from_bytes(bytes)
 }

@@ -260,9 +260,13 @@ fn tell_gave_up(domain: &Domain, process: &str, restarts: u32, status: &str) {
             .allocation_strategy(iceoryx2::prelude::AllocationStrategy::Static)
             .create()
             .map_err(|e| format!("control port: {e:?}"))?;
-        // A client id is `<pid>-<n>`: this one lives as long as `up`.
+        // A client id is `<pid>-<n>`: this one lives as long as `up`, and numbers its
+        // requests (the manager answers a number it has seen from the client with the answer
+        // it gave: a second report under number 1 would be taken for a repeat of the first).
+        static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         let id = format!("{}-up", std::process::id());
-        let bytes = control::encode_request(&id, 1, &request).map_err(|e| e.to_string())?;
+        let bytes = control::encode_request(&id, seq, &request).map_err(|e| e.to_string())?;
         let pending = port
             .loan_slice_uninit(bytes.len())
             .map_err(|e| format!("loan: {e:?}"))?

@@ -58,8 +58,8 @@ impl Step {
     /// The value written to output `port`, `None` if the body did not write it.
     ///
     /// # Panics
-    /// If the skill has no output `port`, or `port` carries another type than `T`: a
-    /// misspelt name must fail the test, not pass an `is_none()` that tests nothing.
+    /// If the skill has no output `port`, or the value written is of another type than `T`:
+    /// a misspelt name must fail the test, not pass an `is_none()` that tests nothing.
     pub fn output<T: Message>(&self, port: &str) -> Option<&T> {
         let Some(i) = self.names.iter().position(|n| n == port) else {
             panic!(

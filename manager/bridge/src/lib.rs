@@ -77,13 +77,12 @@ pub struct BridgeArgs {
 #[non_exhaustive]
 pub enum BridgeError {
     /// Zenoh refused something.
-    #[error("zenoh: {what}")]
+    #[error("zenoh: {what}: {cause}")]
     Zenoh {
         /// What was being done.
         what: String,
         /// Zenoh's error.
-        #[source]
-        source: zenoh::Error,
+        cause: zenoh::Error,
     },
     /// The local fabric (iceoryx2) failed.
     #[error(transparent)]
@@ -108,7 +107,7 @@ pub enum BridgeError {
 pub(crate) fn zenoh_error(what: &str, e: zenoh::Error) -> BridgeError {
     BridgeError::Zenoh {
         what: what.to_string(),
-        source: e,
+        cause: e,
     }
 }
 

@@ -42,7 +42,7 @@ pub struct ZenohOptions {
 fn zenoh_error(what: &str, e: zenoh::Error) -> ClientError {
     ClientError::Link {
         what: format!("zenoh: {what}"),
-        source: e,
+        cause: e,
     }
 }
 

@@ -39,7 +39,8 @@ struct Cli {
 /// How to build `skillfab` with the bridge, for a build without it.
 #[cfg(not(feature = "bridge"))]
 const NO_BRIDGE: &str = "this skillfab was built without the bridge (Zenoh): build it with \
-                         `cargo build --release --features skillfab/bridge`";
+                         `cargo build --features skillfab/bridge` (and --release for a \
+                         release build)";
 
 /// Reaching a domain on another host through its bridge.
 #[derive(clap::Args, Debug, Clone)]
@@ -446,7 +447,22 @@ fn clean(domain: &Domain, all_dead: bool, json: bool) -> anyhow::Result<()> {
 fn run(cli: Cli) -> anyhow::Result<()> {
     let domain = Domain::new(&cli.domain.domain)?;
     match cli.command {
-        Cmd::Manager(_) | Cmd::Up(_) => exec_manager(),
+        Cmd::Manager(_) => exec_manager(),
+        Cmd::Up(args) => {
+            // Said once, here, rather than by a bridge process `up` would restart 5 times.
+            #[cfg(not(feature = "bridge"))]
+            if let Ok(l) = skillfab_manager::launch::Launch::load(&args.launch)
+                && l.processes.iter().any(|p| {
+                    p.program.file_name() == Some(std::ffi::OsStr::new("skillfab"))
+                        && p.args.first().map(String::as_str) == Some("bridge")
+                })
+            {
+                anyhow::bail!("{}: [bridge]: {NO_BRIDGE}", args.launch.display());
+            }
+            #[cfg(feature = "bridge")]
+            let _ = args;
+            exec_manager()
+        }
         Cmd::Ctl { json, remote, cmd } => ctl::run(remote.address(&domain)?, json, cmd),
         Cmd::Sequence {
             file,

@@ -302,7 +302,7 @@ impl Sequencer {
             match fabric.set_param_value(&o.skill, &o.param, o.before) {
                 Ok(()) => self.steps.push(what),
                 Err(FabricError::Refused(r)) => self.steps.push(format!("{what}: refused: {r}")),
-                Err(source) => return Err(SeqError::Fabric { what, source }),
+                Err(cause) => return Err(SeqError::Fabric { what, cause }),
             }
         }
         Ok(())
@@ -338,9 +338,9 @@ impl Sequencer {
         } else {
             fabric
                 .adopt_monitors(&ids)
-                .map_err(|source| SeqError::Fabric {
+                .map_err(|cause| SeqError::Fabric {
                     what: "taking over the plan's monitors".into(),
-                    source,
+                    cause,
                 })?
         };
         let (mut live, mut fired, mut gone) = (0, 0, HashSet::new());
@@ -448,9 +448,9 @@ impl Sequencer {
     /// tree ends).
     pub fn tick(&mut self, fabric: &mut dyn Fabric) -> Result<Status, SeqError> {
         if !self.asked_gave_up {
-            let listed = fabric.gave_up().map_err(|source| SeqError::Fabric {
+            let listed = fabric.gave_up().map_err(|cause| SeqError::Fabric {
                 what: "asking which processes `up` gave up on".into(),
-                source,
+                cause,
             })?;
             self.gave_up.extend(listed);
             self.asked_gave_up = true;
@@ -628,7 +628,7 @@ fn drive(
     let failed = |what: &'static str| {
         move |e: ClientError| SeqError::Fabric {
             what: what.into(),
-            source: FabricError::Failed(std::sync::Arc::new(e)),
+            cause: FabricError::Failed(std::sync::Arc::new(e)),
         }
     };
     client

@@ -77,13 +77,12 @@ pub enum SeqError {
     #[error(transparent)]
     Plan(#[from] PlanError),
     /// The fabric could not be asked.
-    #[error("{what}: {source}")]
+    #[error("{what}: {cause}")]
     Fabric {
         /// The node's step.
         what: String,
-        /// Why.
-        #[source]
-        source: FabricError,
+        /// Why (in the message).
+        cause: FabricError,
     },
 }
 
@@ -155,9 +154,9 @@ impl Cx<'_> {
                 self.step(format!("{what}: refused: {why}"));
                 Ok(None)
             }
-            Err(source) => Err(SeqError::Fabric {
+            Err(cause) => Err(SeqError::Fabric {
                 what: what.to_string(),
-                source,
+                cause,
             }),
         }
     }

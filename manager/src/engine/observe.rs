@@ -121,14 +121,16 @@ impl Manager {
         let stamp = |r: &crate::monitors::Resolved| latest(r).map(|(_, h)| h.stamp_ns);
         let before = self.monitors.len();
         let fired = self.monitors.evaluate(self.cycle, &value, &stamp);
-        if !fired.is_empty() && matches!(self.config.pace, Pace::LockStep(_)) {
+        // A `Once` monitor that fired is gone from the state file.
+        self.state_check |= self.monitors.len() != before;
+        let any = !fired.is_empty();
+        // The firings first, then the pause they cause.
+        self.outbox.extend(fired);
+        if any && matches!(self.config.pace, Pace::LockStep(_)) {
             self.set_paused(true);
             // A `step` in progress ends here too (its answer says at which cycle): its client
             // reacts to the firing first.
             self.stop_at = None;
         }
-        // A `Once` monitor that fired is gone from the state file.
-        self.state_check |= self.monitors.len() != before;
-        self.outbox.extend(fired);
     }
 }

@@ -61,9 +61,12 @@ pub enum ClientError {
     /// No answer in time.
     #[error("no answer from the manager within {0:?}")]
     Timeout(Duration),
-    /// An answer or event that does not decode, or a request that does not encode.
-    #[error("undecodable answer")]
-    Decode(#[source] postcard::Error),
+    /// An answer or event that does not decode.
+    #[error("undecodable answer: {0}")]
+    Decode(postcard::Error),
+    /// A request that does not encode.
+    #[error("the request does not encode: {0}")]
+    Encode(postcard::Error),
     /// Every place on the control plane stayed taken for as long as the client waits.
     #[error("the manager serves at most {max} clients at once and none left")]
     Full {
@@ -78,13 +81,12 @@ pub enum ClientError {
     Poisoned,
     /// The link to another host (a Zenoh session to a bridge) could not be opened or
     /// configured, or refused a request.
-    #[error("{what}")]
+    #[error("{what}: {cause}")]
     Link {
         /// What was being done.
         what: String,
         /// The link's own error.
-        #[source]
-        source: Box<dyn std::error::Error + Send + Sync>,
+        cause: Box<dyn std::error::Error + Send + Sync>,
     },
     /// No bridge of the remote domain answered (not running, not reachable, or another
     /// domain name on that host).
@@ -98,12 +100,11 @@ pub enum ClientError {
         timeout: Duration,
     },
     /// The remote domain's bridge could not carry the request out.
-    #[error("the bridge of domain '{domain}'")]
+    #[error("the bridge of domain '{domain}': {failure}")]
     Remote {
         /// The remote domain.
         domain: String,
         /// The bridge's reason.
-        #[source]
         failure: skillfab_proto::bridge::RemoteFailure,
     },
     /// The remote domain's bridge answered with a failure this client cannot read (another
@@ -328,7 +329,7 @@ impl Client {
     /// a second monitor.
     pub fn request(&self, request: &Request) -> Result<Reply, ClientError> {
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
-        let bytes = control::encode_request(&self.id, seq, request).map_err(ClientError::Decode)?;
+        let bytes = control::encode_request(&self.id, seq, request).map_err(ClientError::Encode)?;
         if bytes.len() > control::MAX_REQUEST_BYTES {
             // What the manager would answer; the port's samples could not even hold it.
             return Err(ClientError::Refused(ControlError::RequestTooLarge {
@@ -379,8 +380,10 @@ impl Local {
             {
                 let (answers, response) =
                     control::decode_response(answer.payload()).map_err(ClientError::Decode)?;
-                // The answer to an earlier request of this client, delivered late: not ours.
-                if answers == seq {
+                // The answer to an earlier request of this client, delivered late, is not ours;
+                // 0 answers whatever was sent (a request the manager could not read: another
+                // protocol version, undecodable bytes, too large).
+                if answers == seq || answers == 0 {
                     return Ok(response?);
                 }
                 tracing::debug!(seq, answers, "a stale answer ignored");

@@ -103,15 +103,15 @@ pub enum Error {
         /// What is wrong.
         reason: String,
     },
-    /// An iceoryx2 operation failed: iceoryx2's error is the source (match it to tell an
-    /// exhausted segment from too many loans; `{:#}` or the source chain shows it).
-    #[error("{what}")]
+    /// An iceoryx2 operation failed. iceoryx2's error is kept as it was (downcast `cause` to
+    /// tell an exhausted segment from too many loans) and is part of the message, which is
+    /// what C and Python skills and the logs show.
+    #[error("{what}: {cause}")]
     Transport {
         /// What was attempted.
         what: String,
         /// iceoryx2's error.
-        #[source]
-        source: Box<dyn std::error::Error + Send + Sync>,
+        cause: Box<dyn std::error::Error + Send + Sync>,
     },
     /// Encoding or decoding a declaration failed.
     #[error("declaration encoding: {0}")]
@@ -120,11 +120,11 @@ pub enum Error {
 
 impl Error {
     /// A failed iceoryx2 operation: `what` was attempted, `e` is iceoryx2's error (kept as
-    /// the source).
+    /// the cause).
     pub fn transport(what: &str, e: impl std::error::Error + Send + Sync + 'static) -> Error {
         Error::Transport {
             what: what.to_string(),
-            source: Box::new(e),
+            cause: Box::new(e),
         }
     }
 }

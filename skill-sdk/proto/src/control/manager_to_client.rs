@@ -254,8 +254,7 @@ pub enum ControlError {
     Param {
         /// Skill instance.
         skill: String,
-        /// Why.
-        #[source]
+        /// Why (in the message: a client in C or Python shows the message alone).
         error: ParamError,
     },
     /// A value path that does not resolve.
@@ -263,8 +262,7 @@ pub enum ControlError {
     BadPath {
         /// As given.
         path: String,
-        /// Why.
-        #[source]
+        /// Why (in the message).
         error: PathError,
     },
     /// Nothing has been published at that path yet.
@@ -278,8 +276,7 @@ pub enum ControlError {
     BadExpression {
         /// As given.
         expr: String,
-        /// Where and why.
-        #[source]
+        /// Where and why (in the message).
         error: ExprError,
     },
     /// No monitor with that id.
@@ -294,8 +291,8 @@ pub enum ControlError {
         manager: u16,
     },
     /// The request bytes do not decode.
-    #[error("malformed request")]
-    Malformed(#[source] postcard::Error),
+    #[error("malformed request: {0}")]
+    Malformed(postcard::Error),
     /// A request larger than the manager reads.
     #[error("a request of {bytes} bytes (at most {max})")]
     RequestTooLarge {
@@ -474,8 +471,8 @@ impl ExprProblem {
     pub const MAX_LEN: usize = 4096;
 }
 
-/// Encodes the response to the client's request number `seq` (0: a request that did not
-/// say); one over [`MAX_ANSWER_BYTES`] becomes an error answer saying so. The number lets a
+/// Encodes the response to the client's request number `seq` (0: a request the manager could
+/// not read, whose number it does not know — a client takes it as its answer); one over [`MAX_ANSWER_BYTES`] becomes an error answer saying so. The number lets a
 /// client tell its answer from a stale one: under a crowd of clients connecting at once,
 /// iceoryx2 0.10 has handed a client's new request the answer to its previous one.
 pub fn encode_response(seq: u64, response: &Response) -> Vec<u8> {

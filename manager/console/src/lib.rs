@@ -96,15 +96,9 @@ struct Worker {
     last_down: Option<String>,
 }
 
-/// The error with its causes, as one line.
+/// The error as one line (its message carries its cause).
 fn describe(e: &ClientError) -> String {
-    let mut text = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(cause) = source {
-        text.push_str(&format!(": {cause}"));
-        source = cause.source();
-    }
-    text
+    format!("{e}")
 }
 
 impl Worker {

@@ -123,6 +123,10 @@ pub struct ManagerArgs {
     /// Start with cycling stopped.
     #[arg(long)]
     pub paused: bool,
+    /// Run no cycle until a client holds the fabric at one (`Client::hold`): an observer
+    /// that acts at cycles of its choosing connects before the first cycle runs.
+    #[arg(long)]
+    pub held: bool,
     /// Do not start cycling until these skills registered (comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub wait_for: Vec<String>,
@@ -146,6 +150,10 @@ pub struct UpArgs {
     /// before the first cycle, so a lock-step run does not depend on when it connected.
     #[arg(long)]
     pub paused: bool,
+    /// Run no cycle until a client holds the fabric at one (`Client::hold`), whatever else
+    /// resumes it: a lock-step observer (the demos' judge) acts from the first cycle on.
+    #[arg(long)]
+    pub held: bool,
 }
 
 /// Runs a domain's manager until it is stopped (or its cycle budget is spent), then prints
@@ -155,6 +163,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
         pace,
         deadline_ms,
         paused,
+        held,
         wait_for,
         wait_timeout_s,
     } = args;
@@ -164,6 +173,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
     }
     config.deadline = deadline_ms.map(|ms| Duration::from_secs_f64(ms.max(0.0) / 1000.0));
     config.paused = paused;
+    config.held = held;
     config.max_cycles = pace.cycles;
     config.wait_for = wait_for;
     config.wait_timeout = Duration::from_secs_f64(wait_timeout_s.max(0.0));
@@ -189,6 +199,7 @@ pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
         pace: args.pace.paced()?,
         lockstep: args.pace.lockstep,
         paused: args.paused,
+        held: args.held,
         first_cycle: args.pace.first_cycle,
         record: args
             .pace

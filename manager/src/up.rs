@@ -45,6 +45,8 @@ pub struct UpOptions {
     pub lockstep: bool,
     /// Start with cycling stopped.
     pub paused: bool,
+    /// Run no cycle until a client holds the fabric at one.
+    pub held: bool,
     /// The first cycle's number.
     pub first_cycle: u64,
     /// The full-rate recording.
@@ -367,9 +369,12 @@ fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
         Some(Pace::LockStep(p)) => a.extend(["--lockstep".into(), "--period-ms".into(), ms(p)]),
         None => {}
     }
-    // A restarted manager takes the pause and the cycle number from its predecessor.
+    // A restarted manager takes the pause, the holds and the cycle number from its predecessor.
     if restart == 0 && opts.paused {
         a.push("--paused".into());
+    }
+    if restart == 0 && opts.held {
+        a.push("--held".into());
     }
     if restart == 0 && opts.first_cycle > 1 {
         a.extend(["--first-cycle".into(), opts.first_cycle.to_string()]);

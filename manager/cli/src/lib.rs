@@ -332,6 +332,10 @@ struct DemoRuns {
     /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// Copy the first run's ground truth here (the simulator's CSV: time, pose, speeds,
+    /// collisions, … every 100 ms of the robot's time).
+    #[arg(long, value_name = "FILE.csv")]
+    truth: Option<PathBuf>,
 }
 
 impl DemoRuns {
@@ -355,6 +359,7 @@ impl DemoRuns {
             },
             lockstep: self.lockstep,
             record: self.record.map(std::path::absolute).transpose()?,
+            truth: self.truth,
             plan: None,
             tree: None,
         })

@@ -215,11 +215,19 @@ impl ControlPlane {
         }
     }
 
-    /// Drops the monitors of clients whose process has been gone for [`ORPHAN_GRACE`] — but
-    /// not in lock-step: there a monitor's firing pauses the fabric until its plan has
+    /// Releases the holds of clients whose process is gone, and drops their monitors once it
+    /// has been gone for [`ORPHAN_GRACE`] — but not in lock-step: there a monitor's firing pauses the fabric until its plan has
     /// reacted, and the fabric waits for a plan runner that died (a restarted one takes its
     /// monitors over).
     pub fn forget_dead_clients(&mut self, m: &mut Manager) {
+        // A hold goes with its client at once (the fabric would wait for nobody).
+        let gone = m
+            .holds
+            .release_gone(|c| client_pid(c).is_some_and(|p| !pid_alive(p)));
+        if !gone.is_empty() {
+            m.state_check = true;
+            tracing::info!(clients = ?gone, "holds of departed clients released");
+        }
         if matches!(m.config.pace, crate::engine::Pace::LockStep(_)) {
             return;
         }
@@ -344,6 +352,11 @@ impl Manager {
                 Ok(Reply::Done)
             }
             Request::Step(_) => Ok(Reply::Stepped(self.cycle)),
+            Request::Hold(at) => {
+                self.holds.set(client, at);
+                self.state_check = true;
+                Ok(Reply::Done)
+            }
             Request::Stats => Ok(Reply::Stats(self.stats_info())),
             Request::Latencies(n) => {
                 let n = (n as usize).min(MAX_LATENCIES);

@@ -36,6 +36,12 @@ impl Manager {
             if self.paused || self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
                 return Ok(());
             }
+            if self.holds.blocks(self.cycle) {
+                if let Some(cycle) = self.holds.reached(self.cycle) {
+                    self.outbox.push(EventKind::Held { cycle });
+                }
+                return Ok(());
+            }
             if !self.started {
                 let missing: Vec<String> = self
                     .config

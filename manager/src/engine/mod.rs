@@ -15,6 +15,7 @@
 //! time. Cleanup between cycles is the re-arming of the counter.
 
 mod cycle;
+mod holds;
 mod observe;
 mod record;
 mod registry;
@@ -96,6 +97,9 @@ pub struct ManagerConfig {
     pub deadline: Option<Duration>,
     /// Start with cycling stopped.
     pub paused: bool,
+    /// Run no cycle until a client holds the fabric at one (a lock-step observer's first
+    /// hold; see `Request::Hold`).
+    pub held: bool,
     /// Stop after this many cycles.
     pub max_cycles: Option<u64>,
     /// Do not start cycling until these skills have registered.
@@ -149,6 +153,7 @@ impl ManagerConfig {
             pace: Pace::Period(Duration::from_millis(10)),
             deadline: None,
             paused: false,
+            held: false,
             max_cycles: None,
             wait_for: Vec::new(),
             wait_timeout: Duration::from_secs(30),
@@ -227,6 +232,8 @@ pub struct Manager {
     pub(crate) paused: bool,
     /// Pause once this many cycles are done (`step`).
     pub(crate) stop_at: Option<u64>,
+    /// Clients' holds: no cycle after the lowest starts.
+    pub(crate) holds: holds::Holds,
     started: bool,
     created: Instant,
     pub(crate) stats: CycleStats,
@@ -324,6 +331,11 @@ impl Manager {
         };
         let saved = state::Saved::load(&config.domain);
         let first_cycle = config.first_cycle;
+        let holds = if config.held {
+            holds::Holds::at_start()
+        } else {
+            holds::Holds::default()
+        };
         let mut manager = Manager {
             paused: config.paused,
             config,
@@ -338,6 +350,7 @@ impl Manager {
             stop_at: None,
             outbox: Vec::new(),
             monitors: Monitors::default(),
+            holds,
             gave_up: std::collections::BTreeMap::new(),
             readers: HashMap::new(),
             control: Some(control),
@@ -473,7 +486,7 @@ impl Manager {
         let until = |t: Instant| t.saturating_duration_since(now);
         let t = match &self.running {
             Some(r) => until(r.deadline),
-            None if self.paused || !self.started => LIVENESS_TICK,
+            None if self.paused || !self.started || self.holds.blocks(self.cycle) => LIVENESS_TICK,
             None => match self.config.pace {
                 Pace::Period(_) => until(self.next_start),
                 Pace::FreeRun | Pace::LockStep(_) if self.plan.expected.is_empty() => IDLE_FREE_RUN,

@@ -16,6 +16,7 @@ use serde_json::json;
 use skillfab_proto::control::ControlError;
 use skillfab_proto::schema::MessageSchema;
 use skillfab_proto::value;
+use std::collections::BTreeMap;
 
 /// What and where to record.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,8 +31,9 @@ pub struct RecordSpec {
 pub(crate) struct Recording {
     rec: Recorder,
     spec: RecordSpec,
-    /// Per recorded topic: how to decode it and who produces it.
-    topics: HashMap<String, RecTopic>,
+    /// Per recorded topic (in order: a cycle's samples are written in the same order every
+    /// run): how to decode it and who produces it.
+    topics: BTreeMap<String, RecTopic>,
     /// Skill instances whose declaration is in the file: (name, pid).
     declared: HashSet<(String, u32)>,
     /// Samples recorded so far.
@@ -113,7 +115,7 @@ impl Recording {
         Ok(Recording {
             rec,
             spec,
-            topics: HashMap::new(),
+            topics: BTreeMap::new(),
             declared: HashSet::new(),
             samples: 0,
             out_of_order: 0,

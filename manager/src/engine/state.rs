@@ -3,8 +3,8 @@
 //! Clients set things a skill's process does not hold — activation, parameter values,
 //! priority, whether its samples are logged — and install monitors. The manager keeps them by
 //! skill name (so a restarted skill gets them back, [`super::skills::Kept`]) and writes them,
-//! with the last declaration of every name, the monitors and whether cycling is stopped, to
-//! `<domain root>/manager/state` whenever a request or a registration changed them. A manager
+//! with the last declaration of every name, the monitors, whether cycling is stopped and the
+//! clients' holds, to `<domain root>/manager/state` whenever a request or a registration changed them. A manager
 //! that starts in a domain whose file is there (its predecessor died, or left while skills ran
 //! on) reads it back: skills re-register and get their state, monitors fire again for the
 //! clients that installed them. The file goes with the domain (`remove_all_files`, `skillfab
@@ -23,7 +23,7 @@ use std::path::PathBuf;
 
 /// First bytes of the file, with its layout's version: a file of another layout is ignored
 /// (with a warning), never misread.
-const MAGIC: &[u8; 8] = b"sfstate2";
+const MAGIC: &[u8; 8] = b"sfstate3";
 
 /// A monitor as its client installed it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -44,6 +44,8 @@ pub(crate) struct Saved {
     pub(crate) monitors: Vec<SavedMonitor>,
     pub(crate) next_monitor: u64,
     pub(crate) paused: bool,
+    /// Clients' holds (a client that outlives the manager keeps its hold).
+    pub(crate) holds: BTreeMap<String, u64>,
 }
 
 /// Where a domain's manager keeps its state.
@@ -114,6 +116,7 @@ impl Manager {
                 .collect(),
             next_monitor: self.monitors.next_id(),
             paused: self.paused,
+            holds: self.holds.all().clone(),
         }
     }
 
@@ -151,6 +154,9 @@ impl Manager {
             self.io_log.insert(name, Vec::new());
         }
         self.paused = saved.paused;
+        for (client, at) in saved.holds {
+            self.holds.set(&client, Some(at));
+        }
         let mut lost = Vec::new();
         for m in saved.monitors {
             self.monitors.set_next_id(m.id);
@@ -184,6 +190,7 @@ mod tests {
         let mut saved = Saved {
             next_monitor: 9,
             paused: true,
+            holds: [("1-0".to_string(), 70)].into(),
             ..Saved::default()
         };
         saved.kept.insert(

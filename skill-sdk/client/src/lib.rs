@@ -655,6 +655,14 @@ impl Client {
         }
     }
 
+    /// Holds the fabric at cycle `at`: no cycle after it starts until this client moves the
+    /// hold or releases it (`None`). The manager publishes `EventKind::Held` when it stops
+    /// there. A lock-step observer acts at cycles of its own choosing with it: the same run
+    /// every time.
+    pub fn hold(&self, at: Option<u64>) -> Result<(), ClientError> {
+        self.done(Request::Hold(at))
+    }
+
     /// Cycle and skill statistics.
     pub fn stats(&self) -> Result<Stats, ClientError> {
         match self.request(&Request::Stats)? {

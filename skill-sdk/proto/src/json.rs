@@ -112,6 +112,7 @@ pub fn event_json(e: &Event) -> Json {
             ("cycle_overrun", json!({"unfinished": unfinished}))
         }
         EventKind::Cycling { running } => ("cycling", json!({"running": running})),
+        EventKind::Held { cycle } => ("held", json!({"at": cycle})),
         EventKind::ProcessGaveUp {
             process,
             restarts,

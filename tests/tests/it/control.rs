@@ -563,3 +563,60 @@ fn requests_for_a_skill_that_is_away_apply_when_it_is_back() {
         ParamValue::Float(6.0)
     );
 }
+
+/// Waits for the event that says the fabric stopped at a hold: its cycle.
+fn held(c: &mut Client) -> u64 {
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while std::time::Instant::now() < deadline {
+        if let Some(EventKind::Held { cycle }) = c
+            .next_event(Duration::from_millis(100))
+            .unwrap()
+            .map(|e| e.kind)
+        {
+            return cycle;
+        }
+    }
+    panic!("the fabric did not stop at a hold within 20 s");
+}
+
+#[test]
+fn a_hold_stops_a_lock_step_fabric_at_its_clients_cycle_whoever_resumes_it() {
+    let mut t = TestDomain::new("holds");
+    let launch = t.launch_file(skillfab_tests::HELLO);
+    t.spawn(
+        "skillfab",
+        &["up", launch.to_str().unwrap(), "--lockstep", "--held"],
+    );
+    let board = t.board();
+    t.wait_until("the hello network to register", || {
+        ["ticker", "scale", "smooth"]
+            .iter()
+            .all(|n| skillfab_tests::registered(&board, n).is_some())
+    });
+    let mut a = Client::connect(&t.domain).unwrap();
+    a.subscribe().unwrap();
+    let b = Client::connect(&t.domain).unwrap();
+    // Started held: no cycle until a client holds, whoever resumes it.
+    b.run().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(a.stats().unwrap().cycles, 0, "held before the first cycle");
+
+    a.hold(Some(50)).unwrap();
+    assert_eq!(held(&mut a), 50);
+    // Another client's `run` (a plan runner resuming after a firing) does not pass it.
+    b.run().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(a.stats().unwrap().cycles, 50, "still at the hold");
+
+    // Holds add up: the fabric stops at the lowest, then at the next.
+    b.hold(Some(120)).unwrap();
+    a.hold(Some(80)).unwrap();
+    assert_eq!(held(&mut a), 80);
+    a.hold(None).unwrap();
+    assert_eq!(held(&mut a), 120);
+    assert_eq!(a.stats().unwrap().cycles, 120);
+    b.hold(None).unwrap();
+    t.wait_until("cycling on without holds", || {
+        a.stats().unwrap().cycles > 200
+    });
+}

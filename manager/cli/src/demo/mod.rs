@@ -90,6 +90,8 @@ pub struct DemoOptions {
     pub lockstep: bool,
     /// Record the first run here (MCAP, every topic).
     pub record: Option<PathBuf>,
+    /// Copy the first run's ground truth (the simulator's trajectory CSV) here.
+    pub truth: Option<PathBuf>,
     /// A plan file (`skillfab sequence`'s format, checked) that drives the robot instead of
     /// the sequencer written in Rust here (the delivery mission needs one). It runs as the
     /// `[plan]` of the network's launch file: a process of its own, supervised by `up`,
@@ -363,7 +365,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     // Lock-step: paused until the sequencer has set up, so the run does not depend on when
     // it connected.
     .args(if opts.lockstep {
-        &["--lockstep", "--paused"][..]
+        &["--lockstep", "--paused", "--held"][..]
     } else {
         &[]
     });
@@ -484,7 +486,7 @@ enum Verdict {
 }
 
 /// How the run at `site` ended by ground truth `now`, if it has.
-fn judge(site: &Site, now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
+fn judge_truth(site: &Site, now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
     if matches!(site, Site::World(_)) && now.outside {
         Some(Verdict::Outside)
     } else if now.delivered {
@@ -501,19 +503,30 @@ fn watch(site: &Site, traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option
     let now = latest(traj)?;
     out.time_s = now.t;
     out.collisions = now.collisions;
-    judge(site, &now, limit_s)
+    judge_truth(site, &now, limit_s)
 }
 
-/// The first ground-truth record a status period after `then` (the manager resumed if it is
-/// in lock-step), or `then` if none comes within 10 s.
+/// The first ground-truth record a status period after `then`, or `then` if none comes
+/// within 10 s. In lock-step the fabric (paused where the plan ended) runs two status periods
+/// on to the judge's hold: the record is the same every run.
 fn truth_after(
-    c: &Client,
+    c: &mut Client,
     traj: &Path,
     then: TruthRecord,
-    lockstep: bool,
+    judge: Option<&mut Judge>,
 ) -> anyhow::Result<TruthRecord> {
-    if lockstep {
+    if let Some(j) = judge {
+        let at = c.stats()?.cycles + 2 * JUDGE_EVERY;
+        j.hold_at(c, at)?;
         c.run()?;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            let ev = c.next_event(Duration::from_millis(100))?;
+            if j.reached(c, ev.map(|e| e.kind).as_ref())? {
+                return Ok(latest(traj).unwrap_or(then));
+            }
+        }
+        return Ok(then);
     }
     let deadline = Instant::now() + Duration::from_secs(10);
     while Instant::now() < deadline {
@@ -523,6 +536,46 @@ fn truth_after(
         std::thread::sleep(Duration::from_millis(20));
     }
     Ok(then)
+}
+
+/// How often (cycles) the lock-step judge looks at the ground truth: the simulator's status
+/// period (100 ms of the robot's time), the rate it writes a record at.
+const JUDGE_EVERY: u64 = 10;
+
+/// The lock-step judge: it holds the fabric every [`JUDGE_EVERY`] cycles (`Client::hold`),
+/// reads the ground truth there and acts on it before it lets the fabric on, so what it sees
+/// and does falls in the same cycle every run. (`up --held` keeps the fabric before its first
+/// cycle until the judge's first hold, even when a plan runner resumed it.)
+struct Judge {
+    at: u64,
+}
+
+impl Judge {
+    fn start(c: &Client) -> anyhow::Result<Judge> {
+        c.hold(Some(JUDGE_EVERY))?;
+        Ok(Judge { at: JUDGE_EVERY })
+    }
+
+    fn hold_at(&mut self, c: &Client, at: u64) -> anyhow::Result<()> {
+        self.at = at;
+        c.hold(Some(at))?;
+        Ok(())
+    }
+
+    /// Lets the fabric on to the next hold.
+    fn next(&mut self, c: &Client) -> anyhow::Result<()> {
+        self.hold_at(c, self.at + JUDGE_EVERY)
+    }
+
+    /// Whether the fabric stands at the hold: told by the event `ev`, or when no event came
+    /// (one may be lost to a full queue) by its cycle count: it cannot run past the hold.
+    fn reached(&self, c: &Client, ev: Option<&EventKind>) -> anyhow::Result<bool> {
+        Ok(match ev {
+            Some(EventKind::Held { cycle }) => *cycle >= self.at,
+            Some(_) => false,
+            None => c.stats()?.cycles >= self.at,
+        })
+    }
 }
 
 const NO_TRUTH_ERROR: &str =
@@ -631,6 +684,13 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             opts.faults.kill_only.clone(),
         )
     });
+    // Lock-step: the judge holds the fabric before the Rust sequencer starts it (or the
+    // plan's runner resumes it: `up --held`).
+    let mut judge = if opts.lockstep {
+        Some(Judge::start(&c)?)
+    } else {
+        None
+    };
     if opts.lockstep && matches!(driver, Driver::Code(_)) {
         c.run()?;
     }
@@ -643,8 +703,8 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             if out.time_s == 0.0 && started.elapsed() > NO_TRUTH {
                 bail!(NO_TRUTH_ERROR);
             }
-            let ev = c.next_event(Duration::from_millis(100))?;
-            if let Some(EventKind::MonitorFired { id, .. }) = ev.map(|e| e.kind) {
+            let ev = c.next_event(Duration::from_millis(100))?.map(|e| e.kind);
+            if let Some(EventKind::MonitorFired { id, .. }) = ev {
                 if let Some(what) = seq.on_monitor(&c, id)? {
                     step(&c, &mut out, &what);
                 }
@@ -653,9 +713,19 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                     c.run()?;
                 }
             }
-            if let Some(v) = watch(&opts.site, &traj, &mut out, opts.limit_s) {
-                verdict(&c, &mut out, v, &step)?;
-                break;
+            // Real time: the ground truth whenever it is looked at; lock-step: at the holds.
+            let look = match &judge {
+                Some(j) => j.reached(&c, ev.as_ref())?,
+                None => true,
+            };
+            if look {
+                if let Some(v) = watch(&opts.site, &traj, &mut out, opts.limit_s) {
+                    verdict(&c, &mut out, v, &step)?;
+                    break;
+                }
+                if let Some(j) = judge.as_mut() {
+                    j.next(&c)?;
+                }
             }
         },
         // The plan runs as a process of the network (and paces a lock-step manager) until
@@ -667,34 +737,57 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
                 if interrupted() {
                     bail!("interrupted");
                 }
-                last = latest(&traj).or(last);
+                // Real time: ten times a second (the trajectory file is read whole);
+                // lock-step: at the judge's holds.
+                let look = match judge.as_mut() {
+                    Some(j) => {
+                        let ev = c.next_event(Duration::from_millis(100))?.map(|e| e.kind);
+                        j.reached(&c, ev.as_ref())?
+                    }
+                    None => {
+                        std::thread::sleep(Duration::from_millis(100));
+                        true
+                    }
+                };
+                if look {
+                    last = latest(&traj).or(last);
+                }
                 match &last {
-                    Some(now) if judge(&opts.site, now, opts.limit_s).is_some() => break None,
+                    Some(now) if look && judge_truth(&opts.site, now, opts.limit_s).is_some() => {
+                        break None;
+                    }
                     None if started.elapsed() > NO_TRUTH => bail!(NO_TRUTH_ERROR),
                     _ => {}
                 }
+                // (A lock-step plan that ended leaves the fabric paused short of the hold.)
                 if let (_, Some(how)) = plan_steps(&net) {
                     break Some(how);
                 }
-                // The trajectory file is read whole: ten times a second is enough.
-                std::thread::sleep(Duration::from_millis(100));
+                if look && let Some(j) = judge.as_mut() {
+                    j.next(&c)?;
+                }
             };
             halt_plan(&net);
             out.steps = plan_steps(&net).0;
             if let Some(status) = &ended {
                 step(&c, &mut out, &format!("the plan ended: {status}"));
             }
-            let Some(mut now) = latest(&traj).or(last) else {
+            let now = match judge {
+                // Lock-step: the record at the hold, not a newer one.
+                Some(_) if ended.is_none() => last,
+                _ => latest(&traj).or(last),
+            };
+            let Some(mut now) = now else {
                 bail!(NO_TRUTH_ERROR);
             };
             // A plan that ended before the ground truth says how: the simulator writes it
             // once per status period (100 ms), and a lock-step manager stays paused when a
             // plan ends. Let the robot's time go on until a record after the plan's end.
-            if ended.is_some() && judge(&opts.site, &now, opts.limit_s).is_none() {
-                now = truth_after(&c, &traj, now, opts.lockstep)?;
+            if ended.is_some() && judge_truth(&opts.site, &now, opts.limit_s).is_none() {
+                now = truth_after(&mut c, &traj, now, judge.as_mut())?;
             }
             (out.time_s, out.collisions) = (now.t, now.collisions);
-            if let Some(v) = judge(&opts.site, &now, opts.limit_s) {
+            if let Some(v) = judge_truth(&opts.site, &now, opts.limit_s) {
                 verdict(&c, &mut out, v, &step)?;
             }
         }
@@ -744,6 +837,10 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     c.deactivate(&all)?;
     step(&c, &mut out, "skills deactivated");
     out.trajectory = TruthRecord::read(&traj).unwrap_or_default();
+    if let Some(to) = opts.truth.as_ref().filter(|_| run == 0) {
+        std::fs::copy(&traj, to)
+            .with_context(|| format!("copying the ground truth to {}", to.display()))?;
+    }
     out.end = out.trajectory.last().map(|r| (r.floor, r.x, r.y));
     // The robot may have gone on a little while the sequencer looked: the time it first was
     // outside (or the message was delivered) is the mission's.

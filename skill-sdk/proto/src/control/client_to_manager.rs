@@ -138,6 +138,12 @@ pub enum Request {
     /// The processes `skillfab up` gave up restarting, and not back since (a plan runner
     /// started after the event asks: it would not have seen it).
     GaveUp,
+    /// Hold the fabric at a cycle: no cycle after it starts until this client moves or
+    /// releases (`None`) its hold; the manager says when it stopped there
+    /// ([`crate::control::EventKind::Held`]). Holds of several clients add up, apart from
+    /// `Run`/`Stop` and from the pause of a monitor's firing in lock-step; a hold goes with its
+    /// client's process. Lock-step observers use it to act at cycles of their choosing.
+    Hold(Option<u64>),
 }
 
 /// Encodes a request.

@@ -132,6 +132,12 @@ pub enum EventKind {
         /// How it last exited.
         status: String,
     },
+    /// The fabric stopped at a client's hold (`Request::Hold`): no cycle after `cycle` starts
+    /// until the hold is moved or released.
+    Held {
+        /// The last cycle run.
+        cycle: u64,
+    },
 }
 
 /// One event of the stream.

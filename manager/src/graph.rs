@@ -5,80 +5,15 @@
 use skillfab_proto::decl::{Mode, PortDecl, PortKind, SkillDecl};
 use std::collections::HashMap;
 
-/// Why a registration is refused.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum WiringError {
-    /// Another live instance has the name.
-    #[error("a skill named '{name}' is already registered (pid {pid})")]
-    DuplicateName {
-        /// The name.
-        name: String,
-        /// The live instance's pid.
-        pid: u32,
-    },
-    /// Two producers for one topic.
-    #[error(
-        "topic '{topic}' is already produced by skill '{producer}'; '{skill}' cannot publish it too"
-    )]
-    TwoProducers {
-        /// The topic.
-        topic: String,
-        /// Its producer.
-        producer: String,
-        /// The newcomer.
-        skill: String,
-    },
-    /// The two ends of a topic disagree on its message type.
-    #[error(
-        "type mismatch on topic '{topic}': skill '{skill}' {side} '{port}' is '{ty}', \
-         but skill '{other}' {other_side} '{other_port}' is '{other_ty}'"
-    )]
-    TypeMismatch {
-        /// The topic.
-        topic: String,
-        /// The newcomer.
-        skill: String,
-        /// "input" or "output".
-        side: &'static str,
-        /// Its port.
-        port: String,
-        /// Its type (name, size, align).
-        ty: String,
-        /// The registered skill it clashes with.
-        other: String,
-        /// "input" or "output".
-        other_side: &'static str,
-        /// Its port.
-        other_port: String,
-        /// Its type.
-        other_ty: String,
-    },
-    /// A second device for a channel.
-    #[error(
-        "channel '{channel}' is already served by device '{device}'; '{skill}' cannot serve it too"
-    )]
-    ChannelServed {
-        /// The channel.
-        channel: String,
-        /// The device serving it.
-        device: String,
-        /// The newcomer.
-        skill: String,
-    },
-    /// Sync skills would wait on each other in a loop.
-    #[error("data-flow loop among sync skills: {path} (make one of them async to break it)")]
-    Loop {
-        /// The loop, `a -> b -> a`.
-        path: String,
-    },
-}
+pub use skillfab_proto::registration::WiringError;
+use skillfab_proto::registration::{Side, TypeDesc};
 
-fn type_desc(p: &PortDecl) -> String {
-    format!(
-        "{} ({} B, align {})",
-        p.schema.type_name, p.schema.size, p.schema.align
-    )
+fn type_desc(p: &PortDecl) -> TypeDesc {
+    TypeDesc {
+        name: p.schema.type_name.clone(),
+        size: p.schema.size,
+        align: p.schema.align,
+    }
 }
 
 fn same_type(a: &PortDecl, b: &PortDecl) -> bool {
@@ -129,7 +64,7 @@ pub fn check_join<'a>(
                         skill: new.name.clone(),
                     }
                 } else {
-                    mismatch(&out.topic, "output", out, d, "output", o)
+                    mismatch(&out.topic, Side::Output, out, d, Side::Output, o)
                 }));
             }
             if let Some(i) = d
@@ -137,7 +72,14 @@ pub fn check_join<'a>(
                 .iter()
                 .find(|i| i.topic == out.topic && !same_type(i, out))
             {
-                return Err(Box::new(mismatch(&out.topic, "output", out, d, "input", i)));
+                return Err(Box::new(mismatch(
+                    &out.topic,
+                    Side::Output,
+                    out,
+                    d,
+                    Side::Input,
+                    i,
+                )));
             }
         }
     }
@@ -159,27 +101,41 @@ pub fn check_join<'a>(
                 .iter()
                 .find(|o| o.topic == inp.topic && !same_type(o, inp))
             {
-                return Err(Box::new(mismatch(&inp.topic, "input", inp, d, "output", o)));
+                return Err(Box::new(mismatch(
+                    &inp.topic,
+                    Side::Input,
+                    inp,
+                    d,
+                    Side::Output,
+                    o,
+                )));
             }
             if let Some(i) = d
                 .inputs
                 .iter()
                 .find(|i| i.topic == inp.topic && !same_type(i, inp))
             {
-                return Err(Box::new(mismatch(&inp.topic, "input", inp, d, "input", i)));
+                return Err(Box::new(mismatch(
+                    &inp.topic,
+                    Side::Input,
+                    inp,
+                    d,
+                    Side::Input,
+                    i,
+                )));
             }
         }
     }
     let mut all: Vec<&SkillDecl> = existing.collect();
     all.push(new);
     if let Some(path) = find_sync_loop(&all) {
-        return Err(Box::new(WiringError::Loop { path }));
+        return Err(Box::new(WiringError::Loop { skills: path }));
     }
     Ok(())
 }
 
 /// A loop among sync skills (producer → consumer edges), as `a -> b -> a`.
-fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
+fn find_sync_loop(skills: &[&SkillDecl]) -> Option<Vec<String>> {
     let producer: HashMap<&str, usize> = skills
         .iter()
         .enumerate()
@@ -200,7 +156,7 @@ fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
         producer: &HashMap<&str, usize>,
         mark: &mut [u8],
         stack: &mut Vec<usize>,
-    ) -> Option<String> {
+    ) -> Option<Vec<String>> {
         mark[i] = 1;
         stack.push(i);
         for inp in skills[i].inputs.iter().filter(|p| is_data(p)) {
@@ -209,14 +165,14 @@ fn find_sync_loop(skills: &[&SkillDecl]) -> Option<String> {
             };
             if mark[p] == 1 {
                 let from = stack.iter().position(|&s| s == p).unwrap_or(0);
-                let mut names: Vec<&str> = stack[from..]
+                let mut names: Vec<String> = stack[from..]
                     .iter()
-                    .map(|&s| skills[s].name.as_str())
+                    .map(|&s| skills[s].name.clone())
                     .collect();
                 names.reverse();
-                names.push(skills[p].name.as_str());
+                names.push(skills[p].name.clone());
                 // Edges point producer -> consumer; the stack walked consumer -> producer.
-                return Some(names.join(" -> "));
+                return Some(names);
             }
             if mark[p] == 0
                 && let Some(path) = visit(p, skills, producer, mark, stack)

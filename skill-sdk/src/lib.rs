@@ -76,8 +76,8 @@ pub enum SdkError {
     Refused {
         /// Instance name.
         name: String,
-        /// The manager's reason.
-        reason: String,
+        /// Why (boxed: the other errors are small).
+        reason: Box<skillfab_proto::registration::Refusal>,
     },
     /// A parameter given at start-up was refused.
     #[error(transparent)]

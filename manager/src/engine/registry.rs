@@ -4,6 +4,10 @@
 use super::skills::Kept;
 use super::*;
 use skillfab_proto::param::check_bounds;
+use skillfab_proto::registration::Refusal;
+
+/// Most inputs, and most outputs, a skill declares (a slot's masks have a bit for each).
+const MAX_PORTS: usize = 64;
 
 /// Why a skill leaves the registry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,10 +51,10 @@ impl Manager {
         }
     }
 
-    pub(super) fn refuse(&self, i: usize, name: Option<&str>, reason: &str) {
+    pub(super) fn refuse(&self, i: usize, name: Option<&str>, reason: Refusal) {
         tracing::warn!(skill = name.unwrap_or("?"), %reason, "registration refused");
         let slot = self.board.slot(i);
-        slot.write_msg(reason);
+        slot.write_msg(&reason.encode());
         slot.set_state(SlotState::Refused);
         slot.bell.ring();
     }
@@ -59,23 +63,32 @@ impl Manager {
         let slot = self.board.slot(i);
         let mut decl: SkillDecl = match postcard::from_bytes(&slot.read_decl()) {
             Ok(d) => d,
-            Err(e) => return self.refuse(i, None, &format!("malformed declaration: {e}")),
+            Err(e) => return self.refuse(i, None, Refusal::Malformed(e)),
         };
-        let checked = names::check_name("skill", &decl.name, false).and_then(|()| {
+        let bad_name = |what: &str, name: &str| {
+            names::check_name(what, name, what == "topic")
+                .is_err()
+                .then(|| Refusal::BadName {
+                    what: what.into(),
+                    name: name.into(),
+                })
+        };
+        let bad = bad_name("skill", &decl.name).or_else(|| {
             decl.inputs
                 .iter()
                 .chain(&decl.outputs)
-                .try_for_each(|p| names::check_name("topic", &p.topic, true))
+                .find_map(|p| bad_name("topic", &p.topic))
         });
-        if let Err(e) = checked {
-            return self.refuse(i, None, &e.to_string());
+        if let Some(refusal) = bad {
+            return self.refuse(i, None, refusal);
         }
-        if decl.inputs.len() > 64 || decl.outputs.len() > 64 {
-            return self.refuse(
-                i,
-                Some(&decl.name),
-                "at most 64 inputs and 64 outputs per skill",
-            );
+        if decl.inputs.len() > MAX_PORTS || decl.outputs.len() > MAX_PORTS {
+            let refusal = Refusal::TooManyPorts {
+                inputs: decl.inputs.len() as u32,
+                outputs: decl.outputs.len() as u32,
+                max: MAX_PORTS as u32,
+            };
+            return self.refuse(i, Some(&decl.name), refusal);
         }
         // A previous instance of the same name that died is replaced, not a duplicate.
         if let Some(j) = (0..MAX_SLOTS).find(|&j| {
@@ -89,7 +102,7 @@ impl Manager {
         }
         let live = self.skills.all().map(|e| &e.decl);
         if let Err(e) = graph::check_join(live, &decl) {
-            return self.refuse(i, Some(&decl.name), &e.to_string());
+            return self.refuse(i, Some(&decl.name), Refusal::Wiring(*e));
         }
         // What clients set for an earlier instance of this name comes back.
         let mut values = decl.param_values.clone();

@@ -33,7 +33,7 @@ pub const MAX_CHANNELS: usize = 4;
 pub const PARAM_BYTES: usize = 4096;
 /// Most outputs of one skill (the published mask is a `u64`).
 pub const MAX_OUTPUTS: usize = 64;
-const MAGIC: u64 = 0x5346_424f_4152_4404; // "SFBOARD" + layout version 4
+const MAGIC: u64 = 0x5346_424f_4152_4405; // "SFBOARD" + layout version 5 (5: a refusal is encoded)
 
 /// Life of a slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,7 +47,7 @@ pub enum SlotState {
     Pending = 2,
     /// Registered; the skill is opening its data ports.
     Accepted = 3,
-    /// Refused; the reason is in the message area.
+    /// Refused; the reason is in the message area (`registration::Refusal`).
     Refused = 4,
     /// The skill is leaving cleanly.
     Leaving = 5,
@@ -471,22 +471,21 @@ impl Slot {
         unsafe { std::slice::from_raw_parts(self.decl.get().cast::<u8>(), len).to_vec() }
     }
 
-    /// Writes the answer text (the manager, before setting `Refused`).
-    pub fn write_msg(&self, text: &str) {
-        let b = text.as_bytes();
-        let n = b.len().min(MSG_BYTES);
+    /// Writes the answer (the manager, before setting `Refused`): an encoded
+    /// [`crate::registration::Refusal`], cut at [`MSG_BYTES`].
+    pub fn write_msg(&self, bytes: &[u8]) {
+        let n = bytes.len().min(MSG_BYTES);
         // SAFETY: in state `Pending` only the manager writes the area; the release store of
         // `Refused` publishes it.
-        unsafe { std::ptr::copy_nonoverlapping(b.as_ptr(), self.msg.get().cast::<u8>(), n) };
+        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), self.msg.get().cast::<u8>(), n) };
         self.msg_len.store(n as u32, Ordering::Relaxed);
     }
 
-    /// Reads the answer text (the skill, after seeing `Refused`).
-    pub fn read_msg(&self) -> String {
+    /// Reads the answer (the skill, after seeing `Refused`).
+    pub fn read_msg(&self) -> Vec<u8> {
         let n = (self.msg_len.load(Ordering::Relaxed) as usize).min(MSG_BYTES);
         // SAFETY: after the acquire load of `Refused` the manager no longer writes the area.
-        let bytes = unsafe { std::slice::from_raw_parts(self.msg.get().cast::<u8>(), n).to_vec() };
-        String::from_utf8_lossy(&bytes).into_owned()
+        unsafe { std::slice::from_raw_parts(self.msg.get().cast::<u8>(), n).to_vec() }
     }
 
     /// Publishes a new parameter snapshot (the manager). Readers that overlap the write see

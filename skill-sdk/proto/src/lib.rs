@@ -35,6 +35,7 @@ pub mod json;
 pub mod log;
 pub mod names;
 pub mod param;
+pub mod registration;
 pub mod schema;
 pub mod services;
 pub mod value;

@@ -9,6 +9,7 @@ use crate::params::Params;
 use crate::services;
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
+use skillfab_proto::registration::Refusal;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
@@ -83,7 +84,7 @@ pub(super) fn register(
         match slot.state() {
             SlotState::Accepted => return Ok(Registration::Accepted(idx)),
             SlotState::Refused => {
-                let reason = slot.read_msg();
+                let reason = Box::new(Refusal::decode(&slot.read_msg()));
                 slot.set_state(SlotState::Free);
                 return Err(SdkError::Refused {
                     name: decl.name.clone(),

@@ -261,7 +261,7 @@ impl FaultArgs {
 
 #[derive(Subcommand, Debug)]
 enum DemoCmd {
-    /// A sequencer drives the simulated Denning robot out of the lab.
+    /// A plan drives the simulated Denning robot out of the lab (the paper's experiment).
     ExitLab {
         /// World file.
         #[arg(long, default_value = "devices/denning-sim/worlds/exit-lab.toml")]
@@ -273,10 +273,13 @@ enum DemoCmd {
         limit_s: f64,
         #[command(flatten)]
         faults: FaultArgs,
-        /// Drive the robot with this plan (`skillfab sequence`'s format, e.g.
-        /// skills/plans/exit-lab.xml) instead of the sequencer written in Rust.
-        #[arg(long, value_name = "FILE.xml")]
-        plan: Option<PathBuf>,
+        /// The plan that drives the robot (`skillfab sequence`'s format, docs/sequence.md).
+        #[arg(
+            long,
+            value_name = "FILE.xml",
+            default_value = "skills/plans/exit-lab.xml"
+        )]
+        plan: PathBuf,
     },
     /// The paper's whole mission: a plan takes the simulated robot out of the basement lab,
     /// through corridors to the elevators, up to the fourth floor and to the department
@@ -339,8 +342,13 @@ struct DemoRuns {
 }
 
 impl DemoRuns {
-    /// The demo's options for these runs, `site` and `limit_s` given; faults and plan none.
-    fn options(self, site: demo::Site, limit_s: f64) -> anyhow::Result<demo::DemoOptions> {
+    /// The demo's options for these runs, `site`, `plan` and `limit_s` given; faults none.
+    fn options(
+        self,
+        site: demo::Site,
+        plan: PathBuf,
+        limit_s: f64,
+    ) -> anyhow::Result<demo::DemoOptions> {
         let t = self.time_factor;
         if !(t > 0.0 && t <= 50.0) {
             anyhow::bail!("--time-factor must be in (0, 50], got {t}");
@@ -360,7 +368,7 @@ impl DemoRuns {
             lockstep: self.lockstep,
             record: self.record.map(std::path::absolute).transpose()?,
             truth: self.truth,
-            plan: None,
+            plan,
             tree: None,
         })
     }
@@ -538,13 +546,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
         } => {
             let json = run.json;
-            let mut opts = run.options(demo::Site::World(world), limit_s)?;
-            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
             // Read and checked here: a mistake is refused before anything starts.
-            if let Some(p) = &plan {
-                sequence::read_plan(p)?;
-            }
-            opts.plan = plan;
+            sequence::read_plan(&plan)?;
+            let mut opts = run.options(demo::Site::World(world), plan, limit_s)?;
+            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
             let summary = demo::demo(&opts)?;
             report(&summary, json, "left the lab")?;
             if summary.successes == 0 {
@@ -568,10 +573,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
             let json = run.json;
-            let mut opts = run.options(demo::Site::Building(building), limit_s)?;
-            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
             sequence::read_plan(&plan)?;
-            opts.plan = Some(plan);
+            let mut opts = run.options(demo::Site::Building(building), plan, limit_s)?;
+            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
             opts.tree = Some(tree.unwrap_or(stem));
             let summary = demo::demo(&opts)?;
             report(&summary, json, "delivered the message")?;

@@ -620,3 +620,49 @@ fn a_hold_stops_a_lock_step_fabric_at_its_clients_cycle_whoever_resumes_it() {
         a.stats().unwrap().cycles > 200
     });
 }
+
+#[test]
+fn the_client_librarys_example_sequencer_schedules_a_gain_on_the_hello_network() {
+    let mut t = TestDomain::new("gainsched");
+    t.hello(&[]);
+    // `cargo test --workspace` builds the example; a run of this crate alone builds it here.
+    let exe = skillfab_tests::bin("skillfab")
+        .with_file_name("examples")
+        .join("gain_schedule");
+    if !exe.is_file() {
+        let built = skillfab_tests::build_command(env!("CARGO"))
+            .args([
+                "build",
+                "-q",
+                "-p",
+                "skillfab-client",
+                "--example",
+                "gain_schedule",
+            ])
+            .current_dir(skillfab_tests::repo_root())
+            .status()
+            .unwrap();
+        assert!(built.success() && exe.is_file(), "{}", exe.display());
+    }
+    let out = t.command_at(&exe).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Both switches, in order, and the gain back where it was.
+    let high = text
+        .find("scale.gain = 6")
+        .unwrap_or_else(|| panic!("{text}"));
+    let back = text
+        .rfind("scale.gain = 2")
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(high < back, "{text}");
+    let c = Client::connect(&t.domain).unwrap();
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.0)
+    );
+    assert!(c.monitors().unwrap().is_empty(), "its monitors removed");
+}

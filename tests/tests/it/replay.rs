@@ -145,6 +145,7 @@ fn a_recorded_lockstep_mission_replays_identically_through_kills_and_a_changed_d
     let rec = t.dir.join("mission.mcap");
     // The shipped lab: every skill of the mission has its part in it.
     let exit_lab = skillfab_tests::repo_root().join("devices/denning-sim/worlds/exit-lab.toml");
+    let plan = skillfab_tests::repo_root().join("skills/plans/exit-lab.xml");
     let out = t.run(
         "skillfab",
         &[
@@ -152,6 +153,8 @@ fn a_recorded_lockstep_mission_replays_identically_through_kills_and_a_changed_d
             "exit-lab",
             "--world",
             exit_lab.to_str().unwrap(),
+            "--plan",
+            plan.to_str().unwrap(),
             "--lockstep",
             "--record",
             rec.to_str().unwrap(),

@@ -1,20 +1,19 @@
 //! `skillfab demo exit-lab` and `skillfab demo deliver`: the paper's experiment and its whole
-//! mission. In `exit-lab` a sequencer written against the client library (or a plan) drives
-//! the simulated Denning robot out of the lab:
+//! mission, each driven by a plan ([`crate::sequence`]'s format) that runs as the `[plan]` of
+//! the network's launch file: a process of its own, supervised by `up`, resumed where it was
+//! if it dies.
 //!
-//! 1. activate explore + avoid + barcode_track; a monitor waits for the door's barcode;
-//! 2. switch explore for home (drive to the barcode) and let door_locate look;
-//! 3. near the barcode, follow its wall (on the left; after 4 m without a door, home again
-//!    and follow it the other way) while door_locate gathers evidence;
-//! 4. once the door is located, lower `avoid.safe_distance` for the tight passage (the
-//!    paper's example of parameterising a skill) and let go_through drive; when the
-//!    simulator's ground truth says the robot is outside, stop it, restore the parameter,
-//!    and report.
+//! In `exit-lab` the plan `skills/plans/exit-lab.xml` drives the simulated Denning robot out of
+//! the lab (the paper's section 6): explore until the door's barcode is seen, home on it,
+//! follow its wall (one way, then the other) while door_locate gathers evidence, and once the
+//! door is located lower `avoid.safe_distance` for the tight passage and let go_through drive.
+//! In `deliver` a plan (`skills/plans/deliver.xml`) takes the robot from the lab through a
+//! simulated building — corridors, an elevator lobby with four cars, the fourth floor — to an
+//! office, where it says its message.
 //!
-//! In `deliver` a plan ([`crate::sequence`]'s format, `skills/plans/deliver.xml`) takes the
-//! robot from the lab through a simulated building — corridors, an elevator lobby with four
-//! cars, the fourth floor — to an office, where it says its message; the simulator's ground
-//! truth says whether the message was delivered there.
+//! The demo is the judge: the simulator's ground truth says when the robot is outside the lab
+//! or the message is delivered; the robot is then stopped and the plan halted. In lock-step
+//! the judge looks at cycles of its own choosing ([`Judge`]), so a seed decides the whole run.
 
 use anyhow::{Context, bail};
 use denning_sim::building::Building;
@@ -25,7 +24,7 @@ use skillfab_client::Client;
 use skillfab_manager::launch::{
     LaunchFile, ManagerSection, PlanSection, ProcessEntry, Restart, find_program,
 };
-use skillfab_proto::control::{EventKind, MonitorMode, SkillState};
+use skillfab_proto::control::{EventKind, SkillState};
 use skillfab_proto::domain::Domain;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -35,9 +34,6 @@ use std::time::{Duration, Instant};
 use crate::faults::{Faults, Kill, Killer};
 
 mod plot;
-mod sequencer;
-
-use sequencer::{Phase, Sequencer};
 
 /// Where a demo's robot is: a one-room world (the exit-lab experiment) or a building (the
 /// delivery mission).
@@ -92,11 +88,10 @@ pub struct DemoOptions {
     pub record: Option<PathBuf>,
     /// Copy the first run's ground truth (the simulator's trajectory CSV) here.
     pub truth: Option<PathBuf>,
-    /// A plan file (`skillfab sequence`'s format, checked) that drives the robot instead of
-    /// the sequencer written in Rust here (the delivery mission needs one). It runs as the
-    /// `[plan]` of the network's launch file: a process of its own, supervised by `up`,
-    /// resumed where it was if it dies.
-    pub plan: Option<PathBuf>,
+    /// The plan file (`skillfab sequence`'s format, checked) that drives the robot. It runs
+    /// as the `[plan]` of the network's launch file: a process of its own, supervised by
+    /// `up`, resumed where it was if it dies.
+    pub plan: PathBuf,
     /// The plan's tree to run (default: its main tree).
     pub tree: Option<String>,
 }
@@ -117,7 +112,7 @@ pub struct RunOutcome {
     pub wall_s: f64,
     /// Collisions the simulator reported.
     pub collisions: u64,
-    /// Sequencer steps: (what, cycle, simulated time).
+    /// The plan's steps and the judge's: (what, cycle, simulated time).
     pub steps: Vec<(String, u64, f64)>,
     /// Processes killed, and their recovery (with `--kill-every`).
     pub kills: Vec<Kill>,
@@ -340,16 +335,14 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         launch.process[0].args.push("--lockstep".into());
     }
     // The plan, copied into the run's directory: its runner is found by that path.
-    if let Some(plan) = &opts.plan {
-        let copy = dir.join(PLAN_FILE);
-        std::fs::copy(plan, &copy).with_context(|| format!("{}", plan.display()))?;
-        launch.plan = Some(PlanSection {
-            file: text(&copy),
-            tree: opts.tree.clone(),
-            max_restarts: Some(restarts),
-            backoff_ms: Some(backoff_ms),
-        });
-    }
+    let copy = dir.join(PLAN_FILE);
+    std::fs::copy(&opts.plan, &copy).with_context(|| format!("{}", opts.plan.display()))?;
+    launch.plan = Some(PlanSection {
+        file: text(&copy),
+        tree: opts.tree.clone(),
+        max_restarts: Some(restarts),
+        backoff_ms: Some(backoff_ms),
+    });
     let launch = toml::to_string(&launch).context("writing the launch file")?;
     let path = dir.join("exit-lab.toml");
     std::fs::write(&path, launch)?;
@@ -362,8 +355,8 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         "--domain",
         domain.name(),
     ])
-    // Lock-step: paused until the sequencer has set up, so the run does not depend on when
-    // it connected.
+    // Lock-step: paused until the plan has set up, and held until the judge's first hold, so
+    // the run does not depend on when either connected.
     .args(if opts.lockstep {
         &["--lockstep", "--paused", "--held"][..]
     } else {
@@ -409,25 +402,48 @@ fn plan_runner(net: &Network) -> Option<u32> {
     crate::faults::process_with_args(&["sequence", &plan.to_string_lossy()])
 }
 
-/// The steps the plan's runners printed (`[cycle N, t = …] what`): what, cycle, the robot's
-/// time (a cycle is 10 ms of it); and how the plan ended, if it has.
-fn plan_steps(net: &Network) -> (Vec<(String, u64, f64)>, Option<String>) {
-    let text = std::fs::read_to_string(net.dir.join(STEPS_FILE)).unwrap_or_default();
-    let mut steps = Vec::new();
-    let mut ended = None;
-    for line in text.lines() {
-        if let Some(rest) = line.strip_prefix("[cycle")
-            && let Some((head, what)) = rest.split_once("] ")
-            && let Some(Ok(cycle)) = head.split(',').next().map(|c| c.trim().parse::<u64>())
-        {
-            steps.push((what.to_string(), cycle, cycle as f64 * 0.01));
-        } else if line == "the plan succeeded" {
-            ended = Some("Success".to_string());
-        } else if line.ends_with("the plan failed") {
-            ended = Some("Failure".to_string());
+/// The steps the plan's runners printed into `up`'s log (`[cycle N, t = …] what`), read as
+/// the log grows: what, cycle, the robot's time (a cycle is 10 ms of it); and how the plan
+/// ended, if it has.
+#[derive(Debug, Default)]
+struct StepLog {
+    steps: Vec<(String, u64, f64)>,
+    ended: Option<String>,
+    /// Bytes of the log read so far (up to the last whole line).
+    read: u64,
+}
+
+impl StepLog {
+    /// Reads what the log gained since the last call; prints the new steps with `verbose`.
+    fn read(&mut self, log: &Path, verbose: bool) {
+        use std::io::{Read, Seek, SeekFrom};
+        let mut text = String::new();
+        let Ok(mut f) = std::fs::File::open(log) else {
+            return;
+        };
+        if f.seek(SeekFrom::Start(self.read)).is_err() || f.read_to_string(&mut text).is_err() {
+            return;
+        }
+        // A line still being written is read next time.
+        let whole = text.rfind('\n').map_or(0, |i| i + 1);
+        self.read += whole as u64;
+        for line in text[..whole].lines() {
+            if let Some(rest) = line.strip_prefix("[cycle")
+                && let Some((head, what)) = rest.split_once("] ")
+                && let Some(Ok(cycle)) = head.split(',').next().map(|c| c.trim().parse::<u64>())
+            {
+                if verbose {
+                    println!("  {line}");
+                }
+                self.steps
+                    .push((what.to_string(), cycle, cycle as f64 * 0.01));
+            } else if line == "the plan succeeded" {
+                self.ended = Some("Success".to_string());
+            } else if line.ends_with("the plan failed") {
+                self.ended = Some("Failure".to_string());
+            }
         }
     }
-    (steps, ended)
 }
 
 /// Halts the plan (SIGTERM to its runner: it restores what it set and removes its monitors)
@@ -465,12 +481,6 @@ fn connect(net: &Network, skills: &[&str]) -> anyhow::Result<Client> {
     }
 }
 
-/// What drives the robot: the sequencer written here, or a plan (run by `up`).
-enum Driver {
-    Code(Sequencer),
-    Plan,
-}
-
 /// How long a run waits for the simulator's first ground truth.
 const NO_TRUTH: Duration = Duration::from_secs(30);
 
@@ -496,14 +506,6 @@ fn judge_truth(site: &Site, now: &TruthRecord, limit_s: f64) -> Option<Verdict> 
     } else {
         None
     }
-}
-
-/// The newest ground truth into `out`; how the run ended, if it has.
-fn watch(site: &Site, traj: &Path, out: &mut RunOutcome, limit_s: f64) -> Option<Verdict> {
-    let now = latest(traj)?;
-    out.time_s = now.t;
-    out.collisions = now.collisions;
-    judge_truth(site, &now, limit_s)
 }
 
 /// The first ground-truth record a status period after `then`, or `then` if none comes
@@ -632,36 +634,14 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         run_dir: None,
         trajectory: Vec::new(),
     };
-    let record = |c: &Client, steps: &mut Vec<(String, u64, f64)>, what: &str| {
+    // The judge's own steps (the plan's are its runner's, read from its log).
+    let step = |c: &Client, out: &mut RunOutcome, what: &str| {
         let cycle = c.stats().map(|s| s.cycles).unwrap_or(0);
         let t = latest(&traj).map_or(0.0, |r| r.t);
         if opts.verbose {
             println!("  [cycle {cycle:>6}, t = {t:>6.1} s] {what}");
         }
-        steps.push((what.to_string(), cycle, t));
-    };
-    let step = |c: &Client, out: &mut RunOutcome, what: &str| record(c, &mut out.steps, what);
-    // The plan (run below), or the Rust sequencer's first step.
-    let mut driver = match &opts.plan {
-        Some(_) => Driver::Plan,
-        None if matches!(opts.site, Site::Building(_)) => {
-            bail!("the delivery mission runs a plan: none was given")
-        }
-        None => {
-            c.activate(&["explore", "avoid", "barcode_track"])?;
-            step(
-                &c,
-                &mut out,
-                "activate explore + avoid + barcode_track; monitor the door's barcode",
-            );
-            Driver::Code(Sequencer {
-                phase: Phase::Search,
-                seen: c.add_monitor("barcode_track.target.seen == 1", MonitorMode::Once, 0)?,
-                near: None,
-                far: None,
-                found: None,
-            })
-        }
+        out.steps.push((what.to_string(), cycle, t));
     };
     let sim_killer = opts.faults.kill_sim_every_s.map(|every| {
         Killer::start_sim(
@@ -678,119 +658,80 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             Duration::from_secs_f64(0.01 / opts.time_factor),
             opts.faults.seed ^ seed,
             // The plan runner is a process of the fabric too.
-            opts.plan
-                .as_ref()
-                .map(|_| net.dir.join(PLAN_FILE).to_string_lossy().into_owned()),
+            Some(net.dir.join(PLAN_FILE).to_string_lossy().into_owned()),
             opts.faults.kill_only.clone(),
         )
     });
-    // Lock-step: the judge holds the fabric before the Rust sequencer starts it (or the
-    // plan's runner resumes it: `up --held`).
+    // Lock-step: the judge holds the fabric before the plan's runner resumes it (`up --held`
+    // keeps it from running until then).
     let mut judge = if opts.lockstep {
         Some(Judge::start(&c)?)
     } else {
         None
     };
-    if opts.lockstep && matches!(driver, Driver::Code(_)) {
-        c.run()?;
-    }
     let started = Instant::now();
-    match &mut driver {
-        Driver::Code(seq) => loop {
-            if interrupted() {
-                bail!("interrupted");
-            }
-            if out.time_s == 0.0 && started.elapsed() > NO_TRUTH {
-                bail!(NO_TRUTH_ERROR);
-            }
-            let ev = c.next_event(Duration::from_millis(100))?.map(|e| e.kind);
-            if let Some(EventKind::MonitorFired { id, .. }) = ev {
-                if let Some(what) = seq.on_monitor(&c, id)? {
-                    step(&c, &mut out, &what);
-                }
-                // Lock-step: the manager paused after the cycle the monitor fired in.
-                if opts.lockstep {
-                    c.run()?;
-                }
-            }
-            // Real time: the ground truth whenever it is looked at; lock-step: at the holds.
-            let look = match &judge {
-                Some(j) => j.reached(&c, ev.as_ref())?,
-                None => true,
-            };
-            if look {
-                if let Some(v) = watch(&opts.site, &traj, &mut out, opts.limit_s) {
-                    verdict(&c, &mut out, v, &step)?;
-                    break;
-                }
-                if let Some(j) = judge.as_mut() {
-                    j.next(&c)?;
-                }
-            }
-        },
-        // The plan runs as a process of the network (and paces a lock-step manager) until
-        // it ends or the ground truth ends the run; it is then halted: what it set is
-        // restored, its monitors removed.
-        Driver::Plan => {
-            let mut last: Option<TruthRecord> = None;
-            let ended = loop {
-                if interrupted() {
-                    bail!("interrupted");
-                }
-                // Real time: ten times a second (the trajectory file is read whole);
-                // lock-step: at the judge's holds.
-                let look = match judge.as_mut() {
-                    Some(j) => {
-                        let ev = c.next_event(Duration::from_millis(100))?.map(|e| e.kind);
-                        j.reached(&c, ev.as_ref())?
-                    }
-                    None => {
-                        std::thread::sleep(Duration::from_millis(100));
-                        true
-                    }
-                };
-                if look {
-                    last = latest(&traj).or(last);
-                }
-                match &last {
-                    Some(now) if look && judge_truth(&opts.site, now, opts.limit_s).is_some() => {
-                        break None;
-                    }
-                    None if started.elapsed() > NO_TRUTH => bail!(NO_TRUTH_ERROR),
-                    _ => {}
-                }
-                // (A lock-step plan that ended leaves the fabric paused short of the hold.)
-                if let (_, Some(how)) = plan_steps(&net) {
-                    break Some(how);
-                }
-                if look && let Some(j) = judge.as_mut() {
-                    j.next(&c)?;
-                }
-            };
-            halt_plan(&net);
-            out.steps = plan_steps(&net).0;
-            if let Some(status) = &ended {
-                step(&c, &mut out, &format!("the plan ended: {status}"));
-            }
-            let now = match judge {
-                // Lock-step: the record at the hold, not a newer one.
-                Some(_) if ended.is_none() => last,
-                _ => latest(&traj).or(last),
-            };
-            let Some(mut now) = now else {
-                bail!(NO_TRUTH_ERROR);
-            };
-            // A plan that ended before the ground truth says how: the simulator writes it
-            // once per status period (100 ms), and a lock-step manager stays paused when a
-            // plan ends. Let the robot's time go on until a record after the plan's end.
-            if ended.is_some() && judge_truth(&opts.site, &now, opts.limit_s).is_none() {
-                now = truth_after(&mut c, &traj, now, judge.as_mut())?;
-            }
-            (out.time_s, out.collisions) = (now.t, now.collisions);
-            if let Some(v) = judge_truth(&opts.site, &now, opts.limit_s) {
-                verdict(&c, &mut out, v, &step)?;
-            }
+    // The plan runs (and paces a lock-step manager) until it ends or the ground truth ends
+    // the run; it is then halted: what it set is restored, its monitors removed.
+    let mut log = StepLog::default();
+    let mut last: Option<TruthRecord> = None;
+    let ended = loop {
+        if interrupted() {
+            bail!("interrupted");
         }
+        // Real time: ten times a second (the trajectory file is read whole); lock-step: at
+        // the judge's holds.
+        let look = match judge.as_mut() {
+            Some(j) => {
+                let ev = c.next_event(Duration::from_millis(100))?.map(|e| e.kind);
+                j.reached(&c, ev.as_ref())?
+            }
+            None => {
+                std::thread::sleep(Duration::from_millis(100));
+                true
+            }
+        };
+        if look {
+            last = latest(&traj).or(last);
+        }
+        log.read(&net.dir.join(STEPS_FILE), opts.verbose);
+        match &last {
+            Some(now) if look && judge_truth(&opts.site, now, opts.limit_s).is_some() => {
+                break None;
+            }
+            None if started.elapsed() > NO_TRUTH => bail!(NO_TRUTH_ERROR),
+            _ => {}
+        }
+        // (A lock-step plan that ended leaves the fabric paused short of the hold.)
+        if let Some(how) = &log.ended {
+            break Some(how.clone());
+        }
+        if look && let Some(j) = judge.as_mut() {
+            j.next(&c)?;
+        }
+    };
+    halt_plan(&net);
+    log.read(&net.dir.join(STEPS_FILE), opts.verbose);
+    out.steps = std::mem::take(&mut log.steps);
+    if let Some(status) = &ended {
+        step(&c, &mut out, &format!("the plan ended: {status}"));
+    }
+    let now = match judge {
+        // Lock-step: the record at the hold, not a newer one.
+        Some(_) if ended.is_none() => last,
+        _ => latest(&traj).or(last),
+    };
+    let Some(mut now) = now else {
+        bail!(NO_TRUTH_ERROR);
+    };
+    // A plan that ended before the ground truth says how: the simulator writes it once per
+    // status period (100 ms), and a lock-step manager stays paused when a plan ends. Let the
+    // robot's time go on until a record after the plan's end.
+    if ended.is_some() && judge_truth(&opts.site, &now, opts.limit_s).is_none() {
+        now = truth_after(&mut c, &traj, now, judge.as_mut())?;
+    }
+    (out.time_s, out.collisions) = (now.t, now.collisions);
+    if let Some(v) = judge_truth(&opts.site, &now, opts.limit_s) {
+        verdict(&c, &mut out, v, &step)?;
     }
     if let Some(k) = killer {
         out.kills = k.finish();
@@ -819,14 +760,6 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             device("safety.blind")?,
         ))
     })();
-    match &mut driver {
-        Driver::Code(_) => {
-            c.set_param("avoid", "safe_distance", "0.6")?;
-            step(&c, &mut out, "avoid.safe_distance restored");
-        }
-        // Halted already when the run ended.
-        Driver::Plan => {}
-    }
     let all: Vec<&str> = opts
         .site
         .skills()
@@ -842,7 +775,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
             .with_context(|| format!("copying the ground truth to {}", to.display()))?;
     }
     out.end = out.trajectory.last().map(|r| (r.floor, r.x, r.y));
-    // The robot may have gone on a little while the sequencer looked: the time it first was
+    // The robot may have gone on a little until the judge looked: the time it first was
     // outside (or the message was delivered) is the mission's.
     let done = |r: &&TruthRecord| match opts.site {
         Site::World(_) => r.outside,

@@ -20,6 +20,7 @@
 #![warn(missing_docs)]
 
 pub mod args;
+pub mod checks;
 pub mod control;
 pub mod engine;
 pub mod graph;

@@ -79,6 +79,9 @@ pub enum SdkError {
         /// Why (boxed: the other errors are small).
         reason: Box<skillfab_proto::registration::Refusal>,
     },
+    /// `--describe` could not write the declaration as JSON.
+    #[error("writing the declaration (--describe): {0}")]
+    Describe(serde_json::Error),
     /// A parameter given at start-up was refused.
     #[error(transparent)]
     Param(#[from] params::ParamError),

@@ -9,6 +9,7 @@
 
 #![warn(missing_docs)]
 
+mod check;
 pub mod ctl;
 mod demo;
 mod faults;
@@ -166,9 +167,15 @@ enum Cmd {
         /// The tree to run (default: the plan's main_tree_to_execute).
         #[arg(long)]
         tree: Option<String>,
-        /// Only read and check the plan.
+        /// Only check the plan: its form, then every skill, parameter (and value), output
+        /// and field it names against the skills of --launch, else of the domain's running
+        /// manager if there is one. Exit status 1 if a name does not fit.
         #[arg(long)]
         check: bool,
+        /// With --check: the launch file whose skills the plan drives (each skill binary is
+        /// asked for its declaration with `--describe`).
+        #[arg(long, value_name = "FILE.toml", requires = "check")]
+        launch: Option<PathBuf>,
         /// Do not resume the plan a runner that died left (same plan, same domain): restore
         /// what it had set and start from the first node.
         #[arg(long)]
@@ -481,6 +488,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             file,
             tree,
             check,
+            launch,
             fresh,
             wait_for,
             wait_timeout_s,
@@ -492,6 +500,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             &sequence::RunOptions {
                 tree,
                 check,
+                launch,
                 fresh,
                 wait_for,
                 wait: std::time::Duration::from_secs_f64(wait_timeout_s.max(0.0)),

@@ -28,8 +28,10 @@ pub struct Unfinished(anyhow::Error);
 pub struct RunOptions {
     /// The tree to run (else the plan's main one).
     pub tree: Option<String>,
-    /// Only read and check the plan.
+    /// Only check the plan (its form, and its names against `launch` or the running domain).
     pub check: bool,
+    /// The launch file whose skills `check` checks the plan's names against.
+    pub launch: Option<std::path::PathBuf>,
     /// Start over whatever a runner before left.
     pub fresh: bool,
     /// Skills to wait for (registered, not starting) before the first tick.
@@ -80,6 +82,56 @@ fn connect_waiting(domain: &Domain, wait_for: &[String], wait: Duration) -> anyh
     }
 }
 
+/// `--check`: the plan's form (read already), then its names against the launch file's
+/// skills, else the running domain's, else not (said).
+fn check(
+    plan: &Plan,
+    file: &Path,
+    tree: Option<&str>,
+    address: &Address,
+    opts: &RunOptions,
+) -> anyhow::Result<()> {
+    let form = format!(
+        "{}: {} tree(s), runs '{}'",
+        file.display(),
+        plan.trees.len(),
+        tree.unwrap_or(&plan.main)
+    );
+    let decls = match &opts.launch {
+        Some(l) => Some(crate::check::Declarations::of_launch(l)?),
+        None => match address.connect() {
+            Ok(c) => Some(crate::check::Declarations::of_domain(&c, address)?),
+            Err(_) => None,
+        },
+    };
+    let Some(decls) = decls else {
+        println!("{form}; its names are not checked: no --launch, and no manager at {address}");
+        return Ok(());
+    };
+    let problems = crate::check::check(plan, &decls);
+    if problems.is_empty() {
+        println!(
+            "{form}; every skill, parameter, output and field it names is in {}",
+            decls.from
+        );
+        return Ok(());
+    }
+    for (u, p) in &problems {
+        println!(
+            "{}:{}: {} (tree '{}'): {p}",
+            file.display(),
+            u.line,
+            u.node,
+            u.tree
+        );
+    }
+    anyhow::bail!(
+        "{} name(s) of the plan do not fit {}",
+        problems.len(),
+        decls.from
+    )
+}
+
 /// Runs the plan in `file` on the manager at `address` (its progress kept in this host's
 /// `domain`), printing each step with the cycle and the fabric's time; an error when the plan
 /// fails.
@@ -94,13 +146,7 @@ pub fn run(
     let name = file.display().to_string();
     let mut seq = Sequencer::kept(&plan, tree, &name, PlanStore::of(domain), opts.fresh)?;
     if opts.check {
-        println!(
-            "{}: {} tree(s), runs '{}'",
-            file.display(),
-            plan.trees.len(),
-            tree.unwrap_or(&plan.main)
-        );
-        return Ok(());
+        return check(&plan, file, tree, &address, opts);
     }
     let mut client = match &address {
         Address::Remote { .. } => address.connect().map_err(|e| Unfinished(e.into()))?,

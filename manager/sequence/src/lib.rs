@@ -23,6 +23,6 @@ pub mod tree;
 mod tests;
 
 pub use keep::{Kept, PlanState, PlanStore};
-pub use plan::{Plan, PlanError};
+pub use plan::{Plan, PlanError, Reference, Use};
 pub use run::{ClientFabric, LockStep, Opening, Sequencer, run};
 pub use tree::{Fabric, FabricError, SeqError, Status};

@@ -130,6 +130,95 @@ pub enum Kind {
     SubTree(String),
 }
 
+/// A name of the fabric a plan uses (checked by `skillfab sequence --check` against the
+/// skills' declarations).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reference<'a> {
+    /// A skill activated or deactivated.
+    Skill(&'a str),
+    /// A parameter set, with the value written.
+    Param {
+        /// Skill.
+        skill: &'a str,
+        /// Parameter.
+        param: &'a str,
+        /// Value, as `ctl set` takes it.
+        value: &'a str,
+    },
+    /// A monitor expression (its paths name skills, outputs and fields).
+    Condition(&'a str),
+    /// A process of the launch file (`WaitGaveUp`).
+    Process(&'a str),
+}
+
+/// Where a plan uses a name: the node and its line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Use<'a> {
+    /// The tree's ID.
+    pub tree: &'a str,
+    /// The node's name (its `name` attribute or element).
+    pub node: &'a str,
+    /// Its line.
+    pub line: u32,
+    /// The name used.
+    pub what: Reference<'a>,
+}
+
+impl Spec {
+    /// The node's children.
+    pub fn children(&self) -> Vec<&Spec> {
+        match &self.kind {
+            Kind::Sequence(c) | Kind::Fallback(c) | Kind::Parallel { children: c, .. } => {
+                c.iter().collect()
+            }
+            Kind::Retry { child, .. }
+            | Kind::Timeout { child, .. }
+            | Kind::WithParam { child, .. }
+            | Kind::Inverter(child)
+            | Kind::KeepRunningUntilFailure(child)
+            | Kind::ForceSuccess(child)
+            | Kind::ForceFailure(child) => vec![child],
+            Kind::Activate(_)
+            | Kind::Deactivate(_)
+            | Kind::SetParam { .. }
+            | Kind::WaitFor { .. }
+            | Kind::Sleep(_)
+            | Kind::WaitGaveUp(_)
+            | Kind::Log(_)
+            | Kind::AlwaysSuccess
+            | Kind::AlwaysFailure
+            | Kind::SubTree(_) => Vec::new(),
+        }
+    }
+
+    /// The names of the fabric this node itself uses.
+    fn own_references(&self) -> Vec<Reference<'_>> {
+        match &self.kind {
+            Kind::Activate(skills) | Kind::Deactivate(skills) => {
+                skills.iter().map(|s| Reference::Skill(s)).collect()
+            }
+            Kind::SetParam {
+                skill,
+                param,
+                value,
+            }
+            | Kind::WithParam {
+                skill,
+                param,
+                value,
+                ..
+            } => vec![Reference::Param {
+                skill,
+                param,
+                value,
+            }],
+            Kind::WaitFor { condition, .. } => vec![Reference::Condition(condition)],
+            Kind::WaitGaveUp(process) => vec![Reference::Process(process)],
+            _ => Vec::new(),
+        }
+    }
+}
+
 /// A whole plan: its trees by ID and the one to run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Plan {
@@ -492,6 +581,24 @@ impl Reader<'_> {
 }
 
 impl Plan {
+    /// Every name of the fabric the plan uses, tree by tree in the order written.
+    pub fn uses(&self) -> Vec<Use<'_>> {
+        let mut out = Vec::new();
+        for (tree, root) in &self.trees {
+            let mut stack = vec![root];
+            while let Some(node) = stack.pop() {
+                out.extend(node.own_references().into_iter().map(|what| Use {
+                    tree,
+                    node: &node.name,
+                    line: node.line,
+                    what,
+                }));
+                stack.extend(node.children().into_iter().rev());
+            }
+        }
+        out
+    }
+
     /// Reads a plan from `text`; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<Plan, PlanError> {
         let doc = roxmltree::Document::parse(text).map_err(|e| PlanError {

@@ -1,7 +1,7 @@
 //! `monitor`, `unmonitor`: conditions on live outputs, evaluated every cycle.
 
-use super::query::check_numeric;
 use super::*;
+use crate::checks::{check_numeric, read_as_number};
 use crate::monitors::Resolved;
 use crate::monitors::expr;
 use skillfab_proto::control::MonitorMode;
@@ -21,7 +21,7 @@ impl Manager {
         })?;
         let mut paths = Vec::new();
         for p in expr::paths(&parsed) {
-            let aggregate = !parsed_is_scalar_use(&parsed, p);
+            let aggregate = !read_as_number(&parsed, p);
             let (topic, field, slot) = self.resolve_path(&p.skill, &p.output, &p.field, &p.text)?;
             check_numeric(&field, aggregate).map_err(|error| ControlError::BadPath {
                 path: p.text.clone(),
@@ -53,18 +53,5 @@ impl Manager {
             return Err(ControlError::UnknownMonitor(id));
         }
         Ok(Reply::Done)
-    }
-}
-
-/// Whether path `p` is used as a plain number (not inside min()/max()).
-fn parsed_is_scalar_use(e: &expr::Expr, p: &expr::PathRef) -> bool {
-    use expr::Expr::*;
-    match e {
-        Path(q) => q == p,
-        Min(_) | Max(_) | Num(_) | Bool(_) => false,
-        Neg(x) | Not(x) => parsed_is_scalar_use(x, p),
-        Arith(_, l, r) | Cmp(_, l, r) | And(l, r) | Or(l, r) => {
-            parsed_is_scalar_use(l, p) || parsed_is_scalar_use(r, p)
-        }
     }
 }

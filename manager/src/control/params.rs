@@ -2,7 +2,6 @@
 
 use super::*;
 use skillfab_proto::control::{EventKind, ParamArg};
-use skillfab_proto::param::{ParamValue, check_bounds};
 
 impl Manager {
     /// Activates or deactivates every named skill, or none (an unknown name refuses all).
@@ -74,41 +73,8 @@ impl Manager {
             None => self.skills.away(skill),
         }
         .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
-        let spec = decl
-            .params
-            .iter()
-            .find(|p| p.name == param)
-            .ok_or_else(|| {
-                param_err(
-                    skill,
-                    ParamError::Unknown {
-                        param: param.into(),
-                    },
-                )
-            })?;
-        let value = match arg {
-            ParamArg::Text(t) => ParamValue::parse(spec.kind, &t).ok_or_else(|| {
-                param_err(
-                    skill,
-                    ParamError::Unparsable {
-                        param: param.into(),
-                        expected: spec.kind,
-                        text: skillfab_proto::control::shorten(&t, 120),
-                    },
-                )
-            })?,
-            ParamArg::Value(v) => v.coerce(spec.kind).ok_or_else(|| {
-                param_err(
-                    skill,
-                    ParamError::WrongType {
-                        param: param.into(),
-                        expected: spec.kind,
-                        got: v,
-                    },
-                )
-            })?,
-        };
-        check_bounds(spec, value).map_err(|err| param_err(skill, err))?;
+        let (value, spec) =
+            crate::checks::param_value(decl, param, arg).map_err(|err| param_err(skill, err))?;
         let default = spec.default;
         let old = match live.and_then(|s| self.skills.get(s)) {
             Some(e) => e.values.iter().find(|(n, _)| n == param).map(|(_, v)| *v),

@@ -24,18 +24,7 @@ impl Manager {
             None => self.skills.away(skill),
         }
         .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
-        let port = decl
-            .outputs
-            .iter()
-            .find(|p| p.port == output)
-            .ok_or_else(|| {
-                bad(PathError::NoOutput {
-                    skill: skill.into(),
-                    output: output.into(),
-                    outputs: decl.outputs.iter().map(|p| p.port.clone()).collect(),
-                })
-            })?;
-        let f = value::resolve(&port.schema, field).map_err(bad)?;
+        let (port, f) = crate::checks::output_field(decl, output, field).map_err(bad)?;
         // Every proposer publishes on its channel's topic: read this skill's own proposals.
         let slot = match (port.kind == skillfab_proto::decl::PortKind::Proposal, live) {
             (false, _) => None,
@@ -192,18 +181,5 @@ impl Manager {
             value,
             cycle: header.cycle,
         })
-    }
-}
-
-/// A plain path must name one number; inside min()/max() an array or range of numbers.
-pub(super) fn check_numeric(f: &FieldPath, aggregate: bool) -> Result<(), PathError> {
-    use skillfab_proto::schema::FieldKind;
-    let prim = |k: &FieldKind| matches!(k, FieldKind::Prim(_));
-    match (aggregate, &f.kind, f.count) {
-        (false, k, None) if prim(k) => Ok(()),
-        (false, _, _) => Err(PathError::NotOneNumber),
-        (true, k, Some(_)) if prim(k) => Ok(()),
-        (true, FieldKind::Array { elem, .. }, None) if prim(elem) => Ok(()),
-        (true, _, _) => Err(PathError::NotNumbers),
     }
 }

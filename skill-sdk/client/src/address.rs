@@ -46,6 +46,17 @@ pub enum Address {
     },
 }
 
+impl std::fmt::Display for Address {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Address::Local(d) => write!(f, "domain '{d}'"),
+            Address::Remote {
+                domain, through, ..
+            } => write!(f, "domain '{domain}' through {through}"),
+        }
+    }
+}
+
 impl Address {
     /// A connection to the manager.
     pub fn connect(&self) -> Result<Client, ClientError> {

@@ -663,6 +663,14 @@ impl Client {
         self.done(Request::Hold(at))
     }
 
+    /// A skill's declaration as it registered (its last one while it is away).
+    pub fn declaration(&self, skill: &str) -> Result<skillfab_proto::decl::SkillDecl, ClientError> {
+        match self.request(&Request::Declaration(skill.into()))? {
+            Reply::Declaration(d) => Ok(*d),
+            other => Err(ClientError::Unexpected(Box::new(other))),
+        }
+    }
+
     /// Cycle and skill statistics.
     pub fn stats(&self) -> Result<Stats, ClientError> {
         match self.request(&Request::Stats)? {

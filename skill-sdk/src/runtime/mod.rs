@@ -87,6 +87,11 @@ pub struct SkillArgs {
     /// Wire a port to another topic, or a proposal/channel to another channel (repeatable).
     #[arg(long = "remap", value_name = "PORT=TOPIC")]
     pub remaps: Vec<String>,
+    /// Print the declaration these options make (JSON: ports with topics and message
+    /// schemas, parameters with values) and exit, without joining a fabric (`skillfab
+    /// sequence --check --launch` reads it).
+    #[arg(long)]
+    pub describe: bool,
 }
 
 /// Options every device binary accepts: a skill's, and where its hardware is and how its
@@ -339,6 +344,11 @@ fn run<U: Unit>(
     kind: &str,
 ) -> Result<(), SdkError> {
     let (decl, params) = declare(&unit, args, policies, kind)?;
+    if args.describe {
+        let json = serde_json::to_string(&decl).map_err(SdkError::Describe)?;
+        println!("{json}");
+        return Ok(());
+    }
     let domain = Domain::new(&args.domain)?;
     let span = tracing::info_span!("skill", name = %decl.name, domain = %domain);
     let _enter = span.enter();

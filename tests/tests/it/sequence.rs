@@ -480,3 +480,97 @@ fn when_up_gives_up_on_a_crashing_process_an_event_says_so_a_plan_reacts_and_a_l
         ParamValue::Float(4.0)
     );
 }
+
+/// `skillfab sequence FILE --check ARGS`: exit status and what it printed.
+fn check(t: &TestDomain, file: &Path, args: &[&str]) -> (bool, String) {
+    let out = t.run(
+        "skillfab",
+        &[&["sequence", file.to_str().unwrap(), "--check"], args].concat(),
+    );
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+#[test]
+fn a_plans_names_are_checked_against_a_launch_files_skills_and_a_running_domain() {
+    let mut t = TestDomain::new("seqcheck");
+    let root = skillfab_tests::repo_root();
+    let launch = |name: &str| root.join("skills/launch").join(name);
+    // The shipped plans fit the skills they drive.
+    for (plan, l) in [
+        ("exit-lab.xml", "exit-lab.toml"),
+        ("deliver.xml", "deliver.toml"),
+    ] {
+        let file = root.join("skills/plans").join(plan);
+        let (ok, text) = check(&t, &file, &["--launch", launch(l).to_str().unwrap()]);
+        assert!(
+            ok && text.contains("every skill, parameter, output and field"),
+            "{text}"
+        );
+    }
+    // Each kind of mistake, with its line, all of them at once.
+    let bad = plan(
+        &t,
+        r#"<Sequence>
+             <Activate skills="explore, avoid, barcode_trak"/>
+             <SetParam skill="avoid" param="safe_distanse" value="0.3"/>
+             <SetParam skill="avoid" param="safe_distance" value="-4"/>
+             <WaitFor condition="barcode_track.targt.seen == 1"/>
+             <WaitFor condition="barcode_track.target.sen == 1"/>
+             <WaitFor condition="denning.sonar.range &lt; 0.3"/>
+             <WaitFor condition="min(denning.sonar.range[0..3]) &lt; 0.25"/>
+             <WaitGaveUp process="denningg"/>
+           </Sequence>"#,
+    );
+    let (ok, text) = check(
+        &t,
+        &bad,
+        &["--launch", launch("exit-lab.toml").to_str().unwrap()],
+    );
+    assert!(!ok, "{text}");
+    for (line, what) in [
+        (4, "no skill 'barcode_trak'"),
+        (5, "unknown parameter 'safe_distanse'"),
+        (6, "'safe_distance' = -4 is out of range"),
+        (7, "has no output 'targt' (outputs: target)"),
+        (8, "has no field 'sen'"),
+        (9, "names more than one number"),
+        (11, "no process 'denningg' in the launch file"),
+    ] {
+        let at = format!("plan.xml:{line}:");
+        assert!(
+            text.lines().any(|l| l.contains(&at) && l.contains(what)),
+            "line {line}: {what}\n{text}"
+        );
+    }
+    assert!(
+        !text.contains("plan.xml:10:"),
+        "min() over a range is fine: {text}"
+    );
+    assert!(text.contains("7 name(s) of the plan do not fit"), "{text}");
+
+    // Without --launch: the running domain's skills, as they registered.
+    let (ok, text) = check(&t, &bad, &[]);
+    assert!(
+        ok && text.contains("not checked"),
+        "no manager, no check: {text}"
+    );
+    t.hello(&[]);
+    let good = plan(
+        &t,
+        r#"<Sequence>
+             <WithParam skill="scale" param="gain" value="3">
+               <WaitFor condition="smooth.smoothed.value &gt; 10"/>
+             </WithParam>
+           </Sequence>"#,
+    );
+    let (ok, text) = check(&t, &good, &[]);
+    assert!(ok && text.contains("registered in domain"), "{text}");
+    let renamed = plan(&t, r#"<WaitFor condition="smooth.smoothd.value &gt; 10"/>"#);
+    let (ok, text) = check(&t, &renamed, &[]);
+    assert!(!ok && text.contains("has no output 'smoothd'"), "{text}");
+}

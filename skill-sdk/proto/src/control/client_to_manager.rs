@@ -144,6 +144,10 @@ pub enum Request {
     /// `Run`/`Stop` and from the pause of a monitor's firing in lock-step; a hold goes with its
     /// client's process. Lock-step observers use it to act at cycles of their choosing.
     Hold(Option<u64>),
+    /// A skill's declaration as it registered (ports with topics and message schemas,
+    /// parameters); a skill that is away, its last one. `skillfab sequence --check` checks a
+    /// plan's names against them.
+    Declaration(String),
 }
 
 /// Encodes a request.

@@ -213,6 +213,8 @@ pub enum Reply {
     Adopted(Vec<MonitorFate>),
     /// The processes `skillfab up` gave up restarting ([`crate::control::Request::GaveUp`]).
     GaveUp(Vec<GaveUpInfo>),
+    /// A skill's declaration ([`crate::control::Request::Declaration`]).
+    Declaration(Box<crate::decl::SkillDecl>),
 }
 
 /// A process `skillfab up` gave up restarting, as it told the manager.

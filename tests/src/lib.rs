@@ -261,6 +261,24 @@ impl TestDomain {
         up
     }
 
+    /// Starts the hello network under `skillfab up` with `extra` arguments and waits until
+    /// its three skills have registered (not until they run: a fabric started `--paused` or
+    /// `--held` does not cycle); returns the child's index.
+    pub fn hello_registered(&mut self, extra: &[&str]) -> usize {
+        let launch = self.launch_file(HELLO);
+        let up = self.spawn(
+            "skillfab",
+            &[&["up", launch.to_str().expect("utf-8 path")], extra].concat(),
+        );
+        let board = self.board();
+        self.wait_until("the hello network to register", || {
+            ["ticker", "scale", "smooth"]
+                .iter()
+                .all(|n| registered(&board, n).is_some())
+        });
+        up
+    }
+
     /// Runs `skillfab ctl ARGS`, asserts it succeeded and returns its standard output.
     pub fn ctl(&self, args: &[&str]) -> String {
         let out = self.run("skillfab", &[&["ctl"], args].concat());

@@ -165,32 +165,6 @@ pub struct Use<'a> {
 }
 
 impl Spec {
-    /// The node's children.
-    pub fn children(&self) -> Vec<&Spec> {
-        match &self.kind {
-            Kind::Sequence(c) | Kind::Fallback(c) | Kind::Parallel { children: c, .. } => {
-                c.iter().collect()
-            }
-            Kind::Retry { child, .. }
-            | Kind::Timeout { child, .. }
-            | Kind::WithParam { child, .. }
-            | Kind::Inverter(child)
-            | Kind::KeepRunningUntilFailure(child)
-            | Kind::ForceSuccess(child)
-            | Kind::ForceFailure(child) => vec![child],
-            Kind::Activate(_)
-            | Kind::Deactivate(_)
-            | Kind::SetParam { .. }
-            | Kind::WaitFor { .. }
-            | Kind::Sleep(_)
-            | Kind::WaitGaveUp(_)
-            | Kind::Log(_)
-            | Kind::AlwaysSuccess
-            | Kind::AlwaysFailure
-            | Kind::SubTree(_) => Vec::new(),
-        }
-    }
-
     /// The names of the fabric this node itself uses.
     fn own_references(&self) -> Vec<Reference<'_>> {
         match &self.kind {
@@ -593,7 +567,7 @@ impl Plan {
                     line: node.line,
                     what,
                 }));
-                stack.extend(node.children().into_iter().rev());
+                stack.extend(node.kind.children().into_iter().rev());
             }
         }
         out

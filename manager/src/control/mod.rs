@@ -23,7 +23,6 @@ use iceoryx2::prelude::*;
 use skillfab_proto::board::pid_alive;
 use skillfab_proto::control::{ControlError, Event, Reply, Request, Response};
 use skillfab_proto::domain::Domain;
-use skillfab_proto::header::now_ns;
 use skillfab_proto::param::ParamError;
 use skillfab_proto::{Error as SdkError, names, services};
 use std::sync::Arc;
@@ -68,7 +67,6 @@ pub struct ControlPlane {
     poke: Notifier<ipc::Service>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
-    seq: u64,
     /// `step` requests waiting for their cycles.
     steps: Vec<(u64, Option<String>)>,
     /// Clients that hold monitors and whose process was first seen dead then.
@@ -138,7 +136,6 @@ impl ControlPlane {
             poke: services::notifier(node, &names::control())?,
             stop,
             thread: Some(thread),
-            seq: 0,
             steps: Vec::new(),
             orphans: Orphans::default(),
         })
@@ -182,21 +179,9 @@ impl ControlPlane {
     /// Hands queued events and finished `step` answers to the control thread.
     pub fn flush(&mut self, m: &mut Manager) {
         let mut poke = false;
-        if !m.outbox.is_empty() {
-            let events = std::mem::take(&mut m.outbox)
-                .into_iter()
-                .map(|kind| {
-                    self.seq += 1;
-                    Event {
-                        seq: self.seq,
-                        cycle: m.cycle,
-                        time_ns: now_ns(),
-                        kind,
-                    }
-                })
-                .collect::<Vec<_>>();
-            m.record_events(&events);
-            m.events_published = self.seq;
+        m.stamp_events();
+        if !m.stamped.is_empty() {
+            let events = std::mem::take(&mut m.stamped);
             let _ = self.to_clients.send(Outgoing::Events(events));
             poke = true;
         }

@@ -150,6 +150,7 @@ impl Manager {
     }
 
     pub(super) fn start_cycle(&mut self) {
+        self.stamp_events();
         if self.dirty {
             self.replan();
         }
@@ -284,6 +285,32 @@ impl Manager {
         if !self.io_log.is_empty() {
             self.log_io();
         }
+        self.stamp_events();
+    }
+
+    /// Numbers the events queued so far, stamps them with the cycle they belong to (the last
+    /// one completed) and puts them in the recording; the control plane publishes them. Done
+    /// between cycles (when one ends, before the next starts, and when the control plane
+    /// publishes), so an event's cycle and its place among the recorded samples are the
+    /// run's, not the host's timing of the manager's loop.
+    pub(crate) fn stamp_events(&mut self) {
+        if self.outbox.is_empty() {
+            return;
+        }
+        let events: Vec<Event> = std::mem::take(&mut self.outbox)
+            .into_iter()
+            .map(|kind| {
+                self.events_published += 1;
+                Event {
+                    seq: self.events_published,
+                    cycle: self.cycle,
+                    time_ns: now_ns(),
+                    kind,
+                }
+            })
+            .collect();
+        self.record_events(&events);
+        self.stamped.extend(events);
     }
 
     /// Starts or stops cycling.

@@ -32,7 +32,7 @@ use crate::stats::{CycleStats, Report, SkillReport};
 use iceoryx2::node::{Node, NodeView};
 use iceoryx2::prelude::*;
 use skillfab_proto::board::{Board, MAX_OUTPUTS, MAX_SLOTS, RunStatus, SlotState, pid_alive};
-use skillfab_proto::control::{EventKind, SkillFigures};
+use skillfab_proto::control::{Event, EventKind, SkillFigures};
 use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::domain::Domain;
 use skillfab_proto::header::now_ns;
@@ -240,8 +240,10 @@ pub struct Manager {
     pub(crate) deaths: u64,
     last_liveness: Instant,
     last_node_sweep: Instant,
-    /// Events to publish at the end of this loop iteration.
+    /// Events that happened, not yet numbered ([`Manager::stamp_events`]).
     pub(crate) outbox: Vec<EventKind>,
+    /// Events numbered, stamped and recorded, for the control plane to publish.
+    pub(crate) stamped: Vec<Event>,
     /// Installed monitors, and the `Once` ones that fired.
     pub(crate) monitors: Monitors,
     /// The processes `skillfab up` gave up restarting and that have not registered since.
@@ -349,6 +351,7 @@ impl Manager {
             next_start: now,
             stop_at: None,
             outbox: Vec::new(),
+            stamped: Vec::new(),
             monitors: Monitors::default(),
             holds,
             gave_up: std::collections::BTreeMap::new(),

@@ -582,17 +582,7 @@ fn held(c: &mut Client) -> u64 {
 #[test]
 fn a_hold_stops_a_lock_step_fabric_at_its_clients_cycle_whoever_resumes_it() {
     let mut t = TestDomain::new("holds");
-    let launch = t.launch_file(skillfab_tests::HELLO);
-    t.spawn(
-        "skillfab",
-        &["up", launch.to_str().unwrap(), "--lockstep", "--held"],
-    );
-    let board = t.board();
-    t.wait_until("the hello network to register", || {
-        ["ticker", "scale", "smooth"]
-            .iter()
-            .all(|n| skillfab_tests::registered(&board, n).is_some())
-    });
+    t.hello_registered(&["--lockstep", "--held"]);
     let mut a = Client::connect(&t.domain).unwrap();
     a.subscribe().unwrap();
     let b = Client::connect(&t.domain).unwrap();

@@ -144,17 +144,7 @@ fn ctrl_c_halts_a_plan_its_parameter_is_restored_and_its_monitor_removed() {
 #[test]
 fn in_lock_step_a_plans_timers_end_in_the_same_cycle_every_run() {
     let mut t = TestDomain::new("seqlock");
-    let launch = t.launch_file(skillfab_tests::HELLO);
-    t.spawn(
-        "skillfab",
-        &["up", launch.to_str().unwrap(), "--lockstep", "--paused"],
-    );
-    let board = t.board();
-    t.wait_until("the hello network to register", || {
-        ["ticker", "scale", "smooth"]
-            .iter()
-            .all(|n| skillfab_tests::registered(&board, n).is_some())
-    });
+    t.hello_registered(&["--lockstep", "--paused"]);
     // The period is 5 ms: 500 ms are 100 cycles, 250 ms 50. The manager waits for the plan
     // (`--paused`), and is stepped exactly to each timer.
     let p = plan(
@@ -258,17 +248,7 @@ impl Runner {
 #[test]
 fn a_plan_runner_killed_inside_a_with_param_a_retry_and_a_timeout_is_resumed_to_the_same_cycle() {
     let mut t = TestDomain::new("seqkill");
-    let launch = t.launch_file(skillfab_tests::HELLO);
-    t.spawn(
-        "skillfab",
-        &["up", launch.to_str().unwrap(), "--lockstep", "--paused"],
-    );
-    let board = t.board();
-    t.wait_until("the hello network to register", || {
-        ["ticker", "scale", "smooth"]
-            .iter()
-            .all(|n| skillfab_tests::registered(&board, n).is_some())
-    });
+    t.hello_registered(&["--lockstep", "--paused"]);
     let c = Client::connect(&t.domain).unwrap();
     c.step(5).unwrap();
     let cycle_of = |text: &str, what: &str| -> u64 {

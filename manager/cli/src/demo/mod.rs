@@ -432,11 +432,13 @@ impl StepLog {
                 && let Some((head, what)) = rest.split_once("] ")
                 && let Some(Ok(cycle)) = head.split(',').next().map(|c| c.trim().parse::<u64>())
             {
+                // The robot's time: a cycle is 10 ms of it (the runner prints the fabric's,
+                // which a time factor scales).
+                let t = cycle as f64 * 0.01;
                 if verbose {
-                    println!("  {line}");
+                    println!("  [cycle {cycle:>6}, t = {t:>6.1} s] {what}");
                 }
-                self.steps
-                    .push((what.to_string(), cycle, cycle as f64 * 0.01));
+                self.steps.push((what.to_string(), cycle, t));
             } else if line == "the plan succeeded" {
                 self.ended = Some("Success".to_string());
             } else if line.ends_with("the plan failed") {

@@ -247,11 +247,7 @@ impl TestDomain {
     /// Starts the hello network (ticker → scale → smooth, 5 ms period) under `skillfab up`
     /// with `extra` arguments and waits until all three skills run; returns the child's index.
     pub fn hello(&mut self, extra: &[&str]) -> usize {
-        let launch = self.launch_file(HELLO);
-        let up = self.spawn(
-            "skillfab",
-            &[&["up", launch.to_str().expect("utf-8 path")], extra].concat(),
-        );
+        let up = self.hello_registered(extra);
         let board = self.board();
         self.wait_until("the hello network to run", || {
             ["ticker", "scale", "smooth"]

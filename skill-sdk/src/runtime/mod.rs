@@ -166,11 +166,15 @@ pub(crate) fn start<U: Unit>(
     kind: &str,
 ) -> Result<(), (String, SdkError)> {
     init_tracing();
-    // The skill's log lines go to the domain's log stream too (console, `ctl logs`).
-    let _forward = Domain::new(&args.domain).ok().and_then(|d| {
-        let name = args.name.clone().unwrap_or_else(|| kind.to_string());
-        crate::logs::forward(&d, &name)
-    });
+    // The skill's log lines go to the domain's log stream too (console, `ctl logs`); a
+    // skill asked only to `--describe` itself joins no fabric.
+    let _forward = Domain::new(&args.domain)
+        .ok()
+        .filter(|_| !args.describe)
+        .and_then(|d| {
+            let name = args.name.clone().unwrap_or_else(|| kind.to_string());
+            crate::logs::forward(&d, &name)
+        });
     run(unit, args, policies, kind).map_err(|e| (kind.to_string(), e))
 }
 

@@ -24,7 +24,7 @@ use skillfab_client::Client;
 use skillfab_manager::launch::{
     LaunchFile, ManagerSection, PlanSection, ProcessEntry, Restart, find_program,
 };
-use skillfab_proto::control::{EventKind, SkillState};
+use skillfab_proto::control::SkillState;
 use skillfab_proto::domain::Domain;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -33,7 +33,10 @@ use std::time::{Duration, Instant};
 
 use crate::faults::{Faults, Kill, Killer};
 
+mod judge;
 mod plot;
+
+use judge::{Judge, NO_TRUTH, NO_TRUTH_ERROR, StepLog, judge_truth, truth_after, verdict};
 
 /// Where a demo's robot is: a one-room world (the exit-lab experiment) or a building (the
 /// delivery mission).
@@ -402,52 +405,6 @@ fn plan_runner(net: &Network) -> Option<u32> {
     crate::faults::process_with_args(&["sequence", &plan.to_string_lossy()])
 }
 
-/// The steps the plan's runners printed into `up`'s log (`[cycle N, t = …] what`), read as
-/// the log grows: what, cycle, the robot's time (a cycle is 10 ms of it); and how the plan
-/// ended, if it has.
-#[derive(Debug, Default)]
-struct StepLog {
-    steps: Vec<(String, u64, f64)>,
-    ended: Option<String>,
-    /// Bytes of the log read so far (up to the last whole line).
-    read: u64,
-}
-
-impl StepLog {
-    /// Reads what the log gained since the last call; prints the new steps with `verbose`.
-    fn read(&mut self, log: &Path, verbose: bool) {
-        use std::io::{Read, Seek, SeekFrom};
-        let mut text = String::new();
-        let Ok(mut f) = std::fs::File::open(log) else {
-            return;
-        };
-        if f.seek(SeekFrom::Start(self.read)).is_err() || f.read_to_string(&mut text).is_err() {
-            return;
-        }
-        // A line still being written is read next time.
-        let whole = text.rfind('\n').map_or(0, |i| i + 1);
-        self.read += whole as u64;
-        for line in text[..whole].lines() {
-            if let Some(rest) = line.strip_prefix("[cycle")
-                && let Some((head, what)) = rest.split_once("] ")
-                && let Some(Ok(cycle)) = head.split(',').next().map(|c| c.trim().parse::<u64>())
-            {
-                // The robot's time: a cycle is 10 ms of it (the runner prints the fabric's,
-                // which a time factor scales).
-                let t = cycle as f64 * 0.01;
-                if verbose {
-                    println!("  [cycle {cycle:>6}, t = {t:>6.1} s] {what}");
-                }
-                self.steps.push((what.to_string(), cycle, t));
-            } else if line == "the plan succeeded" {
-                self.ended = Some("Success".to_string());
-            } else if line.ends_with("the plan failed") {
-                self.ended = Some("Failure".to_string());
-            }
-        }
-    }
-}
-
 /// Halts the plan (SIGTERM to its runner: it restores what it set and removes its monitors)
 /// and waits for its runner to exit (10 s at most).
 fn halt_plan(net: &Network) {
@@ -481,131 +438,6 @@ fn connect(net: &Network, skills: &[&str]) -> anyhow::Result<Client> {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-}
-
-/// How long a run waits for the simulator's first ground truth.
-const NO_TRUTH: Duration = Duration::from_secs(30);
-
-/// How a run ended, by the simulator's ground truth.
-#[derive(Debug, Clone, Copy)]
-enum Verdict {
-    /// The robot is outside the lab (exit-lab).
-    Outside,
-    /// The message was delivered (deliver).
-    Delivered,
-    /// The time limit passed.
-    Limit,
-}
-
-/// How the run at `site` ended by ground truth `now`, if it has.
-fn judge_truth(site: &Site, now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
-    if matches!(site, Site::World(_)) && now.outside {
-        Some(Verdict::Outside)
-    } else if now.delivered {
-        Some(Verdict::Delivered)
-    } else if now.t > limit_s {
-        Some(Verdict::Limit)
-    } else {
-        None
-    }
-}
-
-/// The first ground-truth record a status period after `then`, or `then` if none comes
-/// within 10 s. In lock-step the fabric (paused where the plan ended) runs two status periods
-/// on to the judge's hold: the record is the same every run.
-fn truth_after(
-    c: &mut Client,
-    traj: &Path,
-    then: TruthRecord,
-    judge: Option<&mut Judge>,
-) -> anyhow::Result<TruthRecord> {
-    if let Some(j) = judge {
-        let at = c.stats()?.cycles + 2 * JUDGE_EVERY;
-        j.hold_at(c, at)?;
-        c.run()?;
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < deadline {
-            let ev = c.next_event(Duration::from_millis(100))?;
-            if j.reached(c, ev.map(|e| e.kind).as_ref())? {
-                return Ok(latest(traj).unwrap_or(then));
-            }
-        }
-        return Ok(then);
-    }
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while Instant::now() < deadline {
-        if let Some(now) = latest(traj).filter(|r| r.t > then.t + 0.15) {
-            return Ok(now);
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    Ok(then)
-}
-
-/// How often (cycles) the lock-step judge looks at the ground truth: the simulator's status
-/// period (100 ms of the robot's time), the rate it writes a record at.
-const JUDGE_EVERY: u64 = 10;
-
-/// The lock-step judge: it holds the fabric every [`JUDGE_EVERY`] cycles (`Client::hold`),
-/// reads the ground truth there and acts on it before it lets the fabric on, so what it sees
-/// and does falls in the same cycle every run. (`up --held` keeps the fabric before its first
-/// cycle until the judge's first hold, even when a plan runner resumed it.)
-struct Judge {
-    at: u64,
-}
-
-impl Judge {
-    fn start(c: &Client) -> anyhow::Result<Judge> {
-        c.hold(Some(JUDGE_EVERY))?;
-        Ok(Judge { at: JUDGE_EVERY })
-    }
-
-    fn hold_at(&mut self, c: &Client, at: u64) -> anyhow::Result<()> {
-        self.at = at;
-        c.hold(Some(at))?;
-        Ok(())
-    }
-
-    /// Lets the fabric on to the next hold.
-    fn next(&mut self, c: &Client) -> anyhow::Result<()> {
-        self.hold_at(c, self.at + JUDGE_EVERY)
-    }
-
-    /// Whether the fabric stands at the hold: told by the event `ev`, or when no event came
-    /// (one may be lost to a full queue) by its cycle count: it cannot run past the hold.
-    fn reached(&self, c: &Client, ev: Option<&EventKind>) -> anyhow::Result<bool> {
-        Ok(match ev {
-            Some(EventKind::Held { cycle }) => *cycle >= self.at,
-            Some(_) => false,
-            None => c.stats()?.cycles >= self.at,
-        })
-    }
-}
-
-const NO_TRUTH_ERROR: &str =
-    "the simulator wrote no ground truth within 30 s (see the log of skillfab up)";
-
-/// Acts on how the run ended: outside, the robot is stopped.
-fn verdict(
-    c: &Client,
-    out: &mut RunOutcome,
-    v: Verdict,
-    step: &dyn Fn(&Client, &mut RunOutcome, &str),
-) -> anyhow::Result<()> {
-    match v {
-        Verdict::Outside => {
-            out.success = true;
-            c.activate(&["stop"])?;
-            step(c, out, "outside the lab: stop");
-        }
-        Verdict::Delivered => {
-            out.success = true;
-            c.activate(&["stop"])?;
-            step(c, out, "the message is delivered: stop");
-        }
-        Verdict::Limit => step(c, out, "time limit reached"),
-    }
-    Ok(())
 }
 
 /// One run of the experiment.

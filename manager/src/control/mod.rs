@@ -339,10 +339,7 @@ impl Manager {
             Request::Step(_) => Ok(Reply::Stepped(self.cycle)),
             Request::Declaration(skill) => self
                 .skills
-                .slot_of(&skill)
-                .and_then(|s| self.skills.get(s))
-                .map(|e| &e.decl)
-                .or_else(|| self.skills.away(&skill))
+                .decl(&skill)
                 .map(|d| Reply::Declaration(Box::new(d.clone())))
                 .ok_or(ControlError::UnknownSkill(skill)),
             Request::Hold(at) => {

@@ -68,11 +68,10 @@ impl Manager {
         // A skill that is away gets the value when it is back; it is checked against the
         // declaration it had.
         let live = self.skills.slot_of(skill);
-        let decl = match live {
-            Some(s) => self.skills.get(s).map(|e| &e.decl),
-            None => self.skills.away(skill),
-        }
-        .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        let decl = self
+            .skills
+            .decl(skill)
+            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
         let (value, spec) =
             crate::checks::param_value(decl, param, arg).map_err(|err| param_err(skill, err))?;
         let default = spec.default;

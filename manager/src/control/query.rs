@@ -19,11 +19,10 @@ impl Manager {
         };
         // A skill that is away (restarting) is resolved against its last declaration.
         let live = self.skills.slot_of(skill);
-        let decl = match live {
-            Some(s) => self.skills.get(s).map(|e| &e.decl),
-            None => self.skills.away(skill),
-        }
-        .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
+        let decl = self
+            .skills
+            .decl(skill)
+            .ok_or_else(|| ControlError::UnknownSkill(skill.to_string()))?;
         let (port, f) = crate::checks::output_field(decl, output, field).map_err(bad)?;
         // Every proposer publishes on its channel's topic: read this skill's own proposals.
         let slot = match (port.kind == skillfab_proto::decl::PortKind::Proposal, live) {

@@ -90,6 +90,14 @@ impl Skills {
         self.slot_of(name).is_none().then(|| self.last.get(name))?
     }
 
+    /// The declaration of `name`: the live instance's, else (away) its last one.
+    pub(crate) fn decl(&self, name: &str) -> Option<&SkillDecl> {
+        match self.slot_of(name) {
+            Some(s) => self.get(s).map(|e| &e.decl),
+            None => self.last.get(name),
+        }
+    }
+
     /// What clients set for `name`, to change (a client sets something).
     pub(crate) fn keep(&mut self, name: &str) -> &mut Kept {
         self.kept.entry(name.to_string()).or_default()

@@ -312,24 +312,18 @@ fn waits_for_the_manager_and_reconnects() {
         nix::sys::signal::Signal::SIGKILL,
     )
     .unwrap();
+    // (The new pid is taken where it is seen: a second look at the board may fall between
+    // two of its states.)
+    let mut new_pid = pid;
     t.wait_until("smooth to be restarted and running", || {
         skillfab_tests::registered(&board, "smooth").is_some_and(|s| {
-            board
+            new_pid = board
                 .slot(s.slot)
                 .pid
-                .load(std::sync::atomic::Ordering::Acquire)
-                != pid
-                && s.runs > 2
+                .load(std::sync::atomic::Ordering::Acquire);
+            new_pid != pid && s.runs > 2
         })
     });
-    let new_pid = skillfab_tests::registered(&board, "smooth")
-        .map(|s| {
-            board
-                .slot(s.slot)
-                .pid
-                .load(std::sync::atomic::Ordering::Acquire)
-        })
-        .unwrap();
     con.wait_for(&format!("pid {new_pid} "));
     // The manager goes away: the console says so and keeps the last view...
     t.signal(up, nix::sys::signal::Signal::SIGTERM);

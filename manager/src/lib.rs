@@ -5,12 +5,15 @@
 //! runs either; `skillfab manager …` and `skillfab up …` run that binary.
 //!
 //! ## Layout
-//! - [`engine`]: the cycle engine: the loop and report (`mod.rs`), the cycle state machine
-//!   (`cycle.rs`), registration and liveness (`registry.rs`), end-of-cycle reads (`observe.rs`).
+//! - [`engine`]: the manager, its state in parts that each own one job: the loop and report
+//!   (`mod.rs`), the cycle state machine (`cycle.rs`), the registry (`skills.rs`) with
+//!   registration and liveness (`registry.rs`), the observers (`observers.rs`, `record.rs`),
+//!   the clients' holds (`holds.rs`), the state file (`state.rs`), and the requests, whose
+//!   handlers get the parts they need and return typed effects (`requests/`).
 //! - [`graph`]: wiring checks and the per-cycle plan, pure.
-//! - [`control`]: the control plane (requests, events), one file per family of requests;
-//!   [`monitors`]: conditions on live outputs — the installed ones and their bookkeeping
-//!   ([`monitors::Monitors`]), and their expression language.
+//! - [`control`]: the control plane's transport (requests in, answers and events out, on a
+//!   thread of its own); [`monitors`]: conditions on live outputs — the installed ones and
+//!   their bookkeeping ([`monitors::Monitors`]), and their expression language.
 //! - [`stats`]: latency percentiles and the run report.
 //! - [`recorder`]: the fabric log (parameter changes, I/O samples) as JSON lines or MCAP.
 //! - [`launch`]: launch files, parsed then validated; [`up`]: a manager plus supervised

@@ -1,17 +1,26 @@
 //! The cycle state machine: plan, start, resolve what can no longer run, finish (the
 //! paper's do-periodic-step, do-next-skill and cleanup).
 
-use super::*;
+use super::requests::lockstep;
+use super::{IDLE_FREE_RUN, Manager, ManagerError, Pace, Running};
+use crate::graph::{self, PlanNode};
+use skillfab_proto::board::{MAX_OUTPUTS, MAX_SLOTS, RunStatus};
+use skillfab_proto::control::EventKind;
+use skillfab_proto::header::now_ns;
+use skillfab_proto::names;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
 
 impl Manager {
     /// Drives the cycle state machine as far as it can go now.
     pub(super) fn advance(&mut self) -> Result<(), ManagerError> {
         loop {
-            if let Some(k) = self.running.as_ref().map(|r| r.k) {
+            if let Some(k) = self.cycles.running.as_ref().map(|r| r.k) {
                 self.resolve();
                 if self.board.remaining(k) == 0 {
                     self.finish(false);
                 } else if self
+                    .cycles
                     .running
                     .as_ref()
                     .is_some_and(|r| Instant::now() >= r.deadline)
@@ -22,27 +31,32 @@ impl Manager {
                     } else {
                         let unfinished = self.board.remaining(k);
                         tracing::warn!(cycle = k, unfinished, "cycle overrun");
-                        self.outbox.push(EventKind::CycleOverrun { unfinished });
+                        self.events.push(EventKind::CycleOverrun { unfinished });
                         self.finish(true);
                     }
                 } else {
                     return Ok(());
                 }
             }
-            if self.stop_at.is_some_and(|t| self.cycle >= t) {
-                self.stop_at = None;
+            if self.cycles.stop_at.is_some_and(|t| self.cycles.cycle >= t) {
+                self.cycles.stop_at = None;
                 self.set_paused(true);
             }
-            if self.paused || self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
+            if self.cycles.paused
+                || self
+                    .config
+                    .max_cycles
+                    .is_some_and(|m| self.cycles.cycle >= m)
+            {
                 return Ok(());
             }
-            if self.holds.blocks(self.cycle) {
-                if let Some(cycle) = self.holds.reached(self.cycle) {
-                    self.outbox.push(EventKind::Held { cycle });
+            if self.cycles.holds.blocks(self.cycles.cycle) {
+                if let Some(cycle) = self.cycles.holds.reached(self.cycles.cycle) {
+                    self.events.push(EventKind::Held { cycle });
                 }
                 return Ok(());
             }
-            if !self.started {
+            if !self.cycles.started {
                 let missing: Vec<String> = self
                     .config
                     .wait_for
@@ -51,7 +65,7 @@ impl Manager {
                     .cloned()
                     .collect();
                 if !missing.is_empty() {
-                    if self.created.elapsed() > self.config.wait_timeout {
+                    if self.cycles.created.elapsed() > self.config.wait_timeout {
                         return Err(ManagerError::MissingSkills {
                             missing,
                             waited: self.config.wait_timeout,
@@ -59,26 +73,26 @@ impl Manager {
                     }
                     return Ok(());
                 }
-                self.started = true;
-                self.next_start = Instant::now();
+                self.cycles.started = true;
+                self.cycles.next_start = Instant::now();
             }
             let now = Instant::now();
             match self.config.pace {
                 Pace::Period(p) => {
-                    if now < self.next_start {
+                    if now < self.cycles.next_start {
                         return Ok(());
                     }
-                    self.next_start += p;
-                    if self.next_start < now {
-                        self.next_start = now;
+                    self.cycles.next_start += p;
+                    if self.cycles.next_start < now {
+                        self.cycles.next_start = now;
                     }
                 }
                 Pace::FreeRun | Pace::LockStep(_) => {
-                    if self.plan.expected.is_empty() && !self.dirty {
-                        if now < self.next_start {
+                    if self.cycles.plan.expected.is_empty() && !self.cycles.dirty {
+                        if now < self.cycles.next_start {
                             return Ok(());
                         }
-                        self.next_start = now + IDLE_FREE_RUN;
+                        self.cycles.next_start = now + IDLE_FREE_RUN;
                     }
                 }
             }
@@ -98,8 +112,8 @@ impl Manager {
                 })
             })
             .collect();
-        self.plan = graph::plan(&nodes);
-        for &(slot, mask) in &self.plan.fresh_masks {
+        self.cycles.plan = graph::plan(&nodes);
+        for &(slot, mask) in &self.cycles.plan.fresh_masks {
             self.board
                 .slot(slot)
                 .fresh_mask
@@ -122,7 +136,7 @@ impl Manager {
                 slot.consumers[o].store(readers, Ordering::Release);
             }
         }
-        for ch in &self.plan.channels {
+        for ch in &self.cycles.plan.channels {
             if ch.index < skillfab_proto::board::MAX_CHANNELS {
                 self.board.slot(ch.device).channel_proposers[ch.index]
                     .store(ch.proposers, Ordering::Release);
@@ -135,38 +149,34 @@ impl Manager {
                 .and_then(|e| e.decl.inputs.get(ch.index))
                 .map(|p| p.schema.clone());
             if let Some(schema) = schema
-                && !self.readers.contains_key(&topic)
+                && let Err(e) = self.observers.read(&self.node, &topic, &schema)
             {
-                match RawReader::open(&self.node, &topic, &schema) {
-                    Ok(r) => {
-                        self.readers.insert(topic, r);
-                    }
-                    Err(e) => tracing::warn!(%topic, error = %e, "cannot read commands"),
-                }
+                tracing::warn!(%topic, error = %e, "cannot read commands");
             }
         }
-        self.dirty = false;
-        self.update_recording();
+        self.cycles.dirty = false;
+        self.observers
+            .update_recording(&self.skills, &self.node, self.cycles.cycle);
     }
 
     pub(super) fn start_cycle(&mut self) {
         self.stamp_events();
-        if self.dirty {
+        if self.cycles.dirty {
             self.replan();
         }
-        let k = self.cycle + 1;
-        for &s in &self.plan.expected {
+        let k = self.cycles.cycle + 1;
+        for &s in &self.cycles.plan.expected {
             self.board
                 .slot(s)
                 .expected_cycle
                 .store(k, Ordering::Release);
         }
-        self.board.arm(k, self.plan.expected.len() as u32);
+        self.board.arm(k, self.cycles.plan.expected.len() as u32);
         let mut run = Running {
             k,
             start_ns: 0,
             deadline: Instant::now() + self.config.deadline(),
-            expected: self.plan.expected.clone(),
+            expected: self.cycles.plan.expected.clone(),
             processed: [false; MAX_SLOTS],
             cancelled: [false; MAX_SLOTS],
         };
@@ -182,16 +192,16 @@ impl Manager {
         };
         h.cycle_time_ns.store(time, Ordering::Release);
         h.cycle.store(k, Ordering::Release);
-        for &s in &self.plan.sources {
+        for &s in &self.cycles.plan.sources {
             self.board.slot(s).bell.ring();
         }
-        self.running = Some(run);
+        self.cycles.running = Some(run);
     }
 
     /// Looks at runs of the current cycle that finished without passing everything on, and
     /// takes the consumers that can no longer run off the completion counter.
     pub(super) fn resolve(&mut self) {
-        let Some(mut run) = self.running.take() else {
+        let Some(mut run) = self.cycles.running.take() else {
             return;
         };
         let mut cancel = Vec::new();
@@ -203,7 +213,7 @@ impl Manager {
             run.processed[s] = true;
             let status = RunStatus::from_u32(slot.status.load(Ordering::Acquire));
             let mask = slot.published_mask.load(Ordering::Acquire);
-            if let Some(per_output) = self.plan.consumers.get(&s) {
+            if let Some(per_output) = self.cycles.plan.consumers.get(&s) {
                 for (o, consumers) in per_output.iter().enumerate() {
                     if status != RunStatus::Ok || mask & (1 << o) == 0 {
                         cancel.extend_from_slice(consumers);
@@ -215,7 +225,7 @@ impl Manager {
         if n > 0 {
             self.board.complete(run.k, n);
         }
-        self.running = Some(run);
+        self.cycles.running = Some(run);
     }
 
     /// Marks `start` and everything downstream of it as unable to run in this cycle; returns
@@ -237,6 +247,7 @@ impl Manager {
                 .store(run.k, Ordering::Release);
             // A device waiting for this skill's proposal must look again.
             for ch in self
+                .cycles
                 .plan
                 .channels
                 .iter()
@@ -244,7 +255,7 @@ impl Manager {
             {
                 self.board.slot(ch.device).bell.ring();
             }
-            if let Some(per_output) = self.plan.consumers.get(&s) {
+            if let Some(per_output) = self.cycles.plan.consumers.get(&s) {
                 todo.extend(per_output.iter().flatten());
             }
         }
@@ -252,7 +263,7 @@ impl Manager {
     }
 
     pub(super) fn finish(&mut self, overrun: bool) {
-        let Some(run) = self.running.take() else {
+        let Some(run) = self.cycles.running.take() else {
             return;
         };
         let end = run
@@ -270,20 +281,25 @@ impl Manager {
         } else {
             end.map_or(0, |e| e.saturating_sub(run.start_ns))
         };
-        self.stats.record(latency, round_trip, overrun);
-        self.cycle = run.k;
-        // First: the recording takes every new sample before monitors and queries poll.
-        if self.recording.is_some() {
-            self.record_cycle(run.k);
+        self.cycles.stats.record(latency, round_trip, overrun);
+        self.cycles.cycle = run.k;
+        let seen = self.observers.end_of_cycle(
+            run.k,
+            &self.board,
+            &self.cycles.plan.channels,
+            &self.skills,
+        );
+        self.state.check |= seen.monitors_changed;
+        // The firings first, then the pause they cause.
+        for event in seen.events {
+            self.events.push(event);
         }
-        if !self.plan.channels.is_empty() {
-            self.read_channels(run.k);
-        }
-        if !self.monitors.is_empty() {
-            self.evaluate_monitors();
-        }
-        if !self.io_log.is_empty() {
-            self.log_io();
+        // In lock-step a monitor that fires pauses cycling after this cycle (ending a `step`
+        // early): its owner reacts and resumes (`run`, `step`), so what a sequencer does in
+        // reaction lands in the same cycle every run.
+        if seen.fired && lockstep(self.config.pace) {
+            self.set_paused(true);
+            self.cycles.stop_at = None;
         }
         self.stamp_events();
     }
@@ -294,32 +310,17 @@ impl Manager {
     /// publishes), so an event's cycle and its place among the recorded samples are the
     /// run's, not the host's timing of the manager's loop.
     pub(crate) fn stamp_events(&mut self) {
-        if self.outbox.is_empty() {
-            return;
-        }
-        let events: Vec<Event> = std::mem::take(&mut self.outbox)
-            .into_iter()
-            .map(|kind| {
-                self.events_published += 1;
-                Event {
-                    seq: self.events_published,
-                    cycle: self.cycle,
-                    time_ns: now_ns(),
-                    kind,
-                }
-            })
-            .collect();
-        self.record_events(&events);
-        self.stamped.extend(events);
+        let stamped = self.events.stamp(self.cycles.cycle);
+        self.observers.record_events(stamped);
     }
 
     /// Starts or stops cycling.
     pub(crate) fn set_paused(&mut self, paused: bool) {
-        if self.paused != paused {
-            self.paused = paused;
-            self.outbox.push(EventKind::Cycling { running: !paused });
+        if self.cycles.paused != paused {
+            self.cycles.paused = paused;
+            self.events.push(EventKind::Cycling { running: !paused });
             if !paused {
-                self.next_start = Instant::now();
+                self.cycles.next_start = Instant::now();
             }
         }
     }

@@ -14,36 +14,40 @@
 //! cycle whose deadline passes is counted as an overrun and closed; the next one starts on
 //! time. Cleanup between cycles is the re-arming of the counter.
 
+//!
+//! The manager's state is in parts that each own one job: the registry ([`skills`]), the
+//! cycles ([`Cycles`]: plan, pacing, holds, figures), the observers ([`observers`]: readers,
+//! monitors, fabric log, recording, channels, bridges), the events on their way out
+//! ([`Outbox`]) and the state file ([`state`]). Requests are carried out by handlers handed the
+//! parts they need ([`requests`]).
+
 mod cycle;
 mod holds;
-mod observe;
+mod observers;
 mod record;
 mod registry;
+mod requests;
 mod skills;
 mod state;
 
 pub use record::{RecordError, RecordSpec};
 
-use crate::control::ControlPlane;
-use crate::graph::{self, Plan, PlanNode};
-use crate::monitors::Monitors;
-use crate::recorder::{IoSample, Recorder};
+use crate::control::{ControlPlane, Outgoing, client_pid};
+use crate::graph::Plan;
+use crate::recorder::Recorder;
 use crate::stats::{CycleStats, Report, SkillReport};
 use iceoryx2::node::{Node, NodeView};
 use iceoryx2::prelude::*;
-use skillfab_proto::board::{Board, MAX_OUTPUTS, MAX_SLOTS, RunStatus, SlotState, pid_alive};
-use skillfab_proto::control::{Event, EventKind, SkillFigures};
+use observers::Observers;
+use skillfab_proto::board::{Board, MAX_SLOTS, pid_alive};
+use skillfab_proto::control::{Event, EventKind, Request, SkillFigures};
 use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::domain::Domain;
 use skillfab_proto::header::now_ns;
 use skillfab_proto::param::ParamValue;
-use skillfab_proto::services::RawReader;
-use skillfab_proto::value::FieldPath;
-use skillfab_proto::{Error as SdkError, names, services};
+use skillfab_proto::{Error as SdkError, services};
 use skills::Skills;
-use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -204,6 +208,12 @@ pub(crate) struct Entry {
     pub(crate) values: Vec<(String, ParamValue)>,
 }
 
+/// How long the monitors of a client whose process died are kept (evaluated, and a `Once`
+/// monitor that fires remembered as fired) before they are removed: a plan runner restarted
+/// by `up` takes them over in that time (`AdoptMonitors`) and misses no condition.
+pub const ORPHAN_GRACE: Duration = Duration::from_secs(10);
+
+/// The cycle in progress.
 struct Running {
     k: u64,
     start_ns: u64,
@@ -215,85 +225,100 @@ struct Running {
     cancelled: [bool; MAX_SLOTS],
 }
 
-/// The skill manager of one domain.
-pub struct Manager {
-    pub(crate) config: ManagerConfig,
-    pub(crate) board: Board,
-    pub(crate) node: Node<ipc::Service>,
-    /// The registered skills, by slot and in registration order.
-    pub(crate) skills: Skills,
+/// Where the cycles stand: the plan they follow, the one in progress, what paces, pauses and
+/// holds them, and their figures.
+struct Cycles {
     plan: Plan,
-    /// The plan must be recomputed before the next cycle.
-    pub(crate) dirty: bool,
+    /// The plan must be made again before the next cycle.
+    dirty: bool,
     /// Cycles completed.
-    pub(crate) cycle: u64,
+    cycle: u64,
     running: Option<Running>,
     next_start: Instant,
-    pub(crate) paused: bool,
+    paused: bool,
     /// Pause once this many cycles are done (`step`).
-    pub(crate) stop_at: Option<u64>,
+    stop_at: Option<u64>,
     /// Clients' holds: no cycle after the lowest starts.
-    pub(crate) holds: holds::Holds,
+    holds: holds::Holds,
+    /// The skills of `wait_for` have registered: cycling has begun.
     started: bool,
     created: Instant,
-    pub(crate) stats: CycleStats,
-    pub(crate) deaths: u64,
+    stats: CycleStats,
     last_liveness: Instant,
     last_node_sweep: Instant,
-    /// Events that happened, not yet numbered ([`Manager::stamp_events`]).
-    pub(crate) outbox: Vec<EventKind>,
-    /// Events numbered, stamped and recorded, for the control plane to publish.
-    pub(crate) stamped: Vec<Event>,
-    /// Installed monitors, and the `Once` ones that fired.
-    pub(crate) monitors: Monitors,
-    /// The processes `skillfab up` gave up restarting and that have not registered since.
-    pub(crate) gave_up: std::collections::BTreeMap<String, skillfab_proto::control::GaveUpInfo>,
-    /// Untyped readers of topics that monitors and queries read.
-    pub(crate) readers: HashMap<String, RawReader>,
-    /// Requests and events; taken out while the loop runs.
-    control: Option<ControlPlane>,
-    /// Events published so far.
-    pub(crate) events_published: u64,
-    /// The last report of each bridge of the domain, and when it came.
-    pub(crate) bridges: std::collections::BTreeMap<
-        String,
-        (skillfab_proto::bridge::BridgeStats, std::time::Instant),
-    >,
-    /// Last arbitration seen per channel.
-    pub(crate) channels: HashMap<String, ChannelView>,
-    /// The fabric log's writer (`None` if its file could not be opened).
-    pub(crate) recorder: Option<Recorder>,
-    /// The full-rate recording, when one runs.
-    pub(crate) recording: Option<record::Recording>,
-    /// Skills whose samples are logged, with their ports.
-    pub(crate) io_log: HashMap<String, Vec<IoPort>>,
-    /// A request or a registration may have changed what the state file holds.
-    pub(crate) state_check: bool,
-    /// The state file's bytes as last written.
-    state_written: Vec<u8>,
 }
 
-/// A port whose samples go to the fabric log.
-pub(crate) struct IoPort {
-    pub(crate) dir: &'static str,
-    pub(crate) port: String,
-    pub(crate) topic: String,
-    pub(crate) type_name: String,
-    pub(crate) field: Arc<FieldPath>,
-    /// On a proposal topic, the proposer's slot.
-    pub(crate) slot: Option<u32>,
-    /// The cycle of the last sample logged (each sample once).
-    pub(crate) last: u64,
+/// Events on their way to clients: queued as they happen, then numbered and stamped between
+/// cycles ([`Manager::stamp_events`]), then handed to the control plane.
+#[derive(Default)]
+struct Outbox {
+    queued: Vec<EventKind>,
+    stamped: Vec<Event>,
+    /// Events numbered so far.
+    published: u64,
 }
 
-/// The latest arbitration of a channel, as the manager last read it from the board.
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) struct ChannelView {
-    pub(crate) device: String,
-    pub(crate) policy: skillfab_proto::decl::Policy,
-    pub(crate) cycle: u64,
-    pub(crate) winner: Option<String>,
-    pub(crate) weights: Vec<(String, f64)>,
+impl Outbox {
+    fn push(&mut self, event: EventKind) {
+        self.queued.push(event);
+    }
+
+    fn published(&self) -> u64 {
+        self.published
+    }
+
+    /// Numbers and stamps the queued events as of `cycle`; the ones just stamped.
+    fn stamp(&mut self, cycle: u64) -> &[Event] {
+        let from = self.stamped.len();
+        for kind in std::mem::take(&mut self.queued) {
+            self.published += 1;
+            self.stamped.push(Event {
+                seq: self.published,
+                cycle,
+                time_ns: now_ns(),
+                kind,
+            });
+        }
+        &self.stamped[from..]
+    }
+}
+
+/// The skill manager of one domain.
+pub struct Manager {
+    config: ManagerConfig,
+    board: Board,
+    node: Node<ipc::Service>,
+    /// The registered skills, by slot and in registration order.
+    skills: Skills,
+    cycles: Cycles,
+    observers: Observers,
+    events: Outbox,
+    state: state::StateFile,
+    /// Requests in, answers and events out.
+    control: ControlPlane,
+    /// [`Manager::run`] was called.
+    ran: bool,
+}
+
+/// A slot's run counters, as read from the board.
+pub(crate) fn figures(board: &Board, s: usize) -> SkillFigures {
+    let slot = board.slot(s);
+    let runs = slot.runs.load(Ordering::Acquire);
+    let total = slot.compute_ns_total.load(Ordering::Acquire);
+    SkillFigures {
+        runs,
+        skips: slot.skips.load(Ordering::Acquire),
+        failures: slot.failures.load(Ordering::Acquire),
+        compute_us_mean: if runs == 0 {
+            0.0
+        } else {
+            total as f64 / runs as f64 / 1000.0
+        },
+        compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
+        last_cycle: slot.done_cycle.load(Ordering::Acquire),
+        last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
+        last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
+    }
 }
 
 impl Manager {
@@ -317,7 +342,7 @@ impl Manager {
             .param_log
             .clone()
             .unwrap_or_else(|| default_log_path(&config.domain));
-        let recorder = match Recorder::open(&log_path) {
+        let fabric_log = match Recorder::open(&log_path) {
             Ok(r) => {
                 r.line(
                     "start",
@@ -332,52 +357,52 @@ impl Manager {
             }
         };
         let saved = state::Saved::load(&config.domain);
-        let first_cycle = config.first_cycle;
         let holds = if config.held {
             holds::Holds::at_start()
         } else {
             holds::Holds::default()
         };
-        let mut manager = Manager {
+        let cycles = Cycles {
+            plan: Plan::default(),
+            dirty: true,
+            cycle: previous_cycle.unwrap_or(config.first_cycle.saturating_sub(1)),
+            running: None,
+            next_start: now,
             paused: config.paused,
+            stop_at: None,
+            holds,
+            started: false,
+            created: now,
+            stats: CycleStats::default(),
+            last_liveness: now,
+            last_node_sweep: now,
+        };
+        let mut manager = Manager {
             config,
             board,
             node,
             skills: Skills::new(),
-            plan: Plan::default(),
-            dirty: true,
-            cycle: previous_cycle.unwrap_or(first_cycle.saturating_sub(1)),
-            running: None,
-            next_start: now,
-            stop_at: None,
-            outbox: Vec::new(),
-            stamped: Vec::new(),
-            monitors: Monitors::default(),
-            holds,
-            gave_up: std::collections::BTreeMap::new(),
-            readers: HashMap::new(),
-            control: Some(control),
-            events_published: 0,
-            bridges: std::collections::BTreeMap::new(),
-            channels: HashMap::new(),
-            recorder,
-            recording: None,
-            io_log: HashMap::new(),
-            started: false,
-            created: now,
-            stats: CycleStats::default(),
-            deaths: 0,
-            last_liveness: now,
-            last_node_sweep: now,
-            state_check: false,
-            state_written: Vec::new(),
+            cycles,
+            observers: Observers::new(fabric_log),
+            events: Outbox::default(),
+            state: state::StateFile::default(),
+            control,
+            ran: false,
         };
         if let Some(saved) = saved {
             manager.restore_state(saved);
         }
         if let Some(spec) = manager.config.record.clone() {
+            let at = record::RecordStart::new(
+                &manager.config.domain,
+                manager.cycles.cycle,
+                &manager.board,
+                &manager.skills,
+                &manager.node,
+            );
             manager
-                .start_recording(spec)
+                .observers
+                .start_recording(spec, &at)
                 .map_err(ManagerError::Record)?;
         }
         Ok(manager)
@@ -386,41 +411,44 @@ impl Manager {
     /// Runs until SIGINT/SIGTERM, until `stop(cycles_done)` returns true, or until
     /// `max_cycles` cycles are done; returns the report of the run.
     pub fn run(&mut self, stop: &dyn Fn(u64) -> bool) -> Result<Report, ManagerError> {
-        let mut control = self.control.take().ok_or(ManagerError::RanAlready)?;
+        if std::mem::replace(&mut self.ran, true) {
+            return Err(ManagerError::RanAlready);
+        }
         tracing::info!(domain = %self.config.domain, pace = ?self.config.pace, "manager up");
-        let result = self.serve_loop(&mut control, stop);
-        self.control = Some(control);
-        result
+        self.serve_loop(stop)
     }
 
     /// The manager's loop: it sleeps on its doorbell (rung by the run that ends a cycle, by
     /// registrations and by the control thread) until the next deadline or cycle start, then
     /// does what is due.
-    fn serve_loop(
-        &mut self,
-        control: &mut ControlPlane,
-        stop: &dyn Fn(u64) -> bool,
-    ) -> Result<Report, ManagerError> {
+    fn serve_loop(&mut self, stop: &dyn Fn(u64) -> bool) -> Result<Report, ManagerError> {
         loop {
             // Read before doing the work: a ring from here on ends the wait at once.
             let seen = self.board.header().bell.seen();
             let awake = thread_cpu_ns();
             self.service_registry();
-            if self.last_liveness.elapsed() >= LIVENESS_TICK {
+            if self.cycles.last_liveness.elapsed() >= LIVENESS_TICK {
                 self.check_liveness();
-                control.forget_dead_clients(self);
+                self.forget_dead_clients();
             }
-            control.serve(self);
+            self.serve_requests();
             self.save_state_if_changed();
             self.advance()?;
-            control.flush(self);
-            self.stats.add_work(thread_cpu_ns().saturating_sub(awake));
-            if self.running.is_none() && self.config.max_cycles.is_some_and(|m| self.cycle >= m) {
+            self.publish();
+            self.cycles
+                .stats
+                .add_work(thread_cpu_ns().saturating_sub(awake));
+            if self.cycles.running.is_none()
+                && self
+                    .config
+                    .max_cycles
+                    .is_some_and(|m| self.cycles.cycle >= m)
+            {
                 break;
             }
             // A signal during the wait ends it (EINTR) and is seen here next time round; one
             // that lands between this check and the wait is seen within a liveness tick.
-            if services::termination_requested() || stop(self.cycle) {
+            if services::termination_requested() || stop(self.cycles.cycle) {
                 break;
             }
             let timeout = self.timeout(Instant::now());
@@ -429,6 +457,68 @@ impl Manager {
             }
         }
         Ok(self.report())
+    }
+
+    /// Carries out every request that arrived, and answers them once what they changed is
+    /// in the state file (a manager killed right after the answer comes back with it).
+    fn serve_requests(&mut self) {
+        let mut answers = Vec::new();
+        for inc in self.control.arrived() {
+            let client = inc.client.as_deref().unwrap_or("?");
+            let response = match inc.request {
+                Err(e) => Err(e),
+                Ok(Request::Step(n)) if n > 0 => {
+                    self.cycles.stop_at = Some(self.in_progress() + n);
+                    self.set_paused(false);
+                    self.control.answer_when_stepped(inc.id, inc.client);
+                    continue;
+                }
+                Ok(request) => self.handle(client, request),
+            };
+            if let Err(e) = &response {
+                tracing::info!(client, error = %e, "request refused");
+            }
+            answers.push(Outgoing::Answer {
+                id: inc.id,
+                client: inc.client,
+                response,
+            });
+        }
+        if !answers.is_empty() {
+            self.save_state_if_changed();
+            self.control.answer(answers);
+        }
+    }
+
+    /// Hands the events stamped so far, and the answers of finished `step`s, to the control
+    /// plane.
+    fn publish(&mut self) {
+        self.stamp_events();
+        let events = std::mem::take(&mut self.events.stamped);
+        let stepped = self.cycles.stop_at.is_none().then_some(self.cycles.cycle);
+        self.control.flush(events, stepped);
+    }
+
+    /// Releases the holds of clients whose process is gone, and drops their monitors once it
+    /// has been gone for [`ORPHAN_GRACE`] — but not in lock-step: there a monitor's firing
+    /// pauses the fabric until its plan has reacted, and the fabric waits for a plan runner
+    /// that died (a restarted one takes its monitors over).
+    fn forget_dead_clients(&mut self) {
+        let dead = |c: &str| client_pid(c).is_some_and(|p| !pid_alive(p));
+        // A hold goes with its client at once (the fabric would wait for nobody).
+        let gone = self.cycles.holds.release_gone(dead);
+        if !gone.is_empty() {
+            self.state.check = true;
+            tracing::info!(clients = ?gone, "holds of departed clients released");
+        }
+        if matches!(self.config.pace, Pace::LockStep(_)) {
+            return;
+        }
+        let removed = self.observers.drop_orphaned_monitors(dead, ORPHAN_GRACE);
+        if removed > 0 {
+            self.state.check = true;
+            tracing::info!(removed, "monitors of departed clients removed");
+        }
     }
 
     /// Lets skills that are leaving go, checks liveness once more, closes the board, and
@@ -445,10 +535,10 @@ impl Manager {
         }
         let cleaned = self.node.try_cleanup_dead_nodes();
         // The control thread's node is ours too: close it before looking for others.
-        drop(self.control.take());
-        self.readers.clear();
+        self.control.close();
+        self.observers.readers.clear();
         let others_alive = self.others_alive();
-        let (domain, cycles) = (self.config.domain.clone(), self.cycle);
+        let (domain, cycles) = (self.config.domain.clone(), self.cycles.cycle);
         drop(self);
         if !others_alive {
             domain.remove_all_files();
@@ -482,42 +572,22 @@ impl Manager {
 
     /// Cycles completed so far.
     pub fn cycle(&self) -> u64 {
-        self.cycle
+        self.cycles.cycle
     }
 
     fn timeout(&self, now: Instant) -> Duration {
+        let c = &self.cycles;
         let until = |t: Instant| t.saturating_duration_since(now);
-        let t = match &self.running {
+        let t = match &c.running {
             Some(r) => until(r.deadline),
-            None if self.paused || !self.started || self.holds.blocks(self.cycle) => LIVENESS_TICK,
+            None if c.paused || !c.started || c.holds.blocks(c.cycle) => LIVENESS_TICK,
             None => match self.config.pace {
-                Pace::Period(_) => until(self.next_start),
-                Pace::FreeRun | Pace::LockStep(_) if self.plan.expected.is_empty() => IDLE_FREE_RUN,
+                Pace::Period(_) => until(c.next_start),
+                Pace::FreeRun | Pace::LockStep(_) if c.plan.expected.is_empty() => IDLE_FREE_RUN,
                 Pace::FreeRun | Pace::LockStep(_) => Duration::ZERO,
             },
         };
         t.min(LIVENESS_TICK)
-    }
-
-    /// A slot's run counters, as read from the board.
-    pub(crate) fn figures(&self, s: usize) -> SkillFigures {
-        let slot = self.board.slot(s);
-        let runs = slot.runs.load(Ordering::Acquire);
-        let total = slot.compute_ns_total.load(Ordering::Acquire);
-        SkillFigures {
-            runs,
-            skips: slot.skips.load(Ordering::Acquire),
-            failures: slot.failures.load(Ordering::Acquire),
-            compute_us_mean: if runs == 0 {
-                0.0
-            } else {
-                total as f64 / runs as f64 / 1000.0
-            },
-            compute_us_last: slot.last_compute_ns.load(Ordering::Acquire) as f64 / 1000.0,
-            last_cycle: slot.done_cycle.load(Ordering::Acquire),
-            last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
-            last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
-        }
     }
 
     /// Figures of the run so far.
@@ -532,16 +602,17 @@ impl Manager {
                 active: e.active,
                 priority: e.decl.priority,
                 pid: e.decl.pid,
-                figures: self.figures(s),
+                figures: figures(&self.board, s),
             })
             .collect();
+        let stats = &self.cycles.stats;
         Report {
-            cycles: self.stats.cycles,
-            overruns: self.stats.overruns,
-            latency_us: self.stats.latency_us(),
-            manager_work_us: self.stats.work_us(),
+            cycles: stats.cycles,
+            overruns: stats.overruns,
+            latency_us: stats.latency_us(),
+            manager_work_us: stats.work_us(),
             skills,
-            deaths: self.deaths,
+            deaths: self.skills.deaths,
         }
     }
 }

@@ -11,12 +11,22 @@
 //! for a slow disk; what a subscriber's buffer could not hold (more than
 //! `SUBSCRIBER_BUFFER` samples of one topic in one cycle) is counted in the cycle markers.
 
-use super::*;
+use super::observers::Observers;
+use super::skills::Skills;
+use crate::recorder::{IoSample, Recorder};
+use iceoryx2::node::Node;
+use iceoryx2::prelude::*;
 use serde_json::json;
-use skillfab_proto::control::ControlError;
+use skillfab_proto::board::{Board, Clock};
+use skillfab_proto::control::{ControlError, Event, Reply, Response};
+use skillfab_proto::domain::Domain;
+use skillfab_proto::names;
 use skillfab_proto::schema::MessageSchema;
-use skillfab_proto::value;
-use std::collections::BTreeMap;
+use skillfab_proto::services::RawReader;
+use skillfab_proto::value::{self, FieldPath};
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
 
 /// What and where to record.
 #[derive(Debug, Clone, PartialEq)]
@@ -87,8 +97,14 @@ impl From<RecordError> for ControlError {
 }
 
 impl Recording {
-    /// Starts writing `spec.path` (which must name an `.mcap` file).
-    pub(crate) fn start(spec: RecordSpec, manager: &Manager) -> Result<Recording, RecordError> {
+    /// Starts writing `spec.path` (which must name an `.mcap` file) for the fabric of
+    /// `domain`, at `cycle` and `clock`.
+    pub(crate) fn start(
+        spec: RecordSpec,
+        domain: &str,
+        cycle: u64,
+        clock: Clock,
+    ) -> Result<Recording, RecordError> {
         if !crate::recorder::is_mcap(&spec.path) {
             return Err(RecordError::NotMcap { path: spec.path });
         }
@@ -101,12 +117,11 @@ impl Recording {
         }
         std::fs::File::create(&spec.path).map_err(cannot)?;
         let rec = Recorder::open(&spec.path).map_err(cannot)?;
-        let clock = manager.board.header().clock();
         rec.line(
             "start",
-            Some(manager.cycle),
+            Some(cycle),
             json!({
-                "domain": manager.config.domain.name(), "pid": std::process::id(),
+                "domain": domain, "pid": std::process::id(),
                 "recording": true, "topics": spec.topics,
                 "period_ns": clock.period.map(|p| p.as_nanos() as u64),
                 "lockstep": clock.lockstep,
@@ -139,16 +154,103 @@ impl Recording {
         }
         self.rec.line("control", Some(from.saturating_sub(1)), j);
     }
+
+    /// End of cycle `k`: every new sample of the recorded topics (read through `readers`),
+    /// then the cycle's marker.
+    pub(crate) fn record_cycle(
+        &mut self,
+        k: u64,
+        readers: &mut HashMap<String, RawReader>,
+        clock: Clock,
+    ) {
+        let mut n = 0u64;
+        for (topic, t) in &mut self.topics {
+            let Some(reader) = readers.get_mut(topic) else {
+                continue;
+            };
+            let mut taken = Vec::new();
+            let drained = reader.drain(&mut |bytes, h| taken.push((bytes.to_vec(), h)));
+            if let Err(e) = drained {
+                tracing::warn!(%topic, error = %e, "recording read failed");
+            }
+            for (bytes, h) in taken {
+                // A command's header names the proposal that won, not the device.
+                let (skill, port, dir) = t
+                    .producers
+                    .get(&h.slot)
+                    .or_else(|| t.producers.values().find(|p| p.2 == "cmd"))
+                    .cloned()
+                    .unwrap_or_else(|| (format!("slot{}", h.slot), topic.clone(), "out"));
+                let last = t.last.entry(skill.clone()).or_insert(0);
+                if h.cycle <= *last && *last > 0 {
+                    self.out_of_order += 1;
+                }
+                *last = h.cycle;
+                n += 1;
+                self.rec.sample(IoSample {
+                    cycle: h.cycle,
+                    skill,
+                    dir,
+                    port,
+                    topic: topic.clone(),
+                    type_name: t.type_name.clone(),
+                    stamp_ns: h.stamp_ns,
+                    field: t.field.clone(),
+                    bytes,
+                    raw: true,
+                });
+            }
+        }
+        self.samples += n;
+        self.rec.line(
+            "cycle",
+            Some(k),
+            json!({"clock_ns": clock.time.as_nanos() as u64, "samples": n,
+                   "out_of_order": self.out_of_order}),
+        );
+    }
 }
 
-impl Manager {
+/// Where the fabric stands when a recording starts.
+pub(crate) struct RecordStart<'a> {
+    pub(crate) domain: &'a str,
+    pub(crate) cycle: u64,
+    pub(crate) clock: Clock,
+    pub(crate) skills: &'a Skills,
+    pub(crate) node: &'a Node<ipc::Service>,
+}
+
+impl<'a> RecordStart<'a> {
+    /// The fabric of `domain` at `cycle`, its clock as `board` gives it.
+    pub(crate) fn new(
+        domain: &'a Domain,
+        cycle: u64,
+        board: &Board,
+        skills: &'a Skills,
+        node: &'a Node<ipc::Service>,
+    ) -> RecordStart<'a> {
+        RecordStart {
+            domain: domain.name(),
+            cycle,
+            clock: board.header().clock(),
+            skills,
+            node,
+        }
+    }
+}
+
+impl Observers {
     /// Starts recording (replacing a recording in progress).
-    pub(crate) fn start_recording(&mut self, spec: RecordSpec) -> Result<(), RecordError> {
+    pub(crate) fn start_recording(
+        &mut self,
+        spec: RecordSpec,
+        at: &RecordStart<'_>,
+    ) -> Result<(), RecordError> {
         self.recording = None;
-        let r = Recording::start(spec, self)?;
+        let r = Recording::start(spec, at.domain, at.cycle, at.clock)?;
         tracing::info!(file = %r.path().display(), "recording");
         self.recording = Some(r);
-        self.update_recording();
+        self.update_recording(at.skills, at.node, at.cycle);
         Ok(())
     }
 
@@ -157,8 +259,8 @@ impl Manager {
         &mut self,
         file: Option<String>,
         topics: Vec<String>,
-    ) -> skillfab_proto::control::Response {
-        use skillfab_proto::control::Reply;
+        at: &RecordStart<'_>,
+    ) -> Response {
         match file {
             None if self.recording.is_none() => Err(ControlError::NotRecording),
             None => {
@@ -168,30 +270,39 @@ impl Manager {
                 Ok(Reply::Done)
             }
             Some(f) => self
-                .start_recording(RecordSpec {
-                    path: PathBuf::from(f),
-                    topics,
-                })
+                .start_recording(
+                    RecordSpec {
+                        path: PathBuf::from(f),
+                        topics,
+                    },
+                    at,
+                )
                 .map(|()| Reply::Done)
                 .map_err(ControlError::from),
         }
     }
 
-    /// Records a control change that takes effect from the next cycle to start.
-    pub(crate) fn record_control(&self, what: &str, fields: serde_json::Value) {
+    /// Records a control change that takes effect from cycle `from`.
+    pub(crate) fn record_control(&self, from: u64, what: &str, fields: serde_json::Value) {
         if let Some(r) = &self.recording {
-            r.control(self.in_progress() + 1, what, fields);
+            r.control(from, what, fields);
         }
     }
 
-    /// After a (re)plan: declarations of new skill instances, and the topics to read.
-    pub(super) fn update_recording(&mut self) {
+    /// After a (re)plan, at `cycle`: declarations of new skill instances, and the topics to
+    /// read.
+    pub(crate) fn update_recording(
+        &mut self,
+        skills: &Skills,
+        node: &Node<ipc::Service>,
+        cycle: u64,
+    ) {
         let Some(rec) = self.recording.as_mut() else {
             return;
         };
         let mut wanted: Vec<(String, MessageSchema, u32, String, String, &'static str)> =
             Vec::new();
-        for (s, e) in self.skills.in_order() {
+        for (s, e) in skills.in_order() {
             if !e.ready {
                 continue;
             }
@@ -213,10 +324,10 @@ impl Manager {
                     .collect();
                 rec.rec.line(
                     "decl",
-                    Some(self.cycle),
+                    Some(cycle),
                     json!({"skill": d.name, "kind_of": d.kind, "mode": format!("{:?}", d.mode),
                            "priority": d.priority, "active": e.active, "pid": d.pid,
-                           "from": self.cycle + 1,
+                           "from": cycle + 1,
                            "inputs": d.inputs.iter().map(port).collect::<Vec<_>>(),
                            "outputs": d.outputs.iter().map(port).collect::<Vec<_>>(),
                            "params": params, "defaults": defaults}),
@@ -250,7 +361,7 @@ impl Manager {
                 continue;
             }
             if !self.readers.contains_key(&topic) {
-                match RawReader::open(&self.node, &topic, &schema) {
+                match RawReader::open(node, &topic, &schema) {
                     Ok(r) => {
                         self.readers.insert(topic.clone(), r);
                     }
@@ -273,61 +384,8 @@ impl Manager {
         }
     }
 
-    /// End of cycle `k`: every new sample of the recorded topics, then the cycle's marker.
-    pub(super) fn record_cycle(&mut self, k: u64) {
-        let Some(rec) = self.recording.as_mut() else {
-            return;
-        };
-        let mut n = 0u64;
-        for (topic, t) in &mut rec.topics {
-            let Some(reader) = self.readers.get_mut(topic) else {
-                continue;
-            };
-            let mut taken = Vec::new();
-            let drained = reader.drain(&mut |bytes, h| taken.push((bytes.to_vec(), h)));
-            if let Err(e) = drained {
-                tracing::warn!(%topic, error = %e, "recording read failed");
-            }
-            for (bytes, h) in taken {
-                // A command's header names the proposal that won, not the device.
-                let (skill, port, dir) = t
-                    .producers
-                    .get(&h.slot)
-                    .or_else(|| t.producers.values().find(|p| p.2 == "cmd"))
-                    .cloned()
-                    .unwrap_or_else(|| (format!("slot{}", h.slot), topic.clone(), "out"));
-                let last = t.last.entry(skill.clone()).or_insert(0);
-                if h.cycle <= *last && *last > 0 {
-                    rec.out_of_order += 1;
-                }
-                *last = h.cycle;
-                n += 1;
-                rec.rec.sample(IoSample {
-                    cycle: h.cycle,
-                    skill,
-                    dir,
-                    port,
-                    topic: topic.clone(),
-                    type_name: t.type_name.clone(),
-                    stamp_ns: h.stamp_ns,
-                    field: t.field.clone(),
-                    bytes,
-                    raw: true,
-                });
-            }
-        }
-        rec.samples += n;
-        let clock = self.board.header().clock();
-        rec.rec.line(
-            "cycle",
-            Some(k),
-            json!({"clock_ns": clock.time.as_nanos() as u64, "samples": n,
-                   "out_of_order": rec.out_of_order}),
-        );
-    }
-
     /// Events go into the recording as they are published.
-    pub(crate) fn record_events(&self, events: &[skillfab_proto::control::Event]) {
+    pub(crate) fn record_events(&self, events: &[Event]) {
         if let Some(r) = &self.recording {
             for e in events {
                 r.rec

@@ -1,10 +1,19 @@
 //! Registration and liveness: skills claiming slots, admitted or refused, leaving or found
 //! dead, and rejoining.
 
+use super::requests::set_io_log;
 use super::skills::Kept;
-use super::*;
+use super::{Entry, Manager, NODE_SWEEP};
+use crate::graph;
+use skillfab_proto::board::{MAX_SLOTS, SlotState, pid_alive};
+use skillfab_proto::control::EventKind;
+use skillfab_proto::decl::SkillDecl;
+use skillfab_proto::names;
+use skillfab_proto::param::ParamValue;
 use skillfab_proto::param::check_bounds;
 use skillfab_proto::registration::Refusal;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
 
 /// Most inputs, and most outputs, a skill declares (a slot's masks have a bit for each).
 const MAX_PORTS: usize = 64;
@@ -26,23 +35,12 @@ impl Manager {
                 SlotState::Ready => {
                     if let Some(e) = self.skills.get_mut(i).filter(|e| !e.ready) {
                         e.ready = true;
-                        self.dirty = true;
+                        self.cycles.dirty = true;
                         tracing::info!(skill = %e.decl.name, "skill ready");
                         // Read its outputs from now on, so queries and monitors find the
-                        // latest sample (a late subscriber would only get it at the next send).
+                        // latest sample.
                         let outputs = e.decl.outputs.clone();
-                        for p in outputs {
-                            if !self.readers.contains_key(&p.topic) {
-                                match RawReader::open(&self.node, &p.topic, &p.schema) {
-                                    Ok(r) => {
-                                        self.readers.insert(p.topic.clone(), r);
-                                    }
-                                    Err(err) => {
-                                        tracing::warn!(topic = %p.topic, error = %err, "cannot read topic")
-                                    }
-                                }
-                            }
-                        }
+                        self.observers.read_outputs(&self.node, &outputs);
                     }
                 }
                 SlotState::Leaving => self.drop_slot(i, DropReason::Left),
@@ -136,7 +134,7 @@ impl Manager {
             active, "skill registered"
         );
         // Back (started by hand, or by a new `up`): no longer given up on.
-        self.gave_up.remove(&decl.name);
+        self.skills.gave_up.remove(&decl.name);
         let (name, pid, device) = (decl.name.clone(), decl.pid, is_device(&decl));
         let restarted = self.skills.insert(
             i,
@@ -148,20 +146,28 @@ impl Manager {
             },
         );
         if restarted && device {
-            self.outbox.push(EventKind::DeviceBack {
+            self.events.push(EventKind::DeviceBack {
                 device: name.clone(),
             });
         }
-        self.state_check = true;
-        self.outbox.push(EventKind::SkillRegistered {
+        self.state.check = true;
+        self.events.push(EventKind::SkillRegistered {
             skill: name.clone(),
             pid,
             restarted,
         });
         if let Some(r) = restored {
             // Its samples go to the fabric log again (the ports are those of the new one).
-            let io_log = self.io_log.contains_key(&name)
-                && match self.set_io_log("restore", &name, true) {
+            let io_log = self.observers.io_log.contains_key(&name)
+                && match set_io_log(
+                    &mut self.observers,
+                    &self.skills,
+                    &self.node,
+                    self.cycles.cycle,
+                    "restore",
+                    &name,
+                    true,
+                ) {
                     Ok(_) => true,
                     Err(e) => {
                         tracing::warn!(skill = %name, error = %e, "I/O logging not restored");
@@ -169,7 +175,7 @@ impl Manager {
                     }
                 };
             tracing::info!(skill = %name, active = r.active, params = r.params.len(), priority = ?r.priority, io_log, "state restored");
-            self.outbox.push(EventKind::StateRestored {
+            self.events.push(EventKind::StateRestored {
                 skill: name,
                 active: r.active,
                 params: r.params,
@@ -178,45 +184,43 @@ impl Manager {
                 dropped: r.dropped,
             });
         }
-        self.dirty = true;
+        self.cycles.dirty = true;
     }
 
     /// Removes slot `i`: its skill left or died. Its pending run in this cycle (and whatever
     /// depended on it) is taken off the counter so the cycle does not wait for it.
     fn drop_slot(&mut self, i: usize, why: DropReason) {
-        if let Some(mut run) = self.running.take() {
+        if let Some(mut run) = self.cycles.running.take() {
             let n = self.cancel_all(&mut run, vec![i]);
             if n > 0 {
                 self.board.complete(run.k, n);
             }
-            self.running = Some(run);
+            self.cycles.running = Some(run);
         }
         let slot = self.board.slot(i);
         if let Some(e) = self.skills.remove(i) {
             if why == DropReason::Died {
-                self.deaths += 1;
+                self.skills.deaths += 1;
                 tracing::warn!(skill = %e.decl.name, pid = e.decl.pid, "skill died");
-                self.outbox.push(EventKind::SkillDied {
+                self.events.push(EventKind::SkillDied {
                     skill: e.decl.name.clone(),
                     pid: e.decl.pid,
                 });
                 if is_device(&e.decl) {
-                    self.outbox.push(EventKind::DeviceLost {
+                    self.events.push(EventKind::DeviceLost {
                         device: e.decl.name.clone(),
                     });
                 }
             } else {
                 tracing::info!(skill = %e.decl.name, "skill left");
-                self.outbox.push(EventKind::SkillLeft {
+                self.events.push(EventKind::SkillLeft {
                     skill: e.decl.name.clone(),
                 });
             }
-            self.dirty = true;
+            self.cycles.dirty = true;
             // Stop reading its outputs: the manager must not keep a dead producer's topics
             // alive. They are read again when a new producer is ready.
-            for p in &e.decl.outputs {
-                self.readers.remove(&p.topic);
-            }
+            self.observers.forget_outputs(&e.decl.outputs);
         }
         slot.active.store(0, Ordering::Release);
         slot.pid.store(0, Ordering::Release);
@@ -224,7 +228,7 @@ impl Manager {
     }
 
     pub(super) fn check_liveness(&mut self) {
-        self.last_liveness = Instant::now();
+        self.cycles.last_liveness = Instant::now();
         let mut died = false;
         for i in 0..MAX_SLOTS {
             let slot = self.board.slot(i);
@@ -240,8 +244,8 @@ impl Manager {
         }
         // Frees the ports of dead processes (skills, or clients killed with Ctrl-C) so a
         // restarted instance can take their place and no shared memory is left behind.
-        if died || self.last_node_sweep.elapsed() >= NODE_SWEEP {
-            self.last_node_sweep = Instant::now();
+        if died || self.cycles.last_node_sweep.elapsed() >= NODE_SWEEP {
+            self.cycles.last_node_sweep = Instant::now();
             let _ = self.node.try_cleanup_dead_nodes();
         }
     }

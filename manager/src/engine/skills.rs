@@ -4,6 +4,7 @@
 
 use super::Entry;
 use skillfab_proto::board::MAX_SLOTS;
+use skillfab_proto::control::GaveUpInfo;
 use skillfab_proto::decl::SkillDecl;
 use skillfab_proto::param::ParamValue;
 use std::collections::{BTreeMap, HashMap};
@@ -24,6 +25,10 @@ pub(crate) struct Kept {
 
 /// The manager's registry of skills.
 pub(crate) struct Skills {
+    /// Registered processes found dead so far.
+    pub(crate) deaths: u64,
+    /// The processes `skillfab up` gave up restarting and that have not registered since.
+    pub(crate) gave_up: BTreeMap<String, GaveUpInfo>,
     /// By board slot.
     entries: Vec<Option<Entry>>,
     /// Occupied slots in registration order (lists and reports keep it).
@@ -38,6 +43,8 @@ pub(crate) struct Skills {
 impl Skills {
     pub(crate) fn new() -> Skills {
         Skills {
+            deaths: 0,
+            gave_up: BTreeMap::new(),
             entries: (0..MAX_SLOTS).map(|_| None).collect(),
             order: Vec::new(),
             last: HashMap::new(),

@@ -48,6 +48,15 @@ pub(crate) struct Saved {
     pub(crate) holds: BTreeMap<String, u64>,
 }
 
+/// The state file as the manager keeps it.
+#[derive(Debug, Default)]
+pub(crate) struct StateFile {
+    /// A request or a registration may have changed what the file holds.
+    pub(crate) check: bool,
+    /// The file's bytes as last written.
+    pub(crate) written: Vec<u8>,
+}
+
 /// Where a domain's manager keeps its state.
 pub(crate) fn path(domain: &Domain) -> PathBuf {
     domain.root_path().join("manager").join("state")
@@ -102,8 +111,9 @@ impl Manager {
         Saved {
             kept,
             last,
-            io_logged: self.io_log.keys().cloned().collect(),
+            io_logged: self.observers.io_log.keys().cloned().collect(),
             monitors: self
+                .observers
                 .monitors
                 .iter()
                 .map(|m| SavedMonitor {
@@ -114,16 +124,16 @@ impl Manager {
                     client: m.client.clone(),
                 })
                 .collect(),
-            next_monitor: self.monitors.next_id(),
-            paused: self.paused,
-            holds: self.holds.all().clone(),
+            next_monitor: self.observers.monitors.next_id(),
+            paused: self.cycles.paused,
+            holds: self.cycles.holds.all().clone(),
         }
     }
 
     /// Writes the state file if a request or a registration may have changed it
     /// (`state_check`) and it differs from what was last written.
     pub(crate) fn save_state_if_changed(&mut self) {
-        if std::mem::take(&mut self.state_check) {
+        if std::mem::take(&mut self.state.check) {
             self.save_state();
         }
     }
@@ -133,11 +143,11 @@ impl Manager {
             Ok(b) => b,
             Err(error) => return tracing::warn!(%error, "manager state not saved"),
         };
-        if bytes == self.state_written {
+        if bytes == self.state.written {
             return;
         }
         match write(&self.config.domain, &bytes) {
-            Ok(()) => self.state_written = bytes,
+            Ok(()) => self.state.written = bytes,
             Err(error) => tracing::warn!(%error, "manager state not saved"),
         }
     }
@@ -151,28 +161,37 @@ impl Manager {
         for name in saved.io_logged {
             // The ports are opened when the skill registers again (as after its own restart).
             self.skills.keep(&name);
-            self.io_log.insert(name, Vec::new());
+            self.observers.io_log.insert(name, Vec::new());
         }
-        self.paused = saved.paused;
+        self.cycles.paused = saved.paused;
         for (client, at) in saved.holds {
-            self.holds.set(&client, Some(at));
+            self.cycles.holds.set(&client, Some(at));
         }
         let mut lost = Vec::new();
         for m in saved.monitors {
-            self.monitors.set_next_id(m.id);
-            if let Err(e) = self.add_monitor(&m.client, m.text.clone(), m.mode, m.hold) {
+            self.observers.monitors.set_next_id(m.id);
+            let added = super::requests::add_monitor(
+                &mut self.observers,
+                &self.skills,
+                &self.node,
+                &m.client,
+                m.text.clone(),
+                m.mode,
+                m.hold,
+            );
+            if let Err(e) = added {
                 lost.push(format!("{} ({e})", m.text));
             }
         }
-        let next = saved.next_monitor.max(self.monitors.next_id());
-        self.monitors.set_next_id(next);
+        let next = saved.next_monitor.max(self.observers.monitors.next_id());
+        self.observers.monitors.set_next_id(next);
         if !lost.is_empty() {
             tracing::warn!(lost = ?lost, "monitors not restored");
         }
         tracing::info!(
             skills = self.skills.saved().1.len(),
             monitors = monitors - lost.len(),
-            paused = self.paused,
+            paused = self.cycles.paused,
             "state of the previous manager taken over"
         );
     }

@@ -92,7 +92,14 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
     let (r, out) = crate::replay::replay(
         &t,
         &rec,
-        &["--skills", &building.join(","), "--kill", &kill_list],
+        &[
+            "--skills",
+            &building.join(","),
+            "--kill",
+            &kill_list,
+            "--to",
+            &crate::replay::through_last_kill(&kills),
+        ],
     );
     assert!(out.status.success(), "{r}");
     crate::replay::assert_identical_through(&r, &kills);

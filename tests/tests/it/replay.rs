@@ -124,6 +124,16 @@ pub(crate) fn mid_mission_kills(rec: &Path, skills: &[&str]) -> (Vec<(String, u6
     (kills, arg)
 }
 
+/// How long a replay with kills goes on after the last one: what a restarted skill forgot
+/// shows within a few simulated seconds, and the mission's tail would only add minutes to CI.
+const AFTER_LAST_KILL: u64 = 500;
+
+/// `--to` for a replay with `kills`: [`AFTER_LAST_KILL`] cycles after the last.
+pub(crate) fn through_last_kill(kills: &[(String, u64)]) -> String {
+    let last = kills.iter().map(|k| k.1).max().unwrap_or(0);
+    (last + AFTER_LAST_KILL).to_string()
+}
+
 /// Asserts that a replay with kills (`--kill`) did them all and diverged nowhere.
 pub(crate) fn assert_identical_through(r: &Json, kills: &[(String, u64)]) {
     assert_eq!(r["divergence"], Json::Null, "{r}");
@@ -181,7 +191,15 @@ fn a_recorded_lockstep_mission_replays_identically_through_kills_and_a_changed_d
         "go_through",
     ];
     let (kills, kill_list) = mid_mission_kills(&rec, &ours);
-    let all = ["--skills", &ours.join(","), "--kill", &kill_list];
+    let to = through_last_kill(&kills);
+    let all = [
+        "--skills",
+        &ours.join(","),
+        "--kill",
+        &kill_list,
+        "--to",
+        &to,
+    ];
     let (r, out) = replay(&t, &rec, &all);
     assert!(out.status.success(), "{r}");
     assert_identical_through(&r, &kills);

@@ -35,6 +35,7 @@ const MAX_LATENCIES: usize = 1024;
 #[derive(Debug, Default)]
 #[must_use = "effects must be applied (Manager::apply)"]
 pub(crate) struct Effects {
+    /// Control changes, kept by the recording and the fabric log and announced as events.
     pub(crate) changes: Vec<Change>,
     /// Events with no control change behind them.
     pub(crate) events: Vec<EventKind>,
@@ -45,10 +46,9 @@ pub(crate) struct Effects {
 /// A control change a client made, which takes effect from the next cycle to start.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Change {
-    Activation {
-        skill: String,
-        active: bool,
-    },
+    /// `skill` was activated or deactivated.
+    Activation { skill: String, active: bool },
+    /// Client `by` set `skill`'s parameter `param` from `old` to `new`.
     Param {
         skill: String,
         param: String,
@@ -56,6 +56,7 @@ pub(crate) enum Change {
         new: ParamValue,
         by: String,
     },
+    /// Client `by` changed `skill`'s arbitration priority from `old` to `new`.
     Priority {
         skill: String,
         old: i32,
@@ -65,6 +66,7 @@ pub(crate) enum Change {
 }
 
 impl Effects {
+    /// Adds a control change.
     fn change(&mut self, change: Change) {
         self.changes.push(change);
     }

@@ -1,17 +1,15 @@
-//! Actuator channels: the command type's contract, the device-side port that arbitrates among
-//! the proposals of a cycle, and the `Command<'a, T>` a device's body receives.
+//! Actuator channels: the command type's contract, the arbitration among the proposals of a
+//! cycle, the device-side port that does it, and the `Command<'a, T>` a device's body receives.
 //!
 //! Skills propose through [`Proposal`](crate::ports::Proposal) outputs; a device declares the
-//! channels it serves as `Command<'a, T>` fields. Proposals travel straight from proposer to
-//! device (one topic per channel, many publishers): arbitration adds no process hop.
+//! channels it serves as `Command<'a, T>` fields of a `#[derive(Channels)]` struct.
+//! Proposals travel straight from proposer to device (one topic per channel, many
+//! publishers): arbitration adds no process hop.
 
 use crate::Message;
 use crate::decl::{Policy, PortDecl, PortKind};
-use crate::header::SampleHeader;
-use crate::ports::{
-    Arbitration, Candidate, ErasedChannel, ErasedInput, InputField, InputMeta, InputSource,
-    PortMaker,
-};
+use crate::header::{MaybeSlot, SampleHeader};
+use crate::ports::PortMaker;
 use crate::schema::{FieldKind, MessageSchema, Prim};
 use crate::value::kind_size;
 use iceoryx2::port::publisher::Publisher;
@@ -20,6 +18,7 @@ use iceoryx2::prelude::ipc;
 use std::any::Any;
 use std::collections::HashMap;
 use std::ops::Deref;
+use std::sync::Arc;
 
 /// A message that commands an actuator.
 pub trait Actuation: Message {
@@ -92,14 +91,36 @@ pub fn blend<T: Message>(leaves: &[(usize, Prim)], items: &[(f64, &T)]) -> T {
 
 pub use skillfab_proto::decl::blend_weights;
 
+/// One proposer of a cycle that settled, as the device's runtime finds it on the board.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    /// Board slot.
+    pub slot: u32,
+    /// Current priority.
+    pub priority: i32,
+    /// Instance name (breaks ties: the name that sorts first wins). Shared with the device's
+    /// name cache: a cycle's candidates copy no name.
+    pub name: Arc<str>,
+}
+
+/// The outcome of arbitrating one channel in one cycle.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Arbitration {
+    /// The winner's slot (priority policy); `None` under blend or when nobody proposed.
+    pub winner: Option<u32>,
+    /// Slots whose proposals made the command, with their weights (1.0 for a priority win);
+    /// empty when nobody proposed (the command is the safe one).
+    pub weights: Vec<(u32, f64)>,
+}
+
 /// Picks the command of a cycle from `proposals` (slot → value) of `candidates`.
 pub fn arbitrate<T: Message + Actuation>(
     policy: Policy,
     leaves: Option<&[(usize, Prim)]>,
-    candidates: &[Candidate<'_>],
+    candidates: &[Candidate],
     proposal: &dyn Fn(u32) -> Option<T>,
 ) -> (T, Arbitration) {
-    let live: Vec<(&Candidate<'_>, T)> = candidates
+    let live: Vec<(&Candidate, T)> = candidates
         .iter()
         .filter_map(|c| proposal(c.slot).map(|v| (c, v)))
         .collect();
@@ -132,7 +153,9 @@ pub fn arbitrate<T: Message + Actuation>(
             let (best, cmd) = live
                 .iter()
                 .min_by(|(a, _), (b, _)| {
-                    b.priority.cmp(&a.priority).then_with(|| a.name.cmp(b.name))
+                    b.priority
+                        .cmp(&a.priority)
+                        .then_with(|| a.name.cmp(&b.name))
                 })
                 .map(|(c, v)| (*c, *v))
                 .unwrap_or((live[0].0, live[0].1));
@@ -147,6 +170,32 @@ pub fn arbitrate<T: Message + Actuation>(
     }
 }
 
+/// What a channel's last arbitration decided, besides the command itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Decision {
+    /// The cycle it was made for.
+    pub cycle: u64,
+    /// The winner's slot (priority policy); `None` under blend or when nobody proposed.
+    pub winner: Option<u32>,
+    /// Nobody proposed: the command is the channel's safe one.
+    pub safe: bool,
+}
+
+/// A device's runtime port of one channel, type-erased: the runtime keeps these apart from
+/// inputs (a channel is not read, it is arbitrated) and drives them through a cycle.
+pub trait ErasedChannel {
+    /// Receives every proposal that arrived, keeping each proposer's newest.
+    fn poll(&mut self) -> Result<(), crate::SdkError>;
+    /// Whether the proposer in `slot` has proposed for `cycle`.
+    fn has_proposal(&self, slot: u32, cycle: u64) -> bool;
+    /// Turns the proposals of `cycle` from `candidates` into the cycle's command.
+    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate]) -> Arbitration;
+    /// The command of the last arbitration (a `&T` of the channel's type) and its decision.
+    fn command(&self) -> (&dyn Any, Decision);
+    /// Publishes the cycle's command on the channel's command topic.
+    fn publish(&mut self, header: SampleHeader) -> Result<(), crate::SdkError>;
+}
+
 /// The device-side port of a channel: receives every proposer's proposals, arbitrates, holds
 /// the cycle's command, and publishes it on the channel's command topic.
 pub struct ChannelPort<T: Actuation> {
@@ -158,17 +207,19 @@ pub struct ChannelPort<T: Actuation> {
     /// the subscriber's few borrowed samples and block receiving the next proposals.
     latest: HashMap<u32, (SampleHeader, T)>,
     command: T,
-    header: SampleHeader,
-    winner: Option<u32>,
+    decision: Decision,
 }
 
-impl<T: Actuation> ErasedInput for ChannelPort<T> {
+impl<T: Actuation> ErasedChannel for ChannelPort<T> {
     fn poll(&mut self) -> Result<(), crate::SdkError> {
         loop {
             match self.subscriber.receive() {
                 Ok(Some(s)) => {
-                    self.latest
-                        .insert(s.user_header().slot, (*s.user_header(), *s.payload()));
+                    let h = *s.user_header();
+                    // A proposal always names its proposer.
+                    if let Some(slot) = h.slot.get() {
+                        self.latest.insert(slot, (h, *s.payload()));
+                    }
                 }
                 Ok(None) => return Ok(()),
                 Err(e) => {
@@ -180,23 +231,12 @@ impl<T: Actuation> ErasedInput for ChannelPort<T> {
             }
         }
     }
-    fn latest_header(&self) -> Option<SampleHeader> {
-        Some(self.header)
+    fn has_proposal(&self, slot: u32, cycle: u64) -> bool {
+        self.latest
+            .get(&slot)
+            .is_some_and(|(h, _)| h.cycle == cycle)
     }
-    fn latest_any(&self) -> Option<&dyn Any> {
-        Some(&self.command)
-    }
-    fn is_fresh(&self) -> bool {
-        false
-    }
-    fn consume(&mut self) {}
-    fn as_channel(&mut self) -> Option<&mut dyn ErasedChannel> {
-        Some(self)
-    }
-}
-
-impl<T: Actuation> ErasedChannel for ChannelPort<T> {
-    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate<'_>]) -> Arbitration {
+    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate]) -> Arbitration {
         let latest = &self.latest;
         let proposal = |slot: u32| {
             latest
@@ -206,22 +246,18 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
         };
         let (cmd, arb) = arbitrate(self.policy, self.leaves.as_deref(), candidates, &proposal);
         self.command = cmd;
-        self.winner = arb.winner;
-        self.header = SampleHeader {
+        self.decision = Decision {
             cycle,
-            stamp_ns: crate::header::now_ns(),
-            slot: arb.winner.unwrap_or(u32::MAX),
-            reserved: 0,
+            winner: arb.winner,
+            safe: arb.weights.is_empty(),
         };
         // Forget proposers that left the candidates (dead, deactivated, gone).
         self.latest
             .retain(|slot, _| candidates.iter().any(|c| c.slot == *slot));
         arb
     }
-    fn has_proposal(&self, slot: u32, cycle: u64) -> bool {
-        self.latest
-            .get(&slot)
-            .is_some_and(|(h, _)| h.cycle == cycle)
+    fn command(&self) -> (&dyn Any, Decision) {
+        (&self.command, self.decision)
     }
     fn publish(&mut self, header: SampleHeader) -> Result<(), crate::SdkError> {
         let mut s = self
@@ -229,8 +265,9 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
             .loan_uninit()
             .map_err(|e| crate::SdkError::transport("loan command", e))?
             .write_payload(self.command);
+        // A command's header names the winning proposer, not the device.
         *s.user_header_mut() = SampleHeader {
-            slot: self.header.slot,
+            slot: MaybeSlot::from(self.decision.winner),
             ..header
         };
         s.send()
@@ -243,21 +280,21 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
 #[derive(Debug)]
 pub struct Command<'a, T> {
     value: &'a T,
-    meta: InputMeta,
+    decision: Decision,
 }
 
 impl<T> Command<'_, T> {
     /// True when nobody proposed: the value is the safe command.
     pub fn is_safe(&self) -> bool {
-        self.meta.source.is_none()
+        self.decision.safe
     }
-    /// Board slot of the winning proposer (priority policy).
+    /// Board slot of the winning proposer (priority policy; `None` under blend).
     pub fn winner_slot(&self) -> Option<u32> {
-        self.meta.source
+        self.decision.winner
     }
     /// The cycle it belongs to.
     pub fn cycle(&self) -> u64 {
-        self.meta.cycle
+        self.decision.cycle
     }
 }
 
@@ -268,18 +305,28 @@ impl<T> Deref for Command<'_, T> {
     }
 }
 
-impl<'a, T: Actuation> InputField<'a> for Command<'a, T> {
+/// A field type of a `Channels` struct (generated code uses it).
+pub trait ChannelField<'a>: Sized {
+    /// The channel's declaration (the field name is the channel).
+    fn decl(port: &str) -> PortDecl;
+    /// The cycle's command of channel `idx`; `None` if it is missing.
+    fn fetch(channels: &'a [Box<dyn ErasedChannel>], idx: usize) -> Option<Self>;
+    /// The runtime port of channel `idx`.
+    fn make(maker: &PortMaker<'_>, idx: usize) -> Result<Box<dyn ErasedChannel>, crate::SdkError>;
+}
+
+impl<'a, T: Actuation> ChannelField<'a> for Command<'a, T> {
     fn decl(port: &str) -> PortDecl {
         PortDecl::channel::<T>(port, PortKind::Channel(Policy::Priority))
     }
-    fn fetch(src: &'a dyn InputSource, idx: usize) -> Option<Self> {
-        let (any, meta) = src.get(idx)?;
+    fn fetch(channels: &'a [Box<dyn ErasedChannel>], idx: usize) -> Option<Self> {
+        let (any, decision) = channels.get(idx)?.command();
         Some(Command {
             value: any.downcast_ref::<T>()?,
-            meta,
+            decision,
         })
     }
-    fn make(maker: &PortMaker<'_>, idx: usize) -> Result<Box<dyn ErasedInput>, crate::SdkError> {
+    fn make(maker: &PortMaker<'_>, idx: usize) -> Result<Box<dyn ErasedChannel>, crate::SdkError> {
         let node = maker.node.ok_or(crate::SdkError::NoNode)?;
         let decl = maker.ports.get(idx).ok_or(crate::SdkError::NoNode)?;
         let policy = match decl.kind {
@@ -304,9 +351,36 @@ impl<'a, T: Actuation> InputField<'a> for Command<'a, T> {
             leaves,
             latest: HashMap::new(),
             command: T::safe(),
-            header: SampleHeader::default(),
-            winner: None,
+            decision: Decision {
+                cycle: 0,
+                winner: None,
+                safe: true,
+            },
         }))
+    }
+}
+
+/// The channels a device serves. Derive it with `#[derive(Channels)]` over `Command<'a, T>`
+/// fields; `()` is "no channels". A device's declaration lists its channels as its inputs,
+/// in field order (the manager numbers a device's channels by that position).
+pub trait ChannelSet<'a>: Sized {
+    /// Declarations in field order.
+    fn ports() -> Vec<PortDecl>;
+    /// Every channel's command of the cycle, or `None` if one is missing.
+    fn fetch(channels: &'a [Box<dyn ErasedChannel>]) -> Option<Self>;
+    /// One runtime port per field, in order.
+    fn make(maker: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedChannel>>, crate::SdkError>;
+}
+
+impl<'a> ChannelSet<'a> for () {
+    fn ports() -> Vec<PortDecl> {
+        Vec::new()
+    }
+    fn fetch(_: &'a [Box<dyn ErasedChannel>]) -> Option<Self> {
+        Some(())
+    }
+    fn make(_: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedChannel>>, crate::SdkError> {
+        Ok(Vec::new())
     }
 }
 
@@ -332,24 +406,14 @@ mod tests {
         value: u64,
     }
 
-    fn cands() -> Vec<Candidate<'static>> {
-        vec![
-            Candidate {
-                slot: 1,
-                priority: 1,
-                name: "wander",
-            },
-            Candidate {
-                slot: 2,
-                priority: 3,
-                name: "avoid",
-            },
-            Candidate {
-                slot: 3,
-                priority: 3,
-                name: "home",
-            },
-        ]
+    fn cands() -> Vec<Candidate> {
+        [(1, 1, "wander"), (2, 3, "avoid"), (3, 3, "home")]
+            .map(|(slot, priority, name)| Candidate {
+                slot,
+                priority,
+                name: name.into(),
+            })
+            .to_vec()
     }
 
     #[test]

@@ -2,8 +2,9 @@
 //! never blocks the cycle: at the start of every cycle it publishes its latest buffered sample
 //! at once; once the cycle's proposals are in it receives one arbitrated command per channel.
 
+use crate::actuation::ChannelSet;
 use crate::params::Params;
-use crate::ports::{InputSet, OutputSet};
+use crate::ports::OutputSet;
 use crate::skill::{Ctx, SkillResult};
 
 /// Where a device's hardware is (`--port`, `--baud`).
@@ -21,7 +22,7 @@ pub struct DeviceOptions {
 
 /// A device: sensor outputs published at cycle start, actuator channels served at cycle end.
 ///
-/// `Commands` is a struct of `Command<'a, T>` fields (derive `Inputs`): the field name is the
+/// `Commands` is a struct of `Command<'a, T>` fields (derive `Channels`): the field name is the
 /// channel (`--remap drive=drive2` renames it, `--policy drive=blend` blends it), `T` an
 /// [`Actuation`](crate::actuation::Actuation) whose `safe()` is sent when nobody proposes.
 pub trait Device: Default + 'static {
@@ -29,8 +30,8 @@ pub trait Device: Default + 'static {
     type Params: Params + Default;
     /// Sensor outputs (derive `Outputs`), or `()`.
     type Outputs<'a>: OutputSet<'a>;
-    /// Channels served (derive `Inputs` over `Command<'a, T>` fields), or `()`.
-    type Commands<'a>: InputSet<'a>;
+    /// Channels served (derive `Channels` over `Command<'a, T>` fields), or `()`.
+    type Commands<'a>: ChannelSet<'a>;
 
     /// Called once before registration: open the hardware (start its I/O thread).
     fn init(&mut self, _options: &DeviceOptions) -> SkillResult {

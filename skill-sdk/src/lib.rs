@@ -136,7 +136,7 @@ pub mod prelude {
     pub use crate::ports::{Input, Output, Proposal};
     pub use crate::skill::{Clock, Ctx, Skill, SkillError, SkillResult};
     pub use crate::state::State;
-    pub use skill_sdk_macros::{Inputs, Message, Outputs, Params};
+    pub use skill_sdk_macros::{Channels, Inputs, Message, Outputs, Params};
 }
 
 /// What the derives generate code against; not an API.

@@ -22,8 +22,8 @@ pub struct InputMeta {
     pub cycle: u64,
     /// How many cycles old it is now (0 for a same-cycle input).
     pub age: u64,
-    /// Board slot of the producer; for an arbitrated command, of the winning proposer
-    /// (`None`: nobody proposed, this is the safe command).
+    /// Board slot of the producer; on a device's command topic, of the winning proposer
+    /// (`None`: nobody proposed, the safe command, or the command was blended).
     pub source: Option<u32>,
 }
 
@@ -133,10 +133,6 @@ pub trait ErasedInput {
     fn is_fresh(&self) -> bool;
     /// Marks the newest sample as seen.
     fn consume(&mut self);
-    /// The channel view of a channel port.
-    fn as_channel(&mut self) -> Option<&mut dyn ErasedChannel> {
-        None
-    }
 }
 
 impl<T: Message> ErasedInput for InputPort<T> {
@@ -169,36 +165,6 @@ impl<T: Message> ErasedInput for InputPort<T> {
     fn consume(&mut self) {
         self.fresh = false;
     }
-}
-
-/// One candidate proposer of a cycle, as the device's runtime sees it on the board.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Candidate<'a> {
-    /// Board slot.
-    pub slot: u32,
-    /// Current priority.
-    pub priority: i32,
-    /// Instance name (breaks ties: the name that sorts first wins).
-    pub name: &'a str,
-}
-
-/// The outcome of arbitrating one channel in one cycle.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Arbitration {
-    /// The winner's slot (priority policy); `None` under blend or when nobody proposed.
-    pub winner: Option<u32>,
-    /// Slots whose proposals made the command, with their weights (1.0 for a priority win).
-    pub weights: Vec<(u32, f64)>,
-}
-
-/// Type-erased channel port (the device runtime arbitrates through it).
-pub trait ErasedChannel {
-    /// Turns the proposals of `cycle` from `candidates` into the cycle's command.
-    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate<'_>]) -> Arbitration;
-    /// Publishes the cycle's command on the channel's command topic.
-    fn publish(&mut self, header: SampleHeader) -> Result<(), crate::SdkError>;
-    /// Whether the proposer in `slot` has proposed for `cycle`.
-    fn has_proposal(&self, slot: u32, cycle: u64) -> bool;
 }
 
 /// A skill's inputs. Derive it with `#[derive(Inputs)]`; `()` is "no inputs".

@@ -342,7 +342,7 @@ pub struct MockOut<'a> {
 }
 
 /// Channels of [`MockDevice`].
-#[derive(Inputs)]
+#[derive(Channels)]
 pub struct MockCommands<'a> {
     /// The drive channel.
     pub drive: Command<'a, skillfab_msgs::Drive>,

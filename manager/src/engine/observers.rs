@@ -218,7 +218,7 @@ impl Observers {
             }
             let winner = slot.channel_winner[ch.index].load(Ordering::Acquire);
             let mask = slot.channel_mask[ch.index].load(Ordering::Acquire);
-            let winner = (winner > 0).then(|| name_of(winner as usize - 1)).flatten();
+            let winner = winner.and_then(|w| name_of(w as usize));
             let contributors: Vec<usize> =
                 (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0).collect();
             let weights: Vec<f64> = if ch.policy == Policy::Priority {

@@ -175,9 +175,10 @@ impl Recording {
             }
             for (bytes, h) in taken {
                 // A command's header names the proposal that won, not the device.
-                let (skill, port, dir) = t
-                    .producers
-                    .get(&h.slot)
+                let (skill, port, dir) = h
+                    .slot
+                    .get()
+                    .and_then(|s| t.producers.get(&s))
                     .or_else(|| t.producers.values().find(|p| p.2 == "cmd"))
                     .cloned()
                     .unwrap_or_else(|| (format!("slot{}", h.slot), topic.clone(), "out"));

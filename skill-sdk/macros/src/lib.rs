@@ -11,6 +11,7 @@
 //! - [`Params`]: a parameter struct: `#[param(default = .., min = .., max = ..)]` per field,
 //!   doc comments become the parameter's doc.
 //! - [`Inputs`] / [`Outputs`]: a struct of `Input<'a, T>` / `Output<'a, T>` fields, one per port.
+//! - [`Channels`]: a device's struct of `Command<'a, T>` fields, one per actuator channel.
 
 #![warn(missing_docs)]
 
@@ -250,24 +251,38 @@ fn params(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
 /// A skill's inputs: a struct of `Input<'a, T>` fields; the field name is the topic.
 #[proc_macro_derive(Inputs)]
 pub fn derive_inputs(input: TokenStream) -> TokenStream {
-    let input = parse_macro_input!(input as DeriveInput);
-    match ports(&input, true) {
-        Ok(t) => t.into(),
-        Err(e) => e.to_compile_error().into(),
-    }
+    derive_ports(input, PortSet::Inputs)
 }
 
 /// A skill's outputs: a struct of `Output<'a, T>` fields; the field name is the topic.
 #[proc_macro_derive(Outputs)]
 pub fn derive_outputs(input: TokenStream) -> TokenStream {
+    derive_ports(input, PortSet::Outputs)
+}
+
+/// A device's channels: a struct of `Command<'a, T>` fields; the field name is the channel.
+#[proc_macro_derive(Channels)]
+pub fn derive_channels(input: TokenStream) -> TokenStream {
+    derive_ports(input, PortSet::Channels)
+}
+
+/// Which set of ports a struct declares.
+#[derive(Clone, Copy)]
+enum PortSet {
+    Inputs,
+    Outputs,
+    Channels,
+}
+
+fn derive_ports(input: TokenStream, set: PortSet) -> TokenStream {
     let input = parse_macro_input!(input as DeriveInput);
-    match ports(&input, false) {
+    match ports(&input, set) {
         Ok(t) => t.into(),
         Err(e) => e.to_compile_error().into(),
     }
 }
 
-fn ports(input: &DeriveInput, inputs: bool) -> syn::Result<proc_macro2::TokenStream> {
+fn ports(input: &DeriveInput, set: PortSet) -> syn::Result<proc_macro2::TokenStream> {
     let ident = &input.ident;
     let lifetimes: Vec<_> = input.generics.lifetimes().collect();
     if lifetimes.len() != 1 || input.generics.params.len() != 1 {
@@ -288,47 +303,59 @@ fn ports(input: &DeriveInput, inputs: bool) -> syn::Result<proc_macro2::TokenStr
             .ok_or_else(|| syn::Error::new(f.span(), "unnamed field"))?;
         let name = fid.to_string();
         let ty = &f.ty;
-        if inputs {
-            decls.push(quote! { <#ty as ::skill_sdk::ports::InputField<#lt>>::decl(#name) });
-            builds.push(
-                quote! { #fid: <#ty as ::skill_sdk::ports::InputField<#lt>>::fetch(src, #idx)? },
-            );
-            makes.push(quote! { <#ty as ::skill_sdk::ports::InputField<#lt>>::make(maker, #idx)? });
-        } else {
-            decls.push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::decl(#name) });
-            builds.push(quote! {
-                #fid: <#ty as ::skill_sdk::ports::OutputField<#lt>>::bind(slots.take_next())
-            });
-            makes
-                .push(quote! { <#ty as ::skill_sdk::ports::OutputField<#lt>>::make(maker, #idx)? });
-        }
+        let field = match set {
+            PortSet::Inputs => quote! { ::skill_sdk::ports::InputField<#lt> },
+            PortSet::Outputs => quote! { ::skill_sdk::ports::OutputField<#lt> },
+            PortSet::Channels => quote! { ::skill_sdk::actuation::ChannelField<#lt> },
+        };
+        decls.push(quote! { <#ty as #field>::decl(#name) });
+        builds.push(match set {
+            PortSet::Inputs => quote! { #fid: <#ty as #field>::fetch(src, #idx)? },
+            PortSet::Outputs => quote! { #fid: <#ty as #field>::bind(slots.take_next()) },
+            PortSet::Channels => quote! { #fid: <#ty as #field>::fetch(channels, #idx)? },
+        });
+        makes.push(quote! { <#ty as #field>::make(maker, #idx)? });
     }
-    Ok(if inputs {
-        quote! {
+    let decl = quote! { ::skill_sdk::__private::proto::decl::PortDecl };
+    let error = quote! { ::skill_sdk::SdkError };
+    Ok(match set {
+        PortSet::Inputs => quote! {
             impl<#lt> ::skill_sdk::ports::InputSet<#lt> for #ident<#lt> {
-                fn ports() -> ::std::vec::Vec<::skill_sdk::__private::proto::decl::PortDecl> { vec![#(#decls),*] }
+                fn ports() -> ::std::vec::Vec<#decl> { vec![#(#decls),*] }
                 fn fetch(src: &#lt dyn ::skill_sdk::ports::InputSource) -> ::core::option::Option<Self> {
                     Some(Self { #(#builds),* })
                 }
                 fn make(maker: &::skill_sdk::ports::PortMaker<'_>)
-                    -> ::core::result::Result<::std::vec::Vec<::std::boxed::Box<dyn ::skill_sdk::ports::ErasedInput>>, ::skill_sdk::SdkError> {
+                    -> ::core::result::Result<::std::vec::Vec<::std::boxed::Box<dyn ::skill_sdk::ports::ErasedInput>>, #error> {
                     Ok(vec![#(#makes),*])
                 }
             }
-        }
-    } else {
-        quote! {
+        },
+        PortSet::Outputs => quote! {
             impl<#lt> ::skill_sdk::ports::OutputSet<#lt> for #ident<#lt> {
-                fn ports() -> ::std::vec::Vec<::skill_sdk::__private::proto::decl::PortDecl> { vec![#(#decls),*] }
+                fn ports() -> ::std::vec::Vec<#decl> { vec![#(#decls),*] }
                 fn bind(slots: &#lt mut [::skill_sdk::ports::ErasedOutput]) -> Self {
                     let mut slots = ::skill_sdk::ports::OutputSlots::new(slots);
                     Self { #(#builds),* }
                 }
                 fn make(maker: &::skill_sdk::ports::PortMaker<'_>)
-                    -> ::core::result::Result<::std::vec::Vec<::skill_sdk::ports::ErasedOutput>, ::skill_sdk::SdkError> {
+                    -> ::core::result::Result<::std::vec::Vec<::skill_sdk::ports::ErasedOutput>, #error> {
                     Ok(vec![#(#makes),*])
                 }
             }
-        }
+        },
+        PortSet::Channels => quote! {
+            impl<#lt> ::skill_sdk::actuation::ChannelSet<#lt> for #ident<#lt> {
+                fn ports() -> ::std::vec::Vec<#decl> { vec![#(#decls),*] }
+                fn fetch(channels: &#lt [::std::boxed::Box<dyn ::skill_sdk::actuation::ErasedChannel>])
+                    -> ::core::option::Option<Self> {
+                    Some(Self { #(#builds),* })
+                }
+                fn make(maker: &::skill_sdk::ports::PortMaker<'_>)
+                    -> ::core::result::Result<::std::vec::Vec<::std::boxed::Box<dyn ::skill_sdk::actuation::ErasedChannel>>, #error> {
+                    Ok(vec![#(#makes),*])
+                }
+            }
+        },
     })
 }

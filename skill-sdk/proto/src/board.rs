@@ -201,8 +201,9 @@ pub struct Slot {
     pub channel_proposers: [AtomicU64; MAX_CHANNELS],
     /// For a device: per channel, the cycle of the last arbitration.
     pub channel_cycle: [AtomicU64; MAX_CHANNELS],
-    /// For a device: per channel, the winner's slot + 1 (0: nobody proposed, safe command).
-    pub channel_winner: [AtomicU32; MAX_CHANNELS],
+    /// For a device: per channel, the winner's slot (none: nobody proposed, the safe
+    /// command, or the command was blended).
+    pub channel_winner: [AtomicMaybeSlot; MAX_CHANNELS],
     /// For a device: per channel, the slots whose proposals made the command.
     pub channel_mask: [AtomicU64; MAX_CHANNELS],
     /// Parameter snapshot generation (a seqlock: odd while the manager writes).
@@ -556,9 +557,30 @@ impl Slot {
         for c in 0..MAX_CHANNELS {
             self.channel_proposers[c].store(0, Ordering::Relaxed);
             self.channel_cycle[c].store(0, Ordering::Relaxed);
-            self.channel_winner[c].store(0, Ordering::Relaxed);
+            self.channel_winner[c].store(None, Ordering::Relaxed);
             self.channel_mask[c].store(0, Ordering::Relaxed);
         }
+    }
+}
+
+/// A board slot or none in one atomic word, for the board's own fields: slot `s` is stored
+/// as `s + 1` and none as 0, so a zeroed board (a new one, a reset slot) reads as none.
+/// (A [`SampleHeader`](crate::header::SampleHeader) carries its slot as a
+/// [`MaybeSlot`](crate::header::MaybeSlot), readable outside the fabric; this encoding stays
+/// inside the board.)
+#[repr(transparent)]
+#[derive(Default)]
+pub struct AtomicMaybeSlot(AtomicU32);
+
+impl AtomicMaybeSlot {
+    /// The slot, if there is one.
+    pub fn load(&self, order: Ordering) -> Option<u32> {
+        self.0.load(order).checked_sub(1)
+    }
+
+    /// Sets the slot (`slot` is below [`MAX_SLOTS`], so `slot + 1` cannot wrap).
+    pub fn store(&self, slot: Option<u32>, order: Ordering) {
+        self.0.store(slot.map_or(0, |s| s + 1), order);
     }
 }
 
@@ -588,6 +610,18 @@ pub fn pid_alive(pid: u32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_zeroed_winner_is_none_and_slot_zero_is_a_slot() {
+        let w = AtomicMaybeSlot::default();
+        assert_eq!(w.load(Ordering::Relaxed), None);
+        w.store(Some(0), Ordering::Relaxed);
+        assert_eq!(w.load(Ordering::Relaxed), Some(0));
+        w.store(Some(63), Ordering::Relaxed);
+        assert_eq!(w.load(Ordering::Relaxed), Some(63));
+        w.store(None, Ordering::Relaxed);
+        assert_eq!(w.load(Ordering::Relaxed), None);
+    }
 
     #[test]
     fn completion_counter_is_cycle_tagged() {

@@ -366,8 +366,10 @@ impl RawReader {
                     // SAFETY: as in `latest`: one value of `size` bytes, mapped while held.
                     let bytes = unsafe { std::slice::from_raw_parts(ptr, self.size) };
                     each(bytes, *s.user_header());
-                    if let Some(m) = self.by_slot.as_mut() {
-                        m.insert(s.user_header().slot, (bytes.to_vec(), *s.user_header()));
+                    if let Some(m) = self.by_slot.as_mut()
+                        && let Some(slot) = s.user_header().slot.get()
+                    {
+                        m.insert(slot, (bytes.to_vec(), *s.user_header()));
                     }
                     self.latest = Some(s);
                 }

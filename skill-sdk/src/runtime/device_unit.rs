@@ -5,14 +5,15 @@
 
 use super::arbiter::Arbiter;
 use super::serve::Link;
-use super::skill_unit::{RunRecord, RuntimeInputs, announce, commit_outputs, finish_run, guarded};
+use super::skill_unit::{RunRecord, announce, commit_outputs, finish_run, guarded};
 use super::{Common, Io, Unit};
 use crate::SdkError;
+use crate::actuation::{ChannelSet, ErasedChannel};
 use crate::board::RunStatus;
 use crate::decl::{Mode, PortDecl};
 use crate::device::{Device, DeviceOptions};
-use crate::header::{SampleHeader, now_ns};
-use crate::ports::{ErasedInput, ErasedOutput, InputSet, OutputSet, PortMaker};
+use crate::header::{MaybeSlot, SampleHeader, now_ns};
+use crate::ports::{ErasedInput, ErasedOutput, OutputSet, PortMaker};
 use crate::skill::Ctx;
 use std::sync::atomic::Ordering;
 
@@ -67,31 +68,23 @@ impl<D: Device> DeviceUnit<D> {
         common: &Common<D::Params>,
         k: u64,
     ) -> RunStatus {
-        let status = {
-            let src = RuntimeInputs {
-                inputs: &io.inputs,
-                cycle: k,
-            };
-            match <D::Commands<'_> as InputSet<'_>>::fetch(&src) {
-                None => RunStatus::Skipped,
-                Some(cmds) => {
-                    let ctx = Ctx {
-                        params: &common.params,
-                        cycle: k,
-                        name: &common.name,
-                        activation: link.board.slot(link.idx).active.load(Ordering::Acquire),
-                        clock: link.board.header().clock(),
-                    };
-                    let device = &mut self.device;
-                    guarded(k, || device.command(&ctx, cmds))
-                }
+        let status = match <D::Commands<'_> as ChannelSet<'_>>::fetch(&io.channels) {
+            None => RunStatus::Skipped,
+            Some(cmds) => {
+                let ctx = Ctx {
+                    params: &common.params,
+                    cycle: k,
+                    name: &common.name,
+                    activation: link.board.slot(link.idx).active.load(Ordering::Acquire),
+                    clock: link.board.header().clock(),
+                };
+                let device = &mut self.device;
+                guarded(k, || device.command(&ctx, cmds))
             }
         };
         let header = header(link, k);
-        for i in io.inputs.iter_mut() {
-            if let Some(ch) = i.as_channel()
-                && let Err(e) = ch.publish(header)
-            {
+        for ch in io.channels.iter_mut() {
+            if let Err(e) = ch.publish(header) {
                 tracing::warn!(cycle = k, error = %e, "command not published");
             }
         }
@@ -104,7 +97,7 @@ fn header(link: &Link<'_>, k: u64) -> SampleHeader {
     SampleHeader {
         cycle: k,
         stamp_ns: now_ns(),
-        slot: link.idx as u32,
+        slot: MaybeSlot::some(link.idx as u32),
         reserved: 0,
     }
 }
@@ -127,14 +120,18 @@ impl<D: Device> Unit for DeviceUnit<D> {
                 reason: e.to_string(),
             })
     }
+    /// The channels: a device reads no inputs.
     fn input_ports(&self) -> Vec<PortDecl> {
-        <D::Commands<'static> as InputSet<'static>>::ports()
+        <D::Commands<'static> as ChannelSet<'static>>::ports()
     }
     fn output_ports(&self) -> Vec<PortDecl> {
         <D::Outputs<'static> as OutputSet<'static>>::ports()
     }
-    fn make_inputs(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
-        <D::Commands<'static> as InputSet<'static>>::make(m)
+    fn make_inputs(&self, _m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError> {
+        Ok(Vec::new())
+    }
+    fn make_channels(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedChannel>>, SdkError> {
+        <D::Commands<'static> as ChannelSet<'static>>::make(m)
     }
     fn make_outputs(&self, m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError> {
         <D::Outputs<'static> as OutputSet<'static>>::make(m)
@@ -159,8 +156,8 @@ impl<D: Device> Unit for DeviceUnit<D> {
         // A proposer publishes its proposal before it marks its run done, but the proposal
         // may have landed after the poll of this wake-up: receive again now that everyone has
         // settled, or a proposal made in time would count as none.
-        for i in io.inputs.iter_mut() {
-            if let Err(e) = i.poll() {
+        for ch in io.channels.iter_mut() {
+            if let Err(e) = ch.poll() {
                 tracing::warn!(cycle = k, error = %e, "proposals not received");
             }
         }

@@ -37,6 +37,7 @@ pub use waker::Waker;
 pub(crate) use skill_unit::{guarded, step_skill};
 
 use crate::SdkError;
+use crate::actuation::ErasedChannel;
 use crate::board::SlotState;
 use crate::decl::{Mode, Policy, PortDecl, PortKind, SkillDecl};
 use crate::device::{Device, DeviceOptions};
@@ -211,12 +212,17 @@ pub(crate) trait Unit: 'static {
     fn priority(&self) -> i32;
     /// The parameters' declared defaults.
     fn default_params(&self) -> Self::Params;
-    /// Input ports (for a device: its channels).
+    /// Input ports. A device has none but its channels, which its declaration lists as its
+    /// inputs (the manager numbers a device's channels by their place there).
     fn input_ports(&self) -> Vec<PortDecl>;
     /// Output ports.
     fn output_ports(&self) -> Vec<PortDecl>;
     /// Runtime input ports.
     fn make_inputs(&self, m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedInput>>, SdkError>;
+    /// Runtime channel ports (a device's), made from the same declarations as the inputs.
+    fn make_channels(&self, _m: &PortMaker<'_>) -> Result<Vec<Box<dyn ErasedChannel>>, SdkError> {
+        Ok(Vec::new())
+    }
     /// Runtime output ports.
     fn make_outputs(&self, m: &PortMaker<'_>) -> Result<Vec<ErasedOutput>, SdkError>;
     /// Runs whatever is due now.
@@ -260,7 +266,11 @@ pub(crate) struct Common<P> {
 
 /// A unit's runtime ports.
 pub(crate) struct Io {
+    /// A skill's inputs, read every run.
     inputs: Vec<Box<dyn ErasedInput>>,
+    /// A device's channels, arbitrated every cycle (index c: the c-th channel the device
+    /// declared, as the board's `channel_*` fields count them).
+    channels: Vec<Box<dyn ErasedChannel>>,
     outputs: Vec<ErasedOutput>,
     /// Indexes of the outputs that are proposals.
     proposals: Vec<usize>,
@@ -388,11 +398,13 @@ fn run<U: Unit>(
         };
         tracing::info!(slot = idx, "registered");
         if io.is_none() {
+            let inputs = PortMaker {
+                node: Some(&node),
+                ports: decl.inputs.clone(),
+            };
             io = Some(Io {
-                inputs: unit.make_inputs(&PortMaker {
-                    node: Some(&node),
-                    ports: decl.inputs.clone(),
-                })?,
+                inputs: unit.make_inputs(&inputs)?,
+                channels: unit.make_channels(&inputs)?,
                 outputs: unit.make_outputs(&PortMaker {
                     node: Some(&node),
                     ports: decl.outputs.clone(),

@@ -125,6 +125,9 @@ pub(super) fn serve<U: Unit>(
         for i in io.inputs.iter_mut() {
             i.poll()?;
         }
+        for c in io.channels.iter_mut() {
+            c.poll()?;
+        }
         let now = Instant::now();
         // A closed board is checked at once: its manager left, or died and was replaced.
         if now >= next_tick || !board.is_open() {

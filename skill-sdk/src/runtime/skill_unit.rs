@@ -6,7 +6,7 @@ use super::{Common, Io, Unit};
 use crate::SdkError;
 use crate::board::RunStatus;
 use crate::decl::{Mode, PortDecl};
-use crate::header::{SampleHeader, now_ns};
+use crate::header::{MaybeSlot, SampleHeader, now_ns};
 use crate::params::Params;
 use crate::ports::{
     ErasedInput, ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker,
@@ -33,7 +33,7 @@ impl InputSource for RuntimeInputs<'_> {
             InputMeta {
                 cycle: h.cycle,
                 age: self.cycle.saturating_sub(h.cycle),
-                source: (h.slot != u32::MAX).then_some(h.slot),
+                source: h.slot.get(),
             },
         ))
     }
@@ -281,7 +281,7 @@ pub(crate) fn step_skill<P: Params, B>(
     let header = SampleHeader {
         cycle: k,
         stamp_ns: end,
-        slot: link.idx as u32,
+        slot: MaybeSlot::some(link.idx as u32),
         reserved: 0,
     };
     let mask = commit_outputs(link, &mut io.outputs, status, header);

@@ -42,7 +42,7 @@ pub struct Sensors<'a> {
 }
 
 /// Channels served.
-#[derive(Inputs)]
+#[derive(Channels)]
 pub struct Channels<'a> {
     /// Translate and rotate velocity; safe command: stop.
     pub drive: Command<'a, Drive>,

@@ -40,8 +40,8 @@ pub struct Sample {
     pub pose: (f64, f64, f64),
     /// Velocities (m/s, rad/s).
     pub vel: (f64, f64),
-    /// Latest range of each sonar (m; `None`: no echo) and when it was read.
-    pub sonar: [Option<(Option<f64>, Instant)>; SONARS],
+    /// Each sonar's newest reading (`None`: not read since the driver started).
+    pub sonar: [Option<SonarReading>; SONARS],
     /// Stall and bumper flags.
     pub flags: u16,
     /// Battery (V).
@@ -57,6 +57,35 @@ pub struct Sample {
     pub arm: Option<(u16, u16, Instant)>,
     /// Messages the robot has spoken.
     pub said: u16,
+}
+
+/// One sonar's reading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SonarReading {
+    /// What came back.
+    pub echo: Echo,
+    /// When it was read, on the driver's clock ([`Driver::now`]).
+    pub read_at: Instant,
+}
+
+/// What a sonar heard.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Echo {
+    /// An echo from this far (m, from the ring).
+    Range(f64),
+    /// No echo: nothing within the sonar's reach (the protocol's range 0).
+    Silent,
+}
+
+impl Echo {
+    /// Whether the sonar sees free space at least `d` far (m): an echo from `d` or beyond,
+    /// or none.
+    pub fn clear_to(self, d: f64) -> bool {
+        match self {
+            Echo::Range(r) => r >= d,
+            Echo::Silent => true,
+        }
+    }
 }
 
 struct Shared {
@@ -605,9 +634,13 @@ fn apply_status(s: &mut Sample, st: &Status, odometer: &mut Odometer, now: Insta
     s.flags = st.flags;
     s.battery = f64::from(st.battery) / 10.0;
     s.received = Some(now);
-    for &(n, r) in &st.sonars {
-        if let Some(slot) = s.sonar.get_mut(usize::from(n)) {
-            *slot = Some(((r > 0).then(|| f64::from(r) / 1000.0), now));
+    for &(n, mm) in &st.sonars {
+        if let Some(reading) = s.sonar.get_mut(usize::from(n)) {
+            let echo = match mm {
+                0 => Echo::Silent,
+                mm => Echo::Range(f64::from(mm) / 1000.0),
+            };
+            *reading = Some(SonarReading { echo, read_at: now });
         }
     }
 }
@@ -705,6 +738,6 @@ mod tests {
             s.pose
         );
         assert!((s.pose.2 - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
-        assert_eq!(s.sonar[3].unwrap().0, Some(1.5));
+        assert_eq!(s.sonar[3].unwrap().echo, Echo::Range(1.5));
     }
 }

@@ -30,6 +30,7 @@
 //!   nothing.
 
 use crate::codec::SONARS;
+use crate::driver::{Echo, SonarReading};
 use std::collections::VecDeque;
 use std::f64::consts::TAU;
 use std::time::{Duration, Instant};
@@ -152,8 +153,8 @@ pub struct Interventions {
 #[derive(Debug, Default)]
 pub struct Guard {
     points: VecDeque<Point>,
-    /// Per sonar: when its newest reading was taken and its range (∞: no echo).
-    last: [Option<(Instant, f64)>; SONARS],
+    /// Per sonar: its newest reading.
+    last: [Option<SonarReading>; SONARS],
     /// (when, good frames, dropped frames) about a second ago and now, for the drop share.
     window: VecDeque<(Instant, u64, u64)>,
     /// What it did so far.
@@ -166,28 +167,19 @@ fn sonar_axis(i: usize) -> f64 {
 }
 
 impl Guard {
-    /// A reading of sonar `i` (range from the ring, `None`: no echo) taken at `at`, when the
-    /// robot stood at `pose` (odometry frame: x, y, heading). A reading already seen (the
-    /// same `at`) changes nothing.
-    pub fn observe(
-        &mut self,
-        i: usize,
-        range: Option<f64>,
-        at: Instant,
-        pose: (f64, f64, f64),
-        p: &Limits,
-    ) {
-        let Some(slot) = self.last.get_mut(i) else {
+    /// A reading of sonar `i`, taken when the robot stood at `pose` (odometry frame: x, y,
+    /// heading). A reading already seen (read at the same time) changes nothing.
+    pub fn observe(&mut self, i: usize, reading: SonarReading, pose: (f64, f64, f64), p: &Limits) {
+        let Some(last) = self.last.get_mut(i) else {
             return;
         };
-        if slot.is_some_and(|(t, _)| t == at) {
+        if last.is_some_and(|l| l.read_at == reading.read_at) {
             return;
         }
-        let r = range.unwrap_or(f64::INFINITY);
-        *slot = Some((at, r));
-        if !r.is_finite() {
+        *last = Some(reading);
+        let (Echo::Range(r), at) = (reading.echo, reading.read_at) else {
             return;
-        }
+        };
         let r = if r <= p.min_range_m + 0.01 { 0.0 } else { r };
         let axis = pose.2 + sonar_axis(i);
         let (ox, oy) = (pose.0 + RADIUS * axis.cos(), pose.1 + RADIUS * axis.sin());
@@ -234,8 +226,8 @@ impl Guard {
         let ahead = if translate > 0.0 { 0 } else { SONARS / 2 };
         let sonar = |d: isize| self.last[(ahead as isize + d).rem_euclid(SONARS as isize) as usize];
         let seen = (-(COVER as isize)..=COVER as isize)
-            .any(|d| sonar(d).is_some_and(|(t, _)| is_fresh(t)));
-        let opening = sonar(0).is_some_and(|(t, r)| is_fresh(t) && r >= p.opening_m);
+            .any(|d| sonar(d).is_some_and(|s| is_fresh(s.read_at)));
+        let opening = sonar(0).is_some_and(|s| is_fresh(s.read_at) && s.echo.clear_to(p.opening_m));
         let clear = self.clear(translate.signum(), pose, opening, p.margin_m);
         let d = clear - p.stop_m;
         let (a, t) = (p.decel.max(1e-3), p.react_s.max(0.0));
@@ -316,6 +308,14 @@ mod tests {
 
     const AT: (f64, f64, f64) = (0.0, 0.0, 0.0);
 
+    /// Sonar read at `t`: an echo from `range` (`None`: no echo).
+    fn read(range: Option<f64>, t: Instant) -> SonarReading {
+        SonarReading {
+            echo: range.map_or(Echo::Silent, Echo::Range),
+            read_at: t,
+        }
+    }
+
     /// Every sonar read at `t`: `range(i)` (None: no echo).
     fn ring(
         g: &mut Guard,
@@ -324,7 +324,7 @@ mod tests {
         range: impl Fn(usize) -> Option<f64>,
     ) {
         for i in 0..SONARS {
-            g.observe(i, range(i), t, pose, &Limits::default());
+            g.observe(i, read(range(i), t), pose, &Limits::default());
         }
     }
 
@@ -421,7 +421,7 @@ mod tests {
         ring(&mut g, t, AT, |_| None);
         let later = t + Duration::from_millis(1500);
         for i in 10..14 {
-            g.observe(i, None, later, AT, &Limits::default());
+            g.observe(i, read(None, later), AT, &Limits::default());
         }
         let v = limit(&mut g, 0.4, later);
         assert_eq!(v.action, Action::Blind);

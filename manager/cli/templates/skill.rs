@@ -27,10 +27,11 @@ impl Skill for MySkill {
     /// Above wander (0), below avoid (8).
     const PRIORITY: i32 = 5;
     fn compute(&mut self, ctx: &Ctx<P>, i: In, o: &mut Out) -> SkillResult {
-        // Sonars 0, 1 and 23 look ahead; NaN (never read) counts as far.
+        // Sonars 0, 1 and 23 look ahead; no echo is far, a sonar never read says nothing.
         let ahead = [0, 1, 23]
-            .map(|k| i.sonar.range[k])
             .into_iter()
+            .filter_map(|k| i.sonar.echo(k))
+            .map(|e| e.range_or(f64::INFINITY))
             .fold(f64::INFINITY, f64::min);
         if ahead < ctx.params.near {
             o.drive.set(Drive {

@@ -353,12 +353,12 @@ impl Skill for DoorLocate {
         for k in 0..SONARS {
             let new = s.age_ms[k] < self.ages[k];
             self.ages[k] = s.age_ms[k];
-            if new && !s.range[k].is_nan() {
+            if new && let Some(echo) = s.echo(k) {
                 let a = wrap(od.theta + sonar_angle(k));
                 let ray = Ray {
                     o: (od.x + RING * a.cos(), od.y + RING * a.sin()),
                     a,
-                    r: s.range[k],
+                    r: echo.range_or(f64::INFINITY),
                 };
                 fresh.push(ray);
                 if self.history.len() == HISTORY {

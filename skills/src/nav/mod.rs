@@ -41,10 +41,13 @@ pub fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
 
-/// A usable range: no echo counts as far, never-read as unknown.
+/// How far a sonar reaches (m): a longer range, or no echo, counts as this.
+const SONAR_REACH: f64 = 10.0;
+
+/// A usable range (m): no echo counts as far (the sonar's reach), never-read as unknown.
 pub(crate) fn range(s: &Sonar, i: usize) -> Option<f64> {
-    let r = s.range[i % SONARS];
-    if r.is_nan() { None } else { Some(r.min(10.0)) }
+    s.echo(i % SONARS)
+        .map(|e| e.range_or(SONAR_REACH).min(SONAR_REACH))
 }
 
 /// The smallest range among sonars whose angle lies within `[from, to]` (rad).

@@ -2,6 +2,7 @@
 
 use super::*;
 use skill_sdk::harness::Harness;
+use skillfab_msgs::Echo;
 
 fn ring(f: impl Fn(f64) -> f64) -> Sonar {
     let mut s = Sonar {
@@ -140,8 +141,7 @@ fn pass<S: Skill>(
         for i in 0..SONARS {
             s.age_ms[i] += 10.0;
             if i % 3 == k % 3 {
-                s.range[i] = sim.sonar(i).unwrap_or(f64::INFINITY);
-                s.age_ms[i] = 0.0;
+                s.set_reading(i, sim.sonar(i).map_or(Echo::Silent, Echo::Range), 0.0);
             }
         }
         let od = Odometry {

@@ -3,7 +3,7 @@
 //! of every cycle without waiting for the robot, and forwards the arbitrated `drive` command.
 
 use denning::codec::{Command as Wire, Text};
-use denning::driver::{Driver, Odometer, SONARS};
+use denning::driver::{Driver, Echo, Odometer, SONARS};
 use denning::safety::{Action, Guard, Limits, LinkHealth};
 use denning::transport::{Serial, Transport};
 use skill_sdk::prelude::*;
@@ -185,18 +185,17 @@ impl Device for Denning {
             bad: s.stats.bad_checksum + s.stats.bad_count,
         };
         let sonar = out.sonar.get_mut();
-        for i in 0..SONARS {
-            match s.sonar[i] {
-                Some((r, at)) => {
-                    self.guard.observe(i, r, at, s.pose, &ctx.params.limits());
-                    sonar.range[i] = r.unwrap_or(f64::INFINITY);
-                    sonar.age_ms[i] = ms(at);
-                }
-                None => {
-                    sonar.range[i] = f64::NAN;
-                    sonar.age_ms[i] = f64::INFINITY;
-                }
-            }
+        for (i, reading) in s.sonar.iter().enumerate() {
+            let Some(reading) = *reading else {
+                sonar.set_unread(i);
+                continue;
+            };
+            self.guard.observe(i, reading, s.pose, &ctx.params.limits());
+            let echo = match reading.echo {
+                Echo::Range(r) => skillfab_msgs::Echo::Range(r),
+                Echo::Silent => skillfab_msgs::Echo::Silent,
+            };
+            sonar.set_reading(i, echo, ms(reading.read_at));
         }
         out.odometry.set(Odometry {
             x: s.pose.0,

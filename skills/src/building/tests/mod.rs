@@ -28,6 +28,7 @@ use denning_sim::sim::Sim;
 use denning_sim::world::{World, point_segment};
 use skill_sdk::harness::{HARNESS_PERIOD, Harness};
 use skill_sdk::ports::{InputMeta, InputSet, InputSource, OutputSet, PortMaker};
+use skillfab_msgs::Echo;
 use std::any::Any;
 
 // ---------------------------------------------------------------------------------------
@@ -134,8 +135,8 @@ impl Robot {
 
     fn status(&mut self) {
         for i in (0..SONARS).filter(|i| i % 3 == self.group) {
-            self.sonar.range[i] = self.sim.sonar(i).unwrap_or(f64::INFINITY);
-            self.sonar.age_ms[i] = 0.0;
+            let echo = self.sim.sonar(i).map_or(Echo::Silent, Echo::Range);
+            self.sonar.set_reading(i, echo, 0.0);
         }
         self.group = (self.group + 1) % 3;
         let [x, y, theta] = self.sim.odom;

@@ -553,3 +553,21 @@ impl Skill for Counter {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod blob_tests {
+    use skill_sdk::Message;
+    use skillfab_proto::schema::FieldKind;
+
+    #[test]
+    fn a_blob_declares_its_full_length() {
+        // The length is written `$bytes - 8` inside `blob!`: the derive must keep its grouping.
+        let s = super::Blob64K::schema();
+        assert_eq!(s.size, 64 << 10);
+        assert!(
+            matches!(&s.fields[1].ty, FieldKind::Array { len, .. } if *len == (64 << 10) - 8),
+            "{:?}",
+            s.fields[1].ty
+        );
+    }
+}

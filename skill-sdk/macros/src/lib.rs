@@ -16,7 +16,7 @@
 #![warn(missing_docs)]
 
 use proc_macro::TokenStream;
-use quote::quote;
+use quote::{ToTokens, quote};
 use syn::{Data, DeriveInput, Expr, Fields, Lit, parse_macro_input, spanned::Spanned};
 
 fn named_fields(input: &DeriveInput) -> syn::Result<Vec<&syn::Field>> {
@@ -33,6 +33,41 @@ fn named_fields(input: &DeriveInput) -> syn::Result<Vec<&syn::Field>> {
             input.span(),
             "skill-sdk derives only work on structs",
         )),
+    }
+}
+
+/// `ty` as it must be written again: the length of an array written with a `macro_rules!`
+/// fragment (`[u8; $bytes - 8]` with `$bytes` = `64 << 10`) holds the fragment in an invisible
+/// group, which the compiler drops when it reads the derive's output again (rust-lang/rust
+/// #67062): `[u8; 64 << 10 - 8]`, 256 bytes. Invisible groups in array lengths become
+/// parentheses.
+fn plain_type(ty: &syn::Type) -> syn::Type {
+    fn parenthesised(tokens: proc_macro2::TokenStream) -> proc_macro2::TokenStream {
+        use proc_macro2::{Delimiter, Group, TokenTree};
+        tokens
+            .into_iter()
+            .map(|t| match t {
+                TokenTree::Group(g) => {
+                    let delimiter = match g.delimiter() {
+                        Delimiter::None => Delimiter::Parenthesis,
+                        d => d,
+                    };
+                    let mut out = Group::new(delimiter, parenthesised(g.stream()));
+                    out.set_span(g.span());
+                    TokenTree::Group(out)
+                }
+                other => other,
+            })
+            .collect()
+    }
+    match ty {
+        syn::Type::Array(a) => {
+            let elem = plain_type(&a.elem);
+            let len = parenthesised(a.len.to_token_stream());
+            syn::parse_quote!([#elem; #len])
+        }
+        syn::Type::Group(g) => plain_type(&g.elem),
+        other => other.clone(),
     }
 }
 
@@ -106,7 +141,7 @@ fn message(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
     for f in &fields {
         let name = f.ident.as_ref().map(|i| i.to_string()).unwrap_or_default();
         let fid = &f.ident;
-        let ty = &f.ty;
+        let ty = &plain_type(&f.ty);
         schema_fields.push(quote! {
             #krate::schema::FieldSchema {
                 name: #name.to_string(),
@@ -358,4 +393,21 @@ fn ports(input: &DeriveInput, set: PortSet) -> syn::Result<proc_macro2::TokenStr
             }
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_array_length_from_a_macro_fragment_keeps_its_grouping() {
+        // What `[u8; $bytes - 8]` is with `$bytes` = `64 << 10`, inside `macro_rules!`.
+        let bytes = proc_macro2::Group::new(proc_macro2::Delimiter::None, quote!(64 << 10));
+        let input: DeriveInput = syn::parse_quote! {
+            #[repr(C)]
+            pub struct Blob { data: [u8; #bytes - 8] }
+        };
+        let text = message(&input).unwrap().to_string().replace(' ', "");
+        assert!(text.contains("<[u8;(64<<10)-8]as"), "{text}");
+    }
 }

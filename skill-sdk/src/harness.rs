@@ -14,17 +14,73 @@
 //! #         o.scaled.set(Scaled { value: c.params.gain * i.tick.value as f64 }); Ok(()) }
 //! # }
 //! let mut h = Harness::<Scale>::new();
-//! h.set_param("gain=3").unwrap();
-//! h.input("tick", Tick { value: 5 });
+//! h.set(P::GAIN, 3.0).unwrap();
+//! h.input(In::TICK, Tick { value: 5 });
 //! let step = h.step().unwrap();
-//! assert_eq!(step.output::<Scaled>("scaled").unwrap().value, 15.0);
+//! assert_eq!(step.output(Out::SCALED).unwrap().value, 15.0);
 //! ```
+//!
+//! Ports and parameters are named by the references their derives generate (`In::TICK`, an
+//! [`InputRef`]; see [`crate::refs`]): the compiler checks that the skill has the port and
+//! that the value is of its message type, and `output` needs no type. A name works too
+//! (`h.input("tick", ..)`, `step.output::<Scaled>("scaled")`, `h.set_param("gain=3")`),
+//! checked when the test runs: a name the skill does not have stops the test.
 
 use crate::Message;
-use crate::params::{ParamError, Params};
+use crate::params::{ParamError, ParamType, Params};
 use crate::ports::{ErasedOutput, InputMeta, InputSet, InputSource, OutputSet, PortMaker};
+use crate::refs::{InputRef, OutputRef, Param};
 use crate::skill::{Ctx, Skill, SkillError};
 use std::any::Any;
+use std::marker::PhantomData;
+
+/// A port of the skill under test as a test names it: a reference its derive made, of the
+/// skill's input or output struct `Of` ([`InputRef`] for inputs, [`OutputRef`] for outputs:
+/// the harness takes only its own skill's, so a test cannot feed an output or name another
+/// skill's port), or the port's name (checked when the test runs).
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a port of the skill under test (its ports are of `{Of}`)",
+    label = "a reference of `{Of}`, or a port name"
+)]
+pub trait Port<Of> {
+    /// The port's name.
+    fn name(&self) -> &str;
+}
+
+impl<Of> Port<Of> for &str {
+    fn name(&self) -> &str {
+        self
+    }
+}
+
+impl<T, Of> Port<Of> for InputRef<T, Of> {
+    fn name(&self) -> &str {
+        InputRef::name(self)
+    }
+}
+
+impl<T, Of> Port<Of> for OutputRef<T, Of> {
+    fn name(&self) -> &str {
+        OutputRef::name(self)
+    }
+}
+
+/// A port that carries message type `T`: a reference of a port of that type, or any name
+/// (its type is checked when the test runs).
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` does not carry `{T}`",
+    label = "the port carries another message type"
+)]
+pub trait Carries<T> {}
+
+impl<T> Carries<T> for &str {}
+impl<T, Of> Carries<T> for InputRef<T, Of> {}
+impl<T, Of> Carries<T> for OutputRef<T, Of> {}
+
+/// The input struct of skill `S` (what its input references are of).
+type InputsOf<S> = <S as Skill>::Inputs<'static>;
+/// The output struct of skill `S`.
+type OutputsOf<S> = <S as Skill>::Outputs<'static>;
 
 /// The period a harness steps at (its [`crate::skill::Clock`]).
 pub const HARNESS_PERIOD: std::time::Duration = std::time::Duration::from_millis(10);
@@ -44,23 +100,29 @@ pub struct Harness<S: Skill> {
     activation: u32,
 }
 
-/// What one step produced.
-pub struct Step {
+/// What one step of skill `S` produced.
+pub struct Step<S> {
     names: Vec<String>,
     values: Vec<Option<Box<dyn Any>>>,
     /// The cycle number of the step.
     pub cycle: u64,
     /// True if the body did not run because an input was missing.
     pub skipped: bool,
+    /// Whose outputs these are (what [`Step::output`] takes references of).
+    skill: PhantomData<fn() -> S>,
 }
 
-impl Step {
-    /// The value written to output `port`, `None` if the body did not write it.
+impl<S: Skill> Step<S> {
+    /// The value written to output `port`, `None` if the body did not write it. `port` is a
+    /// reference of the skill's outputs (`Out::SCALED`: the type follows from it) or a name
+    /// (`output::<Scaled>("scaled")`).
     ///
     /// # Panics
-    /// If the skill has no output `port`, or the value written is of another type than `T`:
-    /// a misspelt name must fail the test, not pass an `is_none()` that tests nothing.
-    pub fn output<T: Message>(&self, port: &str) -> Option<&T> {
+    /// If the skill has no output named `port`, or the value written is of another type than
+    /// `T` (only possible with a name): a misspelt name must fail the test, not pass an
+    /// `is_none()` that tests nothing.
+    pub fn output<T: Message>(&self, port: impl Port<OutputsOf<S>> + Carries<T>) -> Option<&T> {
+        let port = port.name();
         let Some(i) = self.names.iter().position(|n| n == port) else {
             panic!(
                 "the skill has no output '{port}' (its outputs: {})",
@@ -184,6 +246,17 @@ impl<S: Skill> Harness<S> {
         Ok(self)
     }
 
+    /// Sets parameter `param` (a reference of the skill's parameters, `P::GAIN`) to `value`,
+    /// checked against its bounds as at run time; on error nothing changes.
+    pub fn set<T: ParamType>(
+        &mut self,
+        param: Param<T, S::Params>,
+        value: T,
+    ) -> Result<&mut Self, ParamError> {
+        self.params.set(param.name(), value.to_value())?;
+        Ok(self)
+    }
+
     /// The current parameters.
     pub fn params(&self) -> &S::Params {
         &self.params
@@ -194,20 +267,30 @@ impl<S: Skill> Harness<S> {
         &self.skill
     }
 
-    /// Sets input `port` for the next step (produced in that step's cycle).
+    /// Sets input `port` (a reference of the skill's inputs, `In::TICK`, or a name) for the
+    /// next step (produced in that step's cycle).
     ///
     /// # Panics
-    /// If the skill has no input `port` (a mistake in the test itself).
-    pub fn input<T: Message>(&mut self, port: &str, value: T) -> &mut Self {
+    /// If the skill has no input named `port` (a mistake in the test itself).
+    pub fn input<T: Message>(
+        &mut self,
+        port: impl Port<InputsOf<S>> + Carries<T>,
+        value: T,
+    ) -> &mut Self {
         self.input_aged(port, value, 0)
     }
 
     /// Sets input `port`, produced `age` cycles before the next step.
     ///
     /// # Panics
-    /// If the skill has no input `port` (a mistake in the test itself).
-    pub fn input_aged<T: Message>(&mut self, port: &str, value: T, age: u64) -> &mut Self {
-        let i = self.input_index(port);
+    /// If the skill has no input named `port` (a mistake in the test itself).
+    pub fn input_aged<T: Message>(
+        &mut self,
+        port: impl Port<InputsOf<S>> + Carries<T>,
+        value: T,
+        age: u64,
+    ) -> &mut Self {
+        let i = self.input_index(port.name());
         self.inputs[i] = Some((Box::new(value), (self.cycle + 1).saturating_sub(age)));
         self
     }
@@ -215,9 +298,9 @@ impl<S: Skill> Harness<S> {
     /// Removes input `port`.
     ///
     /// # Panics
-    /// If the skill has no input `port`.
-    pub fn clear_input(&mut self, port: &str) -> &mut Self {
-        let i = self.input_index(port);
+    /// If the skill has no input named `port`.
+    pub fn clear_input(&mut self, port: impl Port<InputsOf<S>>) -> &mut Self {
+        let i = self.input_index(port.name());
         self.inputs[i] = None;
         self
     }
@@ -234,7 +317,7 @@ impl<S: Skill> Harness<S> {
     }
 
     /// Runs one cycle: the body on the current inputs. An error from the body is returned.
-    pub fn step(&mut self) -> Result<Step, SkillError> {
+    pub fn step(&mut self) -> Result<Step<S>, SkillError> {
         if self.restart_every > 0 && self.cycle > 0 && self.cycle.is_multiple_of(self.restart_every)
         {
             self.restart();
@@ -251,6 +334,7 @@ impl<S: Skill> Harness<S> {
                 values: self.output_names.iter().map(|_| None).collect(),
                 cycle,
                 skipped: true,
+                skill: PhantomData,
             });
         };
         let result = {
@@ -273,6 +357,7 @@ impl<S: Skill> Harness<S> {
             values,
             cycle,
             skipped: false,
+            skill: PhantomData,
         })
     }
 }
@@ -286,7 +371,7 @@ mod tests {
     #[derive(Params, Debug, Clone)]
     struct P {
         /// Ticks above this are scaled; the others write nothing.
-        #[param(default = 0)]
+        #[param(default = 0, min = -100, max = 100)]
         above: i64,
     }
     #[derive(Inputs)]
@@ -313,7 +398,7 @@ mod tests {
         }
     }
 
-    fn stepped(tick: u64) -> super::Step {
+    fn stepped(tick: u64) -> super::Step<Scale> {
         let mut h = Harness::<Scale>::new();
         h.set_param("above=3").unwrap();
         h.input("tick", Tick { value: tick });
@@ -342,5 +427,29 @@ mod tests {
     #[should_panic(expected = "the skill has no input 'tik' (its inputs: tick)")]
     fn a_misspelt_input_fails_the_test() {
         Harness::<Scale>::new().clear_input("tik");
+    }
+
+    #[test]
+    fn references_name_ports_and_parameters_with_their_types() {
+        let mut h = Harness::<Scale>::new();
+        h.set(P::ABOVE, 3).unwrap();
+        assert_eq!(h.params().above, 3);
+        h.input(In::TICK, Tick { value: 5 });
+        // No type to write: `Out::SCALED` carries `Scaled`.
+        let step = h.step().unwrap();
+        let scaled: Option<&Scaled> = step.output(Out::SCALED);
+        assert_eq!(scaled.map(|s| s.value), Some(5.0));
+        h.clear_input(In::TICK);
+        assert!(h.step().unwrap().skipped);
+        // Bounds are checked as for a name; a refused value changes nothing.
+        assert!(h.set(P::ABOVE, 1000).is_err());
+        assert_eq!(h.params().above, 3);
+    }
+
+    #[test]
+    fn a_typed_input_ages_like_a_named_one() {
+        let mut h = Harness::<Scale>::new();
+        h.input_aged(In::TICK, Tick { value: 9 }, 2);
+        assert_eq!(h.step().unwrap().output(Out::SCALED).unwrap().value, 9.0);
     }
 }

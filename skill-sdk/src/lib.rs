@@ -15,6 +15,9 @@
 //!   is a skill binary's whole `main`, [`device_main`] a device's.
 //! - [`logs`]: each skill's tracing lines, forwarded over the domain's log stream.
 //! - [`harness`]: runs a skill body in-process on scripted inputs, for unit tests.
+//! - [`refs`]: typed references to parameters, ports and message fields. The derives make
+//!   one per field (`P::GAIN`, `In::TICK`, `Out::SCALED`, `Tick::VALUE`): the harness takes
+//!   a skill's own, a sequencer's client any (`docs/references.md`).
 //!
 //! A minimal skill (see `skills/src/bin/scale.rs`):
 //! ```no_run
@@ -36,6 +39,9 @@
 //! }
 //! fn main() -> std::process::ExitCode { skill_sdk::main::<Scale>() }
 //! ```
+//! Its test ([`harness`]) names ports and parameters by the references the derives made, so
+//! a renamed one or a value of another type does not compile: `h.set(P::GAIN, 3.0)`,
+//! `h.input(In::TICK, Tick { value: 5 })`, `h.step()?.output(Out::SCALED)`.
 
 #![warn(missing_docs)]
 
@@ -57,6 +63,7 @@ pub(crate) use skillfab_proto::{board, decl, domain, header, names, schema, serv
 
 pub use runtime::{DeviceArgs, SkillArgs, Waker, device_main, init_tracing, main};
 pub use skillfab_proto::Message;
+pub use skillfab_proto::refs;
 
 /// Errors of the SDK: a skill's start-up, declaration and ports.
 #[derive(Debug, thiserror::Error)]

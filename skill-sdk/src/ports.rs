@@ -8,6 +8,7 @@
 use crate::Message;
 use crate::decl::{PortDecl, PortKind};
 use crate::header::SampleHeader;
+use crate::refs::{InputRef, OutputRef};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample_mut::SampleMut;
@@ -64,6 +65,8 @@ impl<T> Deref for Input<'_, T> {
 
 /// A field type of an `Inputs` struct (generated code uses it).
 pub trait InputField<'a>: Sized {
+    /// The message type the port carries (what its [`InputRef`] is typed by).
+    type Message: Message;
     /// The port's declaration.
     fn decl(port: &str) -> PortDecl;
     /// Takes input `idx` from `src`; `None` if it is missing.
@@ -73,6 +76,7 @@ pub trait InputField<'a>: Sized {
 }
 
 impl<'a, T: Message> InputField<'a> for Input<'a, T> {
+    type Message = T;
     fn decl(port: &str) -> PortDecl {
         PortDecl::of::<T>(port)
     }
@@ -92,6 +96,14 @@ impl<'a, T: Message> InputField<'a> for Input<'a, T> {
             fresh: false,
         }))
     }
+}
+
+/// The reference to input `name`, a field of type `F` of the input struct `Of`, carrying `T`
+/// (generated code uses it: the bound checks the type the derive read off the field).
+pub const fn input_ref<'a, F: InputField<'a, Message = T>, T, Of>(
+    name: &'static str,
+) -> InputRef<T, Of> {
+    InputRef::new(name)
 }
 
 /// Builds runtime ports for a skill's declared inputs or outputs.
@@ -433,6 +445,8 @@ impl<'a> OutputSlots<'a> {
 
 /// A field type of an `Outputs` struct (generated code uses it).
 pub trait OutputField<'a>: Sized {
+    /// The message type the port carries (what its [`OutputRef`] is typed by).
+    type Message: Message;
     /// The port's declaration.
     fn decl(port: &str) -> PortDecl;
     /// Binds the field to its cell.
@@ -442,6 +456,7 @@ pub trait OutputField<'a>: Sized {
 }
 
 impl<'a, T: Message> OutputField<'a> for Output<'a, T> {
+    type Message = T;
     fn decl(port: &str) -> PortDecl {
         PortDecl::of::<T>(port)
     }
@@ -468,6 +483,14 @@ impl<'a, T: Message> OutputField<'a> for Output<'a, T> {
     }
 }
 
+/// The reference to output `name`, a field of type `F` of the output struct `Of`, carrying
+/// `T` (generated code uses it: the bound checks the type the derive read off the field).
+pub const fn output_ref<'a, F: OutputField<'a, Message = T>, T, Of>(
+    name: &'static str,
+) -> OutputRef<T, Of> {
+    OutputRef::new(name)
+}
+
 /// A proposal on an actuator channel: written like an [`Output`]; the device serving the
 /// channel arbitrates among the cycle's proposals by the proposers' priorities.
 pub struct Proposal<'a, T: Message> {
@@ -490,6 +513,7 @@ impl<T: Message> Proposal<'_, T> {
 }
 
 impl<'a, T: Message> OutputField<'a> for Proposal<'a, T> {
+    type Message = T;
     fn decl(port: &str) -> PortDecl {
         PortDecl::channel::<T>(port, PortKind::Proposal)
     }

@@ -14,6 +14,8 @@
 //! - [`schema`], [`value`]: message layouts ([`Message`]), and decoding a sample through its
 //!   schema (values, `skill.output[.field][index]` paths).
 //! - [`decl`], [`param`]: a skill's declaration (ports, parameters, mode, priority).
+//! - [`refs`]: typed references to parameters, ports and message fields (what the derives
+//!   generate), and typed value paths built from them.
 //! - [`control`]: the control plane, in files named by direction
 //!   ([`control::client_to_manager`], [`control::manager_to_client`]) and the event stream.
 //! - [`log`]: the log stream's lines and its reader.
@@ -35,6 +37,7 @@ pub mod json;
 pub mod log;
 pub mod names;
 pub mod param;
+pub mod refs;
 pub mod registration;
 pub mod schema;
 pub mod services;

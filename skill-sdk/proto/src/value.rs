@@ -86,6 +86,87 @@ impl fmt::Display for Value {
     }
 }
 
+/// A parameter's value as a decoded value (the same four kinds).
+impl From<crate::param::ParamValue> for Value {
+    fn from(v: crate::param::ParamValue) -> Value {
+        use crate::param::ParamValue as P;
+        match v {
+            P::Bool(b) => Value::Bool(b),
+            P::Int(i) => Value::Int(i),
+            P::UInt(u) => Value::UInt(u),
+            P::Float(f) => Value::Float(f),
+        }
+    }
+}
+
+/// A Rust type a decoded [`Value`] converts back to: what a typed read returns
+/// (`skillfab-client`'s `Client::read`, given a [`ValuePath`](crate::refs::ValuePath)).
+/// Implemented for every message field type — numbers and `bool`, arrays of them, and each
+/// `#[derive(Message)]` type (the derive writes it).
+///
+/// The kinds must match as the schema decodes them: a float from a float, a signed integer
+/// from a signed one that fits, an unsigned from an unsigned. A value of another kind means
+/// the skill declares the field otherwise than the reference says (another version of the
+/// message): `None`, not a converted guess.
+pub trait FromValue: Sized {
+    /// The value as `Self`, or `None` if it is of another kind or out of range.
+    fn from_value(value: &Value) -> Option<Self>;
+}
+
+impl FromValue for bool {
+    fn from_value(value: &Value) -> Option<Self> {
+        match *value {
+            Value::Bool(b) => Some(b),
+            _ => None,
+        }
+    }
+}
+
+macro_rules! from_value {
+    ($variant:ident => $($t:ty),*) => {$(
+        impl FromValue for $t {
+            fn from_value(value: &Value) -> Option<Self> {
+                match *value {
+                    Value::$variant(v) => <$t>::try_from(v).ok(),
+                    _ => None,
+                }
+            }
+        }
+    )*};
+}
+from_value!(Int => i8, i16, i32, i64);
+from_value!(UInt => u8, u16, u32, u64);
+from_value!(Float => f64);
+
+impl FromValue for f32 {
+    fn from_value(value: &Value) -> Option<Self> {
+        match *value {
+            // Widened from an f32 when decoded: narrowing gives it back exactly.
+            Value::Float(v) => Some(v as f32),
+            _ => None,
+        }
+    }
+}
+
+impl<T: FromValue, const N: usize> FromValue for [T; N] {
+    fn from_value(value: &Value) -> Option<Self> {
+        let Value::Array(items) = value else {
+            return None;
+        };
+        let items: Vec<T> = items.iter().map(T::from_value).collect::<Option<_>>()?;
+        items.try_into().ok()
+    }
+}
+
+/// Field `name` of a decoded message (the derived [`FromValue`] of a message reads its
+/// fields through it).
+pub fn field_of<'v>(value: &'v Value, name: &str) -> Option<&'v Value> {
+    match value {
+        Value::Struct(fields) => fields.iter().find(|(n, _)| n == name).map(|(_, v)| v),
+        _ => None,
+    }
+}
+
 /// Bytes one value of `kind` occupies (array stride included).
 pub fn kind_size(kind: &FieldKind) -> usize {
     match kind {
@@ -489,5 +570,43 @@ mod tests {
     #[test]
     fn short_bytes_decode_to_none() {
         assert_eq!(decode_message(&Outer::schema(), &[0u8; 3]), None);
+    }
+
+    #[test]
+    fn decoded_values_convert_back_to_their_rust_types() {
+        let v = Outer {
+            id: 7,
+            range: [0.5, 1.5, 2.5, 3.5],
+            inner: Inner { x: -2.0, ok: true },
+            grid: [[1, -2], [3, -4]],
+        };
+        let decoded = decode_message(&Outer::schema(), &bytes(&v)).unwrap();
+        let back = Outer::from_value(&decoded).unwrap();
+        assert_eq!(format!("{back:?}"), format!("{v:?}"));
+        let read = |p: &str| {
+            resolve(&Outer::schema(), p)
+                .unwrap()
+                .read(&bytes(&v))
+                .unwrap()
+        };
+        assert_eq!(f32::from_value(&read("inner.x")), Some(-2.0));
+        assert_eq!(<[i8; 2]>::from_value(&read("grid[1]")), Some([3, -4]));
+    }
+
+    #[test]
+    fn a_value_of_another_kind_does_not_convert() {
+        // The kinds must match: no float from an integer, no unsigned from a signed.
+        assert_eq!(f64::from_value(&Value::Int(1)), None);
+        assert_eq!(u8::from_value(&Value::Int(1)), None);
+        assert_eq!(u8::from_value(&Value::UInt(300)), None);
+        assert_eq!(i64::from_value(&Value::Int(-3)), Some(-3));
+        assert_eq!(bool::from_value(&Value::UInt(1)), None);
+        assert_eq!(
+            <[u8; 2]>::from_value(&Value::Array(vec![Value::UInt(1)])),
+            None
+        );
+        // A message from a struct lacking one of its fields.
+        let partial = Value::Struct(vec![("x".into(), Value::Float(1.0))]);
+        assert!(Inner::from_value(&partial).is_none());
     }
 }

@@ -12,23 +12,24 @@
 //! sequencer is for what a plan cannot say.)
 
 use skillfab_client::Client;
+use skillfab_msgs::Tick;
 use skillfab_proto::control::{EventKind, MonitorMode};
 use skillfab_proto::domain::{DOMAIN_ENV, Domain};
-use skillfab_proto::param::ParamValue;
+// The skills' own references: a renamed parameter or port stops this compiling.
+use skills::hello::{ScaleParams, TickOut};
 use std::time::{Duration, Instant};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let domain = Domain::new(&std::env::var(DOMAIN_ENV).unwrap_or_else(|_| "default".into()))?;
     let mut c = Client::connect(&domain)?;
     c.subscribe()?;
-    let ParamValue::Float(gain) = c.get_param("scale", "gain")? else {
-        return Err("scale.gain is not a float".into());
-    };
-    let (tick, _) = c.query("ticker.tick.value")?;
-    println!("ticker at {tick:?}, scale.gain = {gain}");
+    let gain = c.get("scale", ScaleParams::GAIN)?;
+    let tick = TickOut::TICK.field(Tick::VALUE);
+    let (now, _) = c.read("ticker", &tick)?;
+    println!("ticker at {now}, scale.gain = {gain}");
 
-    let high = c.add_monitor("ticker.tick.value >= 100", MonitorMode::Once, 0)?;
-    let low = c.add_monitor("ticker.tick.value >= 200", MonitorMode::Once, 0)?;
+    let high = c.add_monitor(&format!("ticker.{tick} >= 100"), MonitorMode::Once, 0)?;
+    let low = c.add_monitor(&format!("ticker.{tick} >= 200"), MonitorMode::Once, 0)?;
     let deadline = Instant::now() + Duration::from_secs(60);
     let mut switched = 0;
     while switched < 2 && Instant::now() < deadline {
@@ -46,7 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             continue;
         };
         // Refused values come back as `ControlError::Param { error: ParamError }`.
-        c.set_param("scale", "gain", &to.to_string())?;
+        c.set("scale", ScaleParams::GAIN, to)?;
         println!("cycle {}: {values:?} -> scale.gain = {to}", ev.cycle);
         switched += 1;
     }
@@ -56,7 +57,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let _ = c.remove_monitor(id);
     }
     if switched < 2 {
-        c.set_param("scale", "gain", &gain.to_string())?;
+        c.set("scale", ScaleParams::GAIN, gain)?;
         return Err("the ticker did not reach 200 within 60 s".into());
     }
     Ok(())

@@ -17,6 +17,35 @@
 //! }
 //! # Ok(()) }
 //! ```
+//!
+//! ## Typed references
+//!
+//! Parameters and values can be named by the references the skill-sdk derives generate
+//! ([`skillfab_proto::refs`]) instead of text: the compiler then checks the names and the
+//! value types, and a renamed parameter or port stops the sequencer compiling. The skill
+//! stays an instance name (launch files name instances). A sequencer gets the references of
+//! Rust skills from their crate (`skills::hello::ScaleParams::GAIN`); for a skill in another
+//! language it declares them itself:
+//!
+//! ```no_run
+//! # use skillfab_client::Client;
+//! # use skillfab_proto::domain::Domain;
+//! use skillfab_proto::refs::{Field, OutputRef, Param};
+//!
+//! /// The message type (a sequencer takes it from its crate: `skillfab_msgs::Tick`).
+//! struct Tick;
+//!
+//! const GAIN: Param<f64> = Param::new("gain");
+//! const TICK: OutputRef<Tick> = OutputRef::new("tick");
+//! const VALUE: Field<u64, Tick> = Field::new("value");
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # let c = Client::connect(&Domain::new("default")?)?;
+//! c.set("scale", GAIN, 3.0)?;
+//! let gain: f64 = c.get("scale", GAIN)?;
+//! let (tick, cycle) = c.read("ticker", TICK.field(VALUE))?; // a u64
+//! println!("cycle {cycle}: tick {tick}, gain {gain}");
+//! # Ok(()) }
+//! ```
 
 #![warn(missing_docs)]
 
@@ -38,8 +67,9 @@ use skillfab_proto::control::{
 };
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::{LogLine, LogReader};
-use skillfab_proto::param::ParamValue;
-use skillfab_proto::value::Value;
+use skillfab_proto::param::{ParamType, ParamValue};
+use skillfab_proto::refs::{Param, ValuePath};
+use skillfab_proto::value::{FromValue, Value};
 use skillfab_proto::{names, services};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
@@ -106,6 +136,18 @@ pub enum ClientError {
         domain: String,
         /// The bridge's reason.
         failure: skillfab_proto::bridge::RemoteFailure,
+    },
+    /// A typed read ([`Client::get`], [`Client::read`]) found a value of another type than
+    /// its reference's: the instance declares it otherwise (another version of the skill, or
+    /// an instance of another skill than the one the reference was made for).
+    #[error("{path} is {got}, which is not a {expected}")]
+    WrongType {
+        /// `skill.param`, or `skill.port[.field][index]`.
+        path: String,
+        /// The reference's type.
+        expected: &'static str,
+        /// The value the manager answered.
+        got: Value,
     },
     /// The remote domain's bridge answered with a failure this client cannot read (another
     /// skillfab version).
@@ -563,11 +605,60 @@ impl Client {
         }
     }
 
+    /// Sets parameter `param` of skill instance `skill` to `value`, typed by the reference
+    /// (`c.set("go", GoParams::SPEED, 0.3)`); applied from the next cycle. The manager checks
+    /// the bounds.
+    pub fn set<T: ParamType, Of>(
+        &self,
+        skill: &str,
+        param: Param<T, Of>,
+        value: T,
+    ) -> Result<(), ClientError> {
+        self.set_param_value(skill, param.name(), value.to_value())
+    }
+
+    /// The current value of parameter `param` of skill instance `skill`, as the reference's
+    /// type ([`ClientError::WrongType`] if the instance declares another).
+    pub fn get<T: ParamType, Of>(
+        &self,
+        skill: &str,
+        param: Param<T, Of>,
+    ) -> Result<T, ClientError> {
+        let value = self.get_param(skill, param.name())?;
+        T::from_value(&value).ok_or_else(|| ClientError::WrongType {
+            path: format!("{skill}.{param}"),
+            expected: std::any::type_name::<T>(),
+            got: value.into(),
+        })
+    }
+
     /// The latest value at `skill.output[.field][index]` and the cycle it was produced in.
     pub fn query(&self, path: &str) -> Result<(Value, u64), ClientError> {
         match self.request(&Request::Query(path.into()))? {
             Reply::Value { value, cycle } => Ok((value, cycle)),
             other => Err(ClientError::Unexpected(Box::new(other))),
+        }
+    }
+
+    /// The latest value at `path` of an output of skill instance `skill`, as the path's type,
+    /// and the cycle it was produced in: `c.read("odometry",
+    /// OdometryOut::ODOM.field(Odometry::X))` is an `f64`, `c.read("ticker", TickOut::TICK)`
+    /// a whole `Tick`. The [`query`](Client::query) of `skill.path`, converted
+    /// ([`ClientError::WrongType`] if the instance declares it otherwise).
+    pub fn read<T: FromValue>(
+        &self,
+        skill: &str,
+        path: impl Into<ValuePath<T>>,
+    ) -> Result<(T, u64), ClientError> {
+        let path = format!("{skill}.{}", path.into());
+        let (value, cycle) = self.query(&path)?;
+        match T::from_value(&value) {
+            Some(v) => Ok((v, cycle)),
+            None => Err(ClientError::WrongType {
+                path,
+                expected: std::any::type_name::<T>(),
+                got: value,
+            }),
         }
     }
 

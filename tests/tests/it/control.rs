@@ -288,6 +288,54 @@ fn the_client_library_sees_events_in_order_with_typed_errors() {
     let _ = &mut t;
 }
 
+#[test]
+fn the_client_takes_typed_references_of_parameters_ports_and_fields() {
+    use skillfab_msgs::Tick;
+    use skillfab_proto::refs::{Field, Param};
+    use skillfab_proto::value::Value;
+    use skills::hello::{ScaleOut, ScaleParams, TickOut};
+    let t = hello("typed");
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.set("scale", ScaleParams::GAIN, 3.0).unwrap();
+    assert_eq!(c.get("scale", ScaleParams::GAIN).unwrap(), 3.0);
+    // A field (a u64) and a whole message, read as their Rust types.
+    let tick = TickOut::TICK.field(Tick::VALUE);
+    t.wait_until("scaled = 3 × tick", || {
+        let (tick, k1) = c.read("ticker", &tick).unwrap();
+        let (scaled, k2) = c.read("scale", ScaleOut::SCALED).unwrap();
+        k1 == k2 && tick > 0 && scaled.value == 3.0 * tick as f64
+    });
+    // The manager checks the bounds as for text.
+    assert!(matches!(
+        c.set("scale", ScaleParams::GAIN, 1e9),
+        Err(ClientError::Refused(ControlError::Param { .. }))
+    ));
+    // A reference of another type than the instance declares: refused with what it holds.
+    const GAIN_AS_BOOL: Param<bool> = Param::new("gain");
+    match c.get("scale", GAIN_AS_BOOL) {
+        Err(ClientError::WrongType { path, got, .. }) => {
+            assert_eq!((path.as_str(), got), ("scale.gain", Value::Float(3.0)))
+        }
+        other => panic!("expected a type mismatch, got {other:?}"),
+    }
+    const VALUE_AS_FLOAT: Field<f64, Tick> = Field::new("value");
+    assert!(matches!(
+        c.read("ticker", TickOut::TICK.field(VALUE_AS_FLOAT)),
+        Err(ClientError::WrongType {
+            expected: "f64",
+            ..
+        })
+    ));
+    // A typed path in a monitor's expression.
+    let id = c
+        .add_monitor(&format!("ticker.{tick} > 0"), MonitorMode::Once, 0)
+        .unwrap();
+    next_matching(&mut c, "the typed path's monitor firing", |k| match k {
+        EventKind::MonitorFired { id: m, .. } if *m == id => Some(()),
+        _ => None,
+    });
+}
+
 /// The next event that `pick` accepts (others are skipped); fails after 20 s or 400 events.
 fn next_matching<T>(
     c: &mut Client,

@@ -201,15 +201,15 @@ mod tests {
                     samples: k,
                 }
             };
-            h.input("tick", Tick { value: k });
-            h.input("a", ema);
-            h.input("b", ema);
+            h.input(CheckIn::TICK, Tick { value: k });
+            h.input(CheckIn::A, ema);
+            h.input(CheckIn::B, ema);
             let step = h.step().unwrap();
-            assert_eq!(step.output::<Scalar>("error").unwrap().value, 0.0);
+            assert_eq!(step.output(CheckOut::ERROR).unwrap().value, 0.0);
         }
-        h.input("tick", Tick { value: 4 });
+        h.input(CheckIn::TICK, Tick { value: 4 });
         h.input(
-            "a",
+            CheckIn::A,
             Smoothed {
                 value: 1.0,
                 samples: 4,
@@ -223,25 +223,22 @@ mod tests {
     fn ticker_publishes_the_cycle() {
         let mut h = Harness::<Ticker>::new();
         for k in 1..=3 {
-            assert_eq!(h.step().unwrap().output::<Tick>("tick").unwrap().value, k);
+            assert_eq!(h.step().unwrap().output(TickOut::TICK).unwrap().value, k);
         }
     }
 
     #[test]
     fn scale_multiplies_and_checks_its_gain() {
         let mut h = Harness::<Scale>::new();
-        h.input("tick", Tick { value: 7 });
-        assert_eq!(
-            h.step().unwrap().output::<Scaled>("scaled").unwrap().value,
-            14.0
-        );
-        h.set_param("gain=-0.5").unwrap();
-        assert_eq!(
-            h.step().unwrap().output::<Scaled>("scaled").unwrap().value,
-            -3.5
-        );
+        h.input(ScaleIn::TICK, Tick { value: 7 });
+        let scaled =
+            |h: &mut Harness<Scale>| h.step().unwrap().output(ScaleOut::SCALED).unwrap().value;
+        assert_eq!(scaled(&mut h), 14.0);
+        h.set(ScaleParams::GAIN, -0.5).unwrap();
+        assert_eq!(scaled(&mut h), -3.5);
+        assert!(h.set(ScaleParams::GAIN, 1e9).is_err());
+        // As text (`--param`, `skillfab ctl param`): parsed by the declared type.
         assert!(h.set_param("gain=abc").is_err());
-        assert!(h.set_param("gain=1e9").is_err());
         assert!(h.set_param("nope=1").is_err());
         assert_eq!(h.params().gain, -0.5, "a refused value changes nothing");
     }
@@ -255,18 +252,14 @@ mod tests {
     #[test]
     fn smooth_is_an_exponential_moving_average() {
         let mut h = Harness::<Smooth>::new();
-        h.set_param("alpha=0.5").unwrap();
-        h.input("scaled", Scaled { value: 10.0 });
+        h.set(SmoothParams::ALPHA, 0.5).unwrap();
+        h.input(SmoothIn::SCALED, Scaled { value: 10.0 });
         assert_eq!(
-            h.step()
-                .unwrap()
-                .output::<Smoothed>("smoothed")
-                .unwrap()
-                .value,
+            h.step().unwrap().output(SmoothOut::SMOOTHED).unwrap().value,
             10.0
         );
-        h.input("scaled", Scaled { value: 20.0 });
-        let s = *h.step().unwrap().output::<Smoothed>("smoothed").unwrap();
+        h.input(SmoothIn::SCALED, Scaled { value: 20.0 });
+        let s = *h.step().unwrap().output(SmoothOut::SMOOTHED).unwrap();
         assert_eq!(
             s,
             Smoothed {

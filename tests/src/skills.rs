@@ -243,27 +243,24 @@ mod tests {
     #[test]
     fn work_scales_and_fails_on_demand() {
         let mut h = Harness::<Work>::new();
-        h.set_param("factor=3")
+        h.set(WorkParams::FACTOR, 3.0)
             .unwrap()
-            .set_param("fail_every=2")
+            .set(WorkParams::FAIL_EVERY, 2)
             .unwrap();
-        h.input("tick", Tick { value: 4 });
-        assert_eq!(
-            h.step().unwrap().output::<Scalar>("out").unwrap().value,
-            12.0
-        );
-        h.input("tick", Tick { value: 5 });
+        h.input(WorkIn::TICK, Tick { value: 4 });
+        assert_eq!(h.step().unwrap().output(WorkOut::OUT).unwrap().value, 12.0);
+        h.input(WorkIn::TICK, Tick { value: 5 });
         assert!(h.step().is_err(), "cycle 2 fails");
     }
 
     #[test]
     fn check_accepts_only_exact_values() {
         let mut h = Harness::<Check>::new();
-        h.input("tick", Tick { value: 1 })
-            .input("scaled", Scaled { value: 2.0 });
+        h.input(CheckIn::TICK, Tick { value: 1 })
+            .input(CheckIn::SCALED, Scaled { value: 2.0 });
         assert!(h.step().is_ok());
-        h.input("tick", Tick { value: 2 })
-            .input("scaled", Scaled { value: 4.5 });
+        h.input(CheckIn::TICK, Tick { value: 2 })
+            .input(CheckIn::SCALED, Scaled { value: 4.5 });
         assert!(h.step().is_err());
     }
 }

@@ -64,12 +64,12 @@ mod tests {
     #[test]
     fn it_turns_away_only_when_something_is_near() {
         let mut h = Harness::<MySkill>::new();
-        h.input("sonar", sonar(0.6));
-        let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        h.input(In::SONAR, sonar(0.6));
+        let d = *h.step().unwrap().output(Out::DRIVE).unwrap();
         assert!((d.translate - 0.05).abs() < 1e-9 && d.rotate > 0.0, "{d:?}");
-        h.input("sonar", sonar(3.0));
+        h.input(In::SONAR, sonar(3.0));
         assert!(
-            h.step().unwrap().output::<Drive>("drive").is_none(),
+            h.step().unwrap().output(Out::DRIVE).is_none(),
             "nothing near: no proposal"
         );
     }

@@ -2,6 +2,7 @@
 
 use super::*;
 use skill_sdk::harness::Harness;
+use skill_sdk::refs::OutputRef;
 use skillfab_msgs::Echo;
 
 fn ring(f: impl Fn(f64) -> f64) -> Sonar {
@@ -18,30 +19,30 @@ fn ring(f: impl Fn(f64) -> f64) -> Sonar {
 #[test]
 fn avoid_turns_away_from_the_near_side_and_is_quiet_in_the_open() {
     let mut h = Harness::<Avoid>::new();
-    h.input("sonar", ring(|_| 5.0));
+    h.input(SonarIn::SONAR, ring(|_| 5.0));
     assert!(
-        h.step().unwrap().output::<Drive>("drive").is_none(),
+        h.step().unwrap().output(DriveOut::DRIVE).is_none(),
         "nothing near: no proposal"
     );
     // An obstacle ahead and to the right: turn left (positive rotate).
     let mut h = Harness::<Avoid>::new();
     h.input(
-        "sonar",
+        SonarIn::SONAR,
         ring(|a| if (-1.0..0.3).contains(&a) { 0.3 } else { 4.0 }),
     );
-    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    let d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     assert!(d.rotate > 0.0, "{d:?}");
     let mut h = Harness::<Avoid>::new();
     h.input(
-        "sonar",
+        SonarIn::SONAR,
         ring(|a| if (-0.3..1.0).contains(&a) { 0.3 } else { 4.0 }),
     );
-    assert!(h.step().unwrap().output::<Drive>("drive").unwrap().rotate < 0.0);
+    assert!(h.step().unwrap().output(DriveOut::DRIVE).unwrap().rotate < 0.0);
     // A lowered safe distance lets it pass close obstacles.
     let mut h = Harness::<Avoid>::new();
-    h.set_param("safe_distance=0.2").unwrap();
-    h.input("sonar", ring(|_| 0.3));
-    assert!(h.step().unwrap().output::<Drive>("drive").is_none());
+    h.set(AvoidParams::SAFE_DISTANCE, 0.2).unwrap();
+    h.input(SonarIn::SONAR, ring(|_| 0.3));
+    assert!(h.step().unwrap().output(DriveOut::DRIVE).is_none());
 }
 
 #[test]
@@ -54,7 +55,7 @@ fn home_converges_on_its_goal() {
         let range = (goal.0 - x).hypot(goal.1 - y);
         let bearing = wrap((goal.1 - y).atan2(goal.0 - x) - th);
         h.input(
-            "target",
+            HomeIn::TARGET,
             Target {
                 seen: true,
                 visible: true,
@@ -65,7 +66,7 @@ fn home_converges_on_its_goal() {
                 bearing,
             },
         );
-        let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        let d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
         th += d.rotate * 0.05;
         x += d.translate * 0.05 * th.cos();
         y += d.translate * 0.05 * th.sin();
@@ -87,9 +88,9 @@ fn barcode_track_places_the_sighting_in_the_odometry_frame() {
     b.id[0] = 7;
     b.bearing[0] = PI / 2.0;
     b.range[0] = 2.0;
-    h.input("barcodes", b);
+    h.input(TrackIn::BARCODES, b);
     h.input(
-        "odometry",
+        TrackIn::ODOMETRY,
         Odometry {
             x: 1.0,
             y: 1.0,
@@ -98,16 +99,16 @@ fn barcode_track_places_the_sighting_in_the_odometry_frame() {
             w: 0.0,
         },
     );
-    let t = *h.step().unwrap().output::<Target>("target").unwrap();
+    let t = *h.step().unwrap().output(TrackOut::TARGET).unwrap();
     assert!(t.seen && t.visible);
     assert!(
         (t.x - 1.0).abs() < 1e-9 && (t.y - 3.0).abs() < 1e-9,
         "{t:?}"
     );
     // Out of view, it is remembered and re-aimed from the new pose.
-    h.input("barcodes", Barcodes::default());
+    h.input(TrackIn::BARCODES, Barcodes::default());
     h.input(
-        "odometry",
+        TrackIn::ODOMETRY,
         Odometry {
             x: 1.0,
             y: 1.0,
@@ -116,7 +117,7 @@ fn barcode_track_places_the_sighting_in_the_odometry_frame() {
             w: 0.0,
         },
     );
-    let t = *h.step().unwrap().output::<Target>("target").unwrap();
+    let t = *h.step().unwrap().output(TrackOut::TARGET).unwrap();
     assert!(t.seen && !t.visible && t.bearing.abs() < 1e-9 && (t.range - 2.0).abs() < 1e-9);
 }
 
@@ -184,9 +185,9 @@ fn door_locate_finds_the_opening_from_a_pass_along_the_wall() {
     let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
     let mut last = Door::default();
     pass(&mut h, DOOR_WORLD, path, |h, od| {
-        h.input("odometry", *od);
-        h.input("target", remembered(code, od));
-        last = *h.step().unwrap().output::<Door>("door").unwrap();
+        h.input(DoorIn::ODOMETRY, *od);
+        h.input(DoorIn::TARGET, remembered(code, od));
+        last = *h.step().unwrap().output(DoorOut::DOOR).unwrap();
     });
     assert!(last.found, "{last:?}");
     assert!(
@@ -204,9 +205,9 @@ fn door_locate_sees_no_door_in_a_plain_wall() {
         [[wall]]\nfrom = [2.0, -3.0]\nto = [2.0, 4.0]\n";
     let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
     pass(&mut h, world, path, |h, od| {
-        h.input("odometry", *od);
-        h.input("target", remembered((1.95, -0.4), od));
-        let d = *h.step().unwrap().output::<Door>("door").unwrap();
+        h.input(DoorIn::ODOMETRY, *od);
+        h.input(DoorIn::TARGET, remembered((1.95, -0.4), od));
+        let d = *h.step().unwrap().output(DoorOut::DOOR).unwrap();
         assert!(!d.found, "no opening, no door: {d:?}");
     });
 }
@@ -220,7 +221,7 @@ fn wall_follow_keeps_its_distance_and_turns_away_from_a_wall_ahead() {
         [[wall]]\nfrom = [3.0, -5.0]\nto = [3.0, 5.0]\n";
     let mut d = Drive::default();
     pass(&mut h, world, (0..3).map(|_| (0.0, 0.0, 0.0)), |h, _| {
-        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     });
     assert!(
         d.translate > 0.0 && d.rotate < 0.0,
@@ -228,20 +229,20 @@ fn wall_follow_keeps_its_distance_and_turns_away_from_a_wall_ahead() {
     );
     // Heading into the wall at 40°: turn away (left).
     pass(&mut h, world, (0..3).map(|_| (0.0, -0.5, -0.7)), |h, _| {
-        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     });
     assert!(d.rotate > 0.0, "away from the wall: {d:?}");
     // The wall ahead (x = 3) close: turn left on the spot.
     pass(&mut h, world, (0..3).map(|_| (2.2, -0.5, 0.0)), |h, _| {
-        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     });
     assert!(d.translate == 0.0 && d.rotate > 0.0, "{d:?}");
     // The same on the left side, mirrored.
-    h.set_param("side=-1").unwrap();
+    h.set(WallFollowParams::SIDE, -1).unwrap();
     let mirrored = "name = 'wall'\nstart = [0.0, 0.0, 0.0]\n\
         [[wall]]\nfrom = [-5.0, 1.36]\nto = [5.0, 1.36]\n";
     pass(&mut h, mirrored, (0..3).map(|_| (0.0, 0.0, 0.0)), |h, _| {
-        d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+        d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     });
     assert!(d.rotate > 0.0, "toward the wall on the left: {d:?}");
 }
@@ -249,16 +250,19 @@ fn wall_follow_keeps_its_distance_and_turns_away_from_a_wall_ahead() {
 #[test]
 fn wander_drives_on_and_bounces_off_what_is_ahead() {
     let mut h = Harness::<Wander>::new();
-    h.input("sonar", ring(|_| 5.0));
-    h.input("odometry", Odometry::default());
-    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    h.input(WanderIn::SONAR, ring(|_| 5.0));
+    h.input(WanderIn::ODOMETRY, Odometry::default());
+    let d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     assert!(d.translate >= 0.0);
     // Something close ahead: the next heading is the open side (here: behind).
     let mut h = Harness::<Wander>::new();
-    h.set_param("look=0").unwrap();
-    h.input("sonar", ring(|a| if a.abs() < 2.0 { 0.5 } else { 5.0 }));
-    h.input("odometry", Odometry::default());
-    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    h.set(WanderParams::LOOK, 0.0).unwrap();
+    h.input(
+        WanderIn::SONAR,
+        ring(|a| if a.abs() < 2.0 { 0.5 } else { 5.0 }),
+    );
+    h.input(WanderIn::ODOMETRY, Odometry::default());
+    let d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
     assert!(
         d.translate == 0.0 && d.rotate.abs() > 0.5,
         "turns around: {d:?}"
@@ -270,7 +274,7 @@ fn wander_drives_on_and_bounces_off_what_is_ahead() {
 fn outputs_restarted_every<S: Skill, T: Message + std::fmt::Debug>(
     every: u64,
     steps: u64,
-    port: &str,
+    port: OutputRef<T, S::Outputs<'static>>,
     mut feed: impl FnMut(&mut Harness<S>, u64),
 ) -> Vec<String> {
     let mut h = Harness::<S>::new();
@@ -278,7 +282,7 @@ fn outputs_restarted_every<S: Skill, T: Message + std::fmt::Debug>(
     (0..steps)
         .map(|k| {
             feed(&mut h, k);
-            format!("{:?}", h.step().unwrap().output::<T>(port))
+            format!("{:?}", h.step().unwrap().output(port))
         })
         .collect()
 }
@@ -305,12 +309,12 @@ fn circling(k: u64) -> Odometry {
 #[test]
 fn a_restarted_wander_draws_on_as_if_never_killed() {
     let feed = |h: &mut Harness<Wander>, k| {
-        h.input("sonar", varying_ring(k))
-            .input("odometry", circling(k));
+        h.input(WanderIn::SONAR, varying_ring(k))
+            .input(WanderIn::ODOMETRY, circling(k));
     };
-    let once = outputs_restarted_every::<Wander, Drive>(0, 1500, "drive", feed);
+    let once = outputs_restarted_every(0, 1500, DriveOut::DRIVE, feed);
     assert_eq!(
-        outputs_restarted_every::<Wander, Drive>(7, 1500, "drive", feed),
+        outputs_restarted_every(7, 1500, DriveOut::DRIVE, feed),
         once,
         "the same map and generator after every restart"
     );
@@ -322,7 +326,7 @@ fn a_restarted_wander_draws_on_as_if_never_killed() {
                 fresh = Harness::new();
             }
             feed(&mut fresh, k);
-            format!("{:?}", fresh.step().unwrap().output::<Drive>("drive"))
+            format!("{:?}", fresh.step().unwrap().output(DriveOut::DRIVE))
         })
         .collect();
     assert_ne!(forgetful, once);
@@ -331,12 +335,12 @@ fn a_restarted_wander_draws_on_as_if_never_killed() {
 #[test]
 fn a_restarted_explore_goes_on_covering_as_if_never_killed() {
     let feed = |h: &mut Harness<Explore>, k| {
-        h.input("sonar", varying_ring(k))
-            .input("odometry", circling(k));
+        h.input(ExploreIn::SONAR, varying_ring(k))
+            .input(ExploreIn::ODOMETRY, circling(k));
     };
     assert_eq!(
-        outputs_restarted_every::<Explore, Drive>(13, 3000, "drive", feed),
-        outputs_restarted_every::<Explore, Drive>(0, 3000, "drive", feed),
+        outputs_restarted_every(13, 3000, DriveOut::DRIVE, feed),
+        outputs_restarted_every(0, 3000, DriveOut::DRIVE, feed),
     );
 }
 
@@ -348,9 +352,9 @@ fn a_restarted_door_locate_keeps_its_readings_and_its_door() {
         let path = (0..140).map(|k| (1.0, -1.5 + 0.03 * f64::from(k), PI / 2.0));
         let mut doors = Vec::new();
         pass(&mut h, DOOR_WORLD, path, |h, od| {
-            h.input("odometry", *od);
-            h.input("target", remembered((1.95, -0.4), od));
-            doors.push(*h.step().unwrap().output::<Door>("door").unwrap());
+            h.input(DoorIn::ODOMETRY, *od);
+            h.input(DoorIn::TARGET, remembered((1.95, -0.4), od));
+            doors.push(*h.step().unwrap().output(DoorOut::DOOR).unwrap());
         });
         doors
     };
@@ -377,13 +381,13 @@ fn restarted_go_through_wall_follow_and_avoid_go_on_as_if_never_killed() {
         w: 0.0,
     };
     let through = |h: &mut Harness<GoThrough>, k| {
-        h.input("door", door)
-            .input("sonar", varying_ring(k))
-            .input("odometry", od(k));
+        h.input(GoIn::DOOR, door)
+            .input(GoIn::SONAR, varying_ring(k))
+            .input(GoIn::ODOMETRY, od(k));
     };
     assert_eq!(
-        outputs_restarted_every::<GoThrough, Drive>(5, 800, "drive", through),
-        outputs_restarted_every::<GoThrough, Drive>(0, 800, "drive", through),
+        outputs_restarted_every(5, 800, GoOut::DRIVE, through),
+        outputs_restarted_every(0, 800, GoOut::DRIVE, through),
     );
     let near = |k: u64| {
         let mut s = ring(|a| 0.4 + 0.3 * (a + k as f64 * 0.05).cos().abs());
@@ -391,18 +395,18 @@ fn restarted_go_through_wall_follow_and_avoid_go_on_as_if_never_killed() {
         s
     };
     let follow = |h: &mut Harness<WallFollow>, k| {
-        h.input("sonar", near(k));
+        h.input(SonarIn::SONAR, near(k));
     };
     assert_eq!(
-        outputs_restarted_every::<WallFollow, Drive>(5, 800, "drive", follow),
-        outputs_restarted_every::<WallFollow, Drive>(0, 800, "drive", follow),
+        outputs_restarted_every(5, 800, DriveOut::DRIVE, follow),
+        outputs_restarted_every(0, 800, DriveOut::DRIVE, follow),
     );
     let avoid = |h: &mut Harness<Avoid>, k| {
-        h.input("sonar", near(k));
+        h.input(SonarIn::SONAR, near(k));
     };
     assert_eq!(
-        outputs_restarted_every::<Avoid, Drive>(5, 800, "drive", avoid),
-        outputs_restarted_every::<Avoid, Drive>(0, 800, "drive", avoid),
+        outputs_restarted_every(5, 800, DriveOut::DRIVE, avoid),
+        outputs_restarted_every(0, 800, DriveOut::DRIVE, avoid),
     );
 }
 
@@ -410,7 +414,7 @@ fn restarted_go_through_wall_follow_and_avoid_go_on_as_if_never_killed() {
 fn stop_proposes_standing_still() {
     let mut h = Harness::<Stop>::new();
     assert_eq!(
-        *h.step().unwrap().output::<Drive>("drive").unwrap(),
+        *h.step().unwrap().output(DriveOut::DRIVE).unwrap(),
         Drive::default()
     );
 }
@@ -425,10 +429,10 @@ fn go_through_heads_for_the_axis_then_through() {
         heading: 0.0,
         width: 1.2,
     };
-    h.input("door", door);
-    h.input("sonar", ring(|_| 5.0));
+    h.input(GoIn::DOOR, door);
+    h.input(GoIn::SONAR, ring(|_| 5.0));
     h.input(
-        "odometry",
+        GoIn::ODOMETRY,
         Odometry {
             x: 0.0,
             y: 1.0,
@@ -437,7 +441,7 @@ fn go_through_heads_for_the_axis_then_through() {
             w: 0.0,
         },
     );
-    let d = *h.step().unwrap().output::<Drive>("drive").unwrap();
+    let d = *h.step().unwrap().output(GoOut::DRIVE).unwrap();
     assert!(
         d.rotate < 0.0,
         "turns toward the approach point below: {d:?}"

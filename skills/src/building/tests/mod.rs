@@ -23,7 +23,7 @@ mod search;
 mod signs;
 
 use super::*;
-use crate::nav::BarcodeTrack;
+use crate::nav::{BarcodeTrack, TrackIn, TrackOut};
 use denning_sim::sim::Sim;
 use denning_sim::world::{World, point_segment};
 use skill_sdk::harness::{HARNESS_PERIOD, Harness};
@@ -228,9 +228,9 @@ impl Robot {
 
     /// What barcode_track (`h`) makes of this cycle's camera report.
     fn track(&self, h: &mut Harness<BarcodeTrack>) -> Target {
-        h.input("barcodes", self.barcodes)
-            .input("odometry", self.odometry);
-        *h.step().unwrap().output::<Target>("target").unwrap()
+        h.input(TrackIn::BARCODES, self.barcodes)
+            .input(TrackIn::ODOMETRY, self.odometry);
+        *h.step().unwrap().output(TrackOut::TARGET).unwrap()
     }
 
     /// A world point in the odometry frame (odometry starts at the world's start, same

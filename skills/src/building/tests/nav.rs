@@ -1,6 +1,7 @@
 //! The navigation skills as the building skills changed them: barcode_track and go_through.
 
 use super::*;
+use crate::nav::{GoIn, GoOut, TrackIn, TrackOut, TrackParams};
 
 #[test]
 fn barcode_track_forgets_its_target_when_the_id_changes_or_it_is_reactivated() {
@@ -15,13 +16,13 @@ fn barcode_track_forgets_its_target_when_the_id_changes_or_it_is_reactivated() {
         b
     };
     let mut h = Harness::<BarcodeTrack>::new();
-    h.set_param("id=7").unwrap();
-    h.input("barcodes", seen(7, 0.0))
-        .input("odometry", Odometry::default());
-    assert!(h.step().unwrap().output::<Target>("target").unwrap().seen);
-    h.set_param("id=850").unwrap();
-    h.input("barcodes", seen(7, 10.0));
-    let t = *h.step().unwrap().output::<Target>("target").unwrap();
+    h.set(TrackParams::ID, 7).unwrap();
+    h.input(TrackIn::BARCODES, seen(7, 0.0))
+        .input(TrackIn::ODOMETRY, Odometry::default());
+    assert!(h.step().unwrap().output(TrackOut::TARGET).unwrap().seen);
+    h.set(TrackParams::ID, 850).unwrap();
+    h.input(TrackIn::BARCODES, seen(7, 10.0));
+    let t = *h.step().unwrap().output(TrackOut::TARGET).unwrap();
     assert!(
         !t.seen && t.id == 850,
         "the door's place is not the button's: {t:?}"
@@ -49,22 +50,22 @@ fn go_through_reports_lining_up_passing_and_through() {
         heading: 0.0,
         width: 1.2,
     };
-    h.input("sonar", ring(|_| 5.0));
-    h.input("door", skillfab_msgs::Door::default())
-        .input("odometry", Odometry::default());
-    let p = *h.step().unwrap().output::<Progress>("progress").unwrap();
+    h.input(GoIn::SONAR, ring(|_| 5.0));
+    h.input(GoIn::DOOR, skillfab_msgs::Door::default())
+        .input(GoIn::ODOMETRY, Odometry::default());
+    let p = *h.step().unwrap().output(GoOut::PROGRESS).unwrap();
     assert_eq!((p.phase, p.done), (0, false), "no door yet");
-    h.input("door", door);
+    h.input(GoIn::DOOR, door);
     let at = |h: &mut Harness<crate::nav::GoThrough>, x: f64| {
         h.input(
-            "odometry",
+            GoIn::ODOMETRY,
             Odometry {
                 x,
                 ..Odometry::default()
             },
         );
         h.step().unwrap();
-        *h.step().unwrap().output::<Progress>("progress").unwrap()
+        *h.step().unwrap().output(GoOut::PROGRESS).unwrap()
     };
     let p = at(&mut h, 0.0);
     assert_eq!((p.phase, p.value), (0, -3.0));

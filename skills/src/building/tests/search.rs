@@ -2,7 +2,7 @@
 //! shipped lab worlds.
 
 use super::*;
-use crate::nav::Avoid;
+use crate::nav::{Avoid, ExploreIn, SonarIn, TrackParams, WanderIn, WanderParams};
 
 /// Cycles until `explore` (`wander` with WANDER set in the environment; avoid beside it)
 /// brings the lab door's barcode (7) into
@@ -20,27 +20,29 @@ fn search_restarted(file: &str, seed: u64, limit: u64, every: u64) -> (Option<u6
     let mut r = Robot::new(&std::fs::read_to_string(path).unwrap(), seed);
     let mut explore = Harness::<crate::nav::Explore>::new();
     let mut wander = Harness::<crate::nav::Wander>::new();
-    wander.set_param(&format!("seed={seed}")).unwrap();
+    wander.set(WanderParams::SEED, seed).unwrap();
     let use_wander = std::env::var("WANDER").is_ok();
     let mut avoid = Harness::<Avoid>::new();
     let mut track = Harness::<BarcodeTrack>::new();
-    track.set_param("id=7").unwrap();
+    track.set(TrackParams::ID, 7).unwrap();
     explore.restarting(every);
     wander.restarting(every);
     avoid.restarting(every);
     track.restarting(every);
     for k in 0..limit {
         explore
-            .input("sonar", r.sonar)
-            .input("odometry", r.odometry);
+            .input(ExploreIn::SONAR, r.sonar)
+            .input(ExploreIn::ODOMETRY, r.odometry);
         let go = if use_wander {
-            wander.input("sonar", r.sonar).input("odometry", r.odometry);
-            wander.step().unwrap().output::<Drive>("drive").copied()
+            wander
+                .input(WanderIn::SONAR, r.sonar)
+                .input(WanderIn::ODOMETRY, r.odometry);
+            wander.step().unwrap().output(DriveOut::DRIVE).copied()
         } else {
-            explore.step().unwrap().output::<Drive>("drive").copied()
+            explore.step().unwrap().output(DriveOut::DRIVE).copied()
         };
-        avoid.input("sonar", r.sonar);
-        let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+        avoid.input(SonarIn::SONAR, r.sonar);
+        let away = avoid.step().unwrap().output(DriveOut::DRIVE).copied();
         r.drive(arbitrate(&[(8, away), (2, go)]));
         if r.track(&mut track).seen {
             return (Some(k), r.sim.collisions);

@@ -59,12 +59,14 @@ fn deliver_once(every: u64) {
     let mut decided_at = None;
     let mut progress = Progress::default();
     while r.sim.pose[0] < 9.5 {
-        read.input("barcodes", r.barcodes);
-        let s = *read.step().unwrap().output::<Signs>("signs").unwrap();
-        deliver.input("signs", s).input("voice", r.voice);
+        read.input(SignIn::BARCODES, r.barcodes);
+        let s = *read.step().unwrap().output(SignsOut::SIGNS).unwrap();
+        deliver
+            .input(DeliverIn::SIGNS, s)
+            .input(DeliverIn::VOICE, r.voice);
         let step = deliver.step().unwrap();
-        progress = *step.output::<Progress>("progress").unwrap();
-        let say = step.output::<Say>("say").copied().unwrap_or_else(silent);
+        progress = *step.output(DeliverOut::PROGRESS).unwrap();
+        let say = step.output(DeliverOut::SAY).copied().unwrap_or_else(silent);
         if say.seq != 0 && decided_at.is_none() {
             decided_at = Some((r.sim.pose[0], s));
             assert_eq!(say.text(), MESSAGE.as_bytes());
@@ -93,17 +95,17 @@ fn deliver_counts_only_what_is_said_after_activation() {
         room_range: 2.0,
         ..Signs::default()
     };
-    h.input("signs", Signs::default())
-        .input("voice", Voice { said: 3, seq: 9 });
+    h.input(DeliverIn::SIGNS, Signs::default())
+        .input(DeliverIn::VOICE, Voice { said: 3, seq: 9 });
     let step = h.step().unwrap();
-    assert!(step.output::<Say>("say").is_none(), "nothing to say yet");
-    h.input("signs", near);
+    assert!(step.output(DeliverOut::SAY).is_none(), "nothing to say yet");
+    h.input(DeliverIn::SIGNS, near);
     let step = h.step().unwrap();
-    let say = *step.output::<Say>("say").unwrap();
+    let say = *step.output(DeliverOut::SAY).unwrap();
     assert_ne!(say.seq, 0);
-    assert!(!step.output::<Progress>("progress").unwrap().done);
+    assert!(!step.output(DeliverOut::PROGRESS).unwrap().done);
     h.input(
-        "voice",
+        DeliverIn::VOICE,
         Voice {
             said: 4,
             seq: say.seq,
@@ -111,9 +113,9 @@ fn deliver_counts_only_what_is_said_after_activation() {
     );
     let step = h.step().unwrap();
     assert_eq!(
-        step.output::<Say>("say").unwrap().seq,
+        step.output(DeliverOut::SAY).unwrap().seq,
         say.seq,
         "the same message"
     );
-    assert!(step.output::<Progress>("progress").unwrap().done);
+    assert!(step.output(DeliverOut::PROGRESS).unwrap().done);
 }

@@ -629,7 +629,7 @@ mod tests {
         };
         let r = "::skill_sdk::refs::InputRef";
         assert_eq!(
-            consts(ports(&input, true).unwrap()),
+            consts(ports(&input, PortSet::Inputs).unwrap()),
             owned(&[
                 ("SONAR", &format!("{r}<Sonar,In<'static>>")),
                 ("DRIVE", &format!("{r}<Drive,In<'static>>")),
@@ -640,7 +640,7 @@ mod tests {
         };
         let r = "::skill_sdk::refs::OutputRef";
         assert_eq!(
-            consts(ports(&output, false).unwrap()),
+            consts(ports(&output, PortSet::Outputs).unwrap()),
             owned(&[
                 ("DRIVE", &format!("{r}<Drive,Out<'static>>")),
                 // A field type with no message type written in it: named through its trait.

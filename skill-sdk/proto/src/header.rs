@@ -85,6 +85,13 @@ unsafe impl FieldType for MaybeSlot {
     }
 }
 
+/// As decoded through the header's schema: the `u32` it is on the wire.
+impl crate::value::FromValue for MaybeSlot {
+    fn from_value(value: &crate::value::Value) -> Option<MaybeSlot> {
+        u32::from_value(value).map(MaybeSlot)
+    }
+}
+
 /// `CLOCK_MONOTONIC` in nanoseconds: comparable between processes on one host.
 pub fn now_ns() -> u64 {
     match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {

@@ -146,6 +146,15 @@ impl Domain {
         config.global.set_root_path(
             &Path::new(root.to_string_lossy().as_bytes()).map_err(|_| bad("root path"))?,
         );
+        // The control server keeps the connection of a client that left while its request is
+        // still being carried out until the answer is dropped. iceoryx2 keeps 128 such
+        // connections and panics past that when they all hold a request (seen with a hundred
+        // clients connecting at once on a loaded machine, each of which may ask again on a new
+        // port): room for every client of the control plane four times over.
+        config
+            .defaults
+            .request_response
+            .server_expired_connection_buffer = 4 * crate::services::CONTROL_MAX_CLIENTS;
         Ok(config)
     }
 

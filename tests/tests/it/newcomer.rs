@@ -2,7 +2,7 @@
 //! (built, its own test run: the skill against the simulated robot in lock-step), and a
 //! message package of one's own used from Python and C at once (`skillfab new msg`, generated
 //! header and module, `SKILLFAB_MSG_PATH`). The Rust template is built and unit-tested as the
-//! `skill_template` binary of the skills crate.
+//! `skill_template` binary of the tests crate.
 
 // Helpers of this test crate fail the test right where a step goes wrong.
 #![allow(clippy::unwrap_used, clippy::expect_used)]

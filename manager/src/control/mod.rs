@@ -99,9 +99,6 @@ impl ControlPlane {
 
     /// Answers requests (the engine has made what it answers durable first).
     pub(crate) fn answer(&self, answers: Vec<Outgoing>) {
-        if answers.is_empty() {
-            return;
-        }
         for a in answers {
             let _ = self.to_clients.send(a);
         }

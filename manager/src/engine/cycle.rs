@@ -1,7 +1,6 @@
 //! The cycle state machine: plan, start, resolve what can no longer run, finish (the
 //! paper's do-periodic-step, do-next-skill and cleanup).
 
-use super::requests::lockstep;
 use super::{IDLE_FREE_RUN, Manager, ManagerError, Pace, Running};
 use crate::graph::{self, PlanNode};
 use skillfab_proto::board::{MAX_OUTPUTS, MAX_SLOTS, RunStatus};
@@ -297,7 +296,7 @@ impl Manager {
         // In lock-step a monitor that fires pauses cycling after this cycle (ending a `step`
         // early): its owner reacts and resumes (`run`, `step`), so what a sequencer does in
         // reaction lands in the same cycle every run.
-        if seen.fired && lockstep(self.config.pace) {
+        if seen.fired && self.config.pace.is_lockstep() {
             self.set_paused(true);
             self.cycles.stop_at = None;
         }

@@ -80,6 +80,11 @@ pub enum Pace {
 pub const LOCKSTEP_DEADLINE: Duration = Duration::from_secs(10);
 
 impl Pace {
+    /// Whether cycles run in lock-step.
+    pub fn is_lockstep(self) -> bool {
+        matches!(self, Pace::LockStep(_))
+    }
+
     /// The nominal period, if there is one.
     pub fn period(self) -> Option<Duration> {
         match self {
@@ -333,10 +338,8 @@ impl Manager {
         let h = board.header();
         let period = config.pace.period().map_or(0, |p| p.as_nanos() as u64);
         h.period_ns.store(period, Ordering::Release);
-        h.lockstep.store(
-            u32::from(matches!(config.pace, Pace::LockStep(_))),
-            Ordering::Release,
-        );
+        h.lockstep
+            .store(u32::from(config.pace.is_lockstep()), Ordering::Release);
         let now = Instant::now();
         let log_path = config
             .param_log
@@ -511,7 +514,7 @@ impl Manager {
             self.state.check = true;
             tracing::info!(clients = ?gone, "holds of departed clients released");
         }
-        if matches!(self.config.pace, Pace::LockStep(_)) {
+        if self.config.pace.is_lockstep() {
             return;
         }
         let removed = self.observers.drop_orphaned_monitors(dead, ORPHAN_GRACE);

@@ -17,7 +17,7 @@ mod query;
 pub(crate) use logging::set_io_log;
 pub(crate) use monitors::add_monitor;
 
-use super::{Manager, Pace};
+use super::Manager;
 use crate::monitors::Monitor;
 use skillfab_proto::control::{
     ChannelStat, ControlError, EventKind, GaveUpInfo, Reply, Request, Response, SkillStat, Stats,
@@ -404,9 +404,4 @@ fn events(events: Vec<EventKind>) -> Effects {
         events,
         ..Effects::default()
     }
-}
-
-/// Whether the fabric runs in lock-step.
-pub(crate) fn lockstep(pace: Pace) -> bool {
-    matches!(pace, Pace::LockStep(_))
 }

@@ -20,6 +20,8 @@
 //!   ([`control::client_to_manager`], [`control::manager_to_client`]) and the event stream.
 //! - [`log`]: the log stream's lines and its reader.
 //! - [`json`]: values, skills and events as JSON (`ctl --json`, the fabric log, the C ABI).
+//! - [`cdr`], [`ros2msg`]: samples as ROS 2's CDR and message schemas as ROS 2 message
+//!   definitions (what a recording's sample channels hold, for the ROS tools).
 
 #![warn(missing_docs)]
 
@@ -27,6 +29,7 @@ extern crate self as skillfab_proto;
 
 pub mod board;
 pub mod bridge;
+pub mod cdr;
 pub mod clean;
 pub mod control;
 pub mod decl;
@@ -39,6 +42,7 @@ pub mod names;
 pub mod param;
 pub mod refs;
 pub mod registration;
+pub mod ros2msg;
 pub mod schema;
 pub mod services;
 pub mod value;

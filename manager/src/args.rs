@@ -50,6 +50,16 @@ pub struct PaceArgs {
     /// With --record: only these topics (comma-separated).
     #[arg(long, value_delimiter = ',', requires = "record")]
     pub topics: Vec<String>,
+    /// With --record: how samples are written — `cdr` (ROS 2's encoding, with ros2msg
+    /// schemas) or `json` (a record per sample: decoded value and bytes as hex).
+    #[arg(
+        long,
+        value_enum,
+        value_name = "ENCODING",
+        default_value_t,
+        requires = "record"
+    )]
+    pub record_encoding: crate::recorder::SampleEncoding,
     /// Number the first cycle N (a replay numbers cycles as its recording did).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub first_cycle: u64,
@@ -182,6 +192,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
     config.record = pace.record.clone().map(|path| crate::engine::RecordSpec {
         path,
         topics: pace.topics.clone(),
+        encoding: pace.record_encoding,
     });
     let mut manager = Manager::new(config).context("starting the manager")?;
     let report = manager.run(&|_| false);
@@ -208,6 +219,7 @@ pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
             .map(|path| crate::engine::RecordSpec {
                 path,
                 topics: args.pace.topics.clone(),
+                encoding: args.pace.record_encoding,
             }),
         wait_timeout: Duration::from_secs_f64(args.wait_timeout_s.max(0.0)),
         param_log: args.pace.param_log.clone(),

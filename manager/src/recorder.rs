@@ -20,41 +20,104 @@
 //! `skillfab ctl reapply FILE` applies the `param` and `priority` lines of a file again, in order.
 //!
 //! A file named `*.mcap` gets the same records in an [MCAP](https://mcap.dev) container instead
-//! (what Foxglove and rosbag2 users open): one channel per logged port,
-//! `/<skill>/<in|out>/<port>`, with a JSON Schema made from the message schema, and one per
-//! other kind, `/skillfab/<kind>`; message encoding `json`, each message the record above;
-//! `log_time` is the wall clock of the record, `publish_time` the sample's stamp, `sequence`
-//! the cycle. The file is written unchunked and flushed with every batch, so a manager that is
-//! killed leaves every record written so far readable (only the summary at the end is
-//! missing).
+//! (what Foxglove and rosbag2 users open), chunked, indexed and LZ4-compressed: one channel
+//! per logged port, `/<skill>/<in|out|cmd>/<port>`, and one per other kind,
+//! `/skillfab/<kind>` (message encoding `json`, each message the record above). Samples are
+//! CDR (message encoding `cdr`, schema encoding `ros2msg`: [`skillfab_proto::cdr`],
+//! [`skillfab_proto::ros2msg`]) unless [`SampleEncoding::Json`] is asked for; what a JSON
+//! sample record says beside its value is in the channel's metadata (`skill`, `dir`, `port`,
+//! `topic`, `type`, the message schema as JSON in `schema`) and the message header: `sequence`
+//! is the cycle, `publish_time` the sample's stamp plus the channel's `clock_offset_ns` (wall
+//! clock minus monotonic clock), `log_time` the wall clock when it was written.
+//!
+//! A chunk is closed and flushed every [`CHUNK_CYCLES`] cycle markers, every
+//! [`CHUNK_BYTES`] of records or after [`CHUNK_AGE`], whichever comes first: a manager that is
+//! killed leaves every closed chunk readable (what it loses is the open chunk, and the summary
+//! at the end).
 
 use serde_json::{Value as Json, json};
 use skillfab_proto::header::now_ns;
 use skillfab_proto::json::param_json;
 use skillfab_proto::param::ParamValue;
-use skillfab_proto::value::FieldPath;
+use skillfab_proto::schema::MessageSchema;
+use skillfab_proto::value::{FieldPath, PathError};
 use std::collections::{BTreeMap, HashMap};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
-/// One sample copied out of a topic, decoded on the writer thread.
-pub(crate) struct IoSample {
-    pub(crate) cycle: u64,
+/// Cycle markers after which an MCAP file's chunk is closed and flushed (1 s at 100 Hz; the
+/// exit-lab network's 100 cycles are about 60 KB of CDR).
+pub const CHUNK_CYCLES: u32 = 100;
+/// Bytes of records (before compression) after which a chunk is closed.
+pub const CHUNK_BYTES: usize = 256 * 1024;
+/// Age after which an open chunk is closed, even when nothing more comes (a paused fabric).
+pub const CHUNK_AGE: Duration = Duration::from_secs(1);
+
+/// How an MCAP file's samples are written.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum SampleEncoding {
+    /// CDR with ros2msg schemas: the ROS tools decode them; the bytes come back exactly
+    /// (padding zeroed).
+    #[default]
+    Cdr,
+    /// One JSON record per sample: the decoded `value` and (in a recording) the bytes as hex.
+    Json,
+}
+
+/// Where a sample comes from and what it is: the same for every sample of one producer's
+/// port, so the manager hands a shared one with each sample instead of copying its names.
+#[derive(Debug)]
+pub(crate) struct SampleSource {
     pub(crate) skill: String,
-    /// `in` or `out`.
+    /// `in`, `out` or `cmd` (a device's arbitrated command).
     pub(crate) dir: &'static str,
     pub(crate) port: String,
     pub(crate) topic: String,
-    pub(crate) type_name: String,
+    pub(crate) schema: MessageSchema,
+    /// The whole message (decoding it for JSON).
+    field: FieldPath,
+    /// In JSON, also keep the bytes themselves (`raw`, hex): a recording replays them exactly
+    /// (NaN, infinities and padding included, which JSON numbers cannot carry).
+    raw: bool,
+}
+
+impl SampleSource {
+    /// The samples `skill` reads or writes (`dir`) on `port`, wired to `topic`.
+    pub(crate) fn new(
+        skill: &str,
+        dir: &'static str,
+        port: &str,
+        topic: &str,
+        schema: &MessageSchema,
+        raw: bool,
+    ) -> Result<SampleSource, PathError> {
+        Ok(SampleSource {
+            skill: skill.to_string(),
+            dir,
+            port: port.to_string(),
+            topic: topic.to_string(),
+            schema: schema.clone(),
+            field: skillfab_proto::value::resolve(schema, "")?,
+            raw,
+        })
+    }
+
+    /// The MCAP channel of its samples.
+    fn channel(&self) -> String {
+        format!("/{}/{}/{}", self.skill, self.dir, self.port)
+    }
+}
+
+/// One sample copied out of a topic, encoded on the writer thread.
+pub(crate) struct IoSample {
+    pub(crate) cycle: u64,
     pub(crate) stamp_ns: u64,
-    pub(crate) field: Arc<FieldPath>,
+    pub(crate) source: Arc<SampleSource>,
     pub(crate) bytes: Vec<u8>,
-    /// Also keep the bytes themselves (`raw`, hex): a recording replays them exactly (NaN,
-    /// infinities and padding included, which JSON numbers cannot carry).
-    pub(crate) raw: bool,
 }
 
 enum Record {
@@ -76,11 +139,16 @@ fn unix_ms() -> u64 {
 }
 
 impl Recorder {
-    /// Starts the writer thread of `path` (creating its directory). The file itself is
-    /// created with the first record other than `start`, which is kept until then: a manager
-    /// whose parameters nobody touched leaves no file. A `.jsonl` file is appended to; an
-    /// `.mcap` file is created anew.
+    /// Starts the writer thread of `path` (creating its directory), its samples in CDR if it
+    /// is an MCAP file. The file itself is created with the first record other than `start`,
+    /// which is kept until then: a manager whose parameters nobody touched leaves no file. A
+    /// `.jsonl` file is appended to; an `.mcap` file is created anew.
     pub fn open(path: &Path) -> std::io::Result<Recorder> {
+        Recorder::open_with(path, SampleEncoding::Cdr)
+    }
+
+    /// [`Recorder::open`], an MCAP file's samples in `encoding` (a `.jsonl` file's are JSON).
+    pub fn open_with(path: &Path, encoding: SampleEncoding) -> std::io::Result<Recorder> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir)?;
         }
@@ -88,7 +156,7 @@ impl Recorder {
         let target = path.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("recorder".into())
-            .spawn(move || write_loop(&target, &rx))?;
+            .spawn(move || write_loop(&target, encoding, &rx))?;
         Ok(Recorder {
             tx: Some(tx),
             path: path.to_path_buf(),
@@ -155,16 +223,23 @@ impl Drop for Recorder {
     }
 }
 
-fn sample_json(s: &IoSample) -> Json {
-    let value = s
+/// A sample as a JSON record: its decoded `value`, and in a recording its bytes as `raw`.
+fn sample_json(
+    cycle: u64,
+    time_ns: u64,
+    stamp_ns: u64,
+    source: &SampleSource,
+    bytes: &[u8],
+) -> Json {
+    let value = source
         .field
-        .read(&s.bytes)
+        .read(bytes)
         .map_or(Json::Null, |v| skillfab_proto::json::value_json(&v));
-    let mut j = json!({"kind": "sample", "cycle": s.cycle, "time_ns": now_ns(), "skill": s.skill,
-           "dir": s.dir, "port": s.port, "topic": s.topic, "type": s.type_name,
-           "stamp_ns": s.stamp_ns, "value": value});
-    if s.raw {
-        j["raw"] = json!(hex(&s.bytes));
+    let mut j = json!({"kind": "sample", "cycle": cycle, "time_ns": time_ns,
+           "skill": source.skill, "dir": source.dir, "port": source.port, "topic": source.topic,
+           "type": source.schema.type_name, "stamp_ns": stamp_ns, "value": value});
+    if source.raw {
+        j["raw"] = json!(hex(bytes));
     }
     j
 }
@@ -209,7 +284,9 @@ impl Sink {
             Sink::Lines(out) => {
                 let j = match r {
                     Record::Line(j) => j,
-                    Record::Sample(s) => sample_json(&s),
+                    Record::Sample(s) => {
+                        sample_json(s.cycle, now_ns(), s.stamp_ns, &s.source, &s.bytes)
+                    }
                 };
                 writeln!(out, "{j}")?;
             }
@@ -218,10 +295,12 @@ impl Sink {
         Ok(())
     }
 
-    fn flush(&mut self) -> anyhow::Result<()> {
+    /// After a batch of records: a JSON-lines file is flushed, an MCAP file's chunk closed and
+    /// flushed when it is due (or `now`).
+    fn flush(&mut self, now: bool) -> anyhow::Result<()> {
         match self {
             Sink::Lines(out) => out.flush()?,
-            Sink::Mcap(m) => m.writer.flush()?,
+            Sink::Mcap(m) => m.flush(now)?,
         }
         Ok(())
     }
@@ -240,17 +319,29 @@ impl Sink {
 /// The MCAP container of the fabric log.
 struct McapSink {
     writer: mcap::Writer<std::io::BufWriter<std::fs::File>>,
+    encoding: SampleEncoding,
     /// Channel of each topic.
     channels: HashMap<String, u16>,
+    /// Channel of each sample source seen; the source is kept so its address names it.
+    sources: HashMap<*const SampleSource, (Arc<SampleSource>, u16)>,
     /// Wall clock minus monotonic clock (ns), to stamp records with the wall clock.
     wall_offset: i128,
+    /// A sample's encoding (reused).
+    buf: Vec<u8>,
+    /// Since the open chunk started: cycle markers, bytes of records, and when.
+    chunk_cycles: u32,
+    chunk_bytes: usize,
+    chunk_start: Option<Instant>,
 }
 
 impl McapSink {
-    fn new(file: std::fs::File) -> anyhow::Result<McapSink> {
+    fn new(file: std::fs::File, encoding: SampleEncoding) -> anyhow::Result<McapSink> {
         let writer = mcap::WriteOptions::new()
-            .compression(None)
-            .use_chunks(false)
+            .compression(Some(mcap::Compression::Lz4))
+            .use_chunks(true)
+            // Closed by `flush` (CHUNK_CYCLES, CHUNK_BYTES, CHUNK_AGE), which also flushes the
+            // file: a chunk the writer closed by itself could wait in the buffer.
+            .chunk_size(None)
             .profile("")
             .library(concat!("skillfab ", env!("CARGO_PKG_VERSION")))
             .create(std::io::BufWriter::new(file))?;
@@ -259,8 +350,14 @@ impl McapSink {
             .map_or(0, |d| d.as_nanos() as i128);
         Ok(McapSink {
             writer,
+            encoding,
             channels: HashMap::new(),
+            sources: HashMap::new(),
             wall_offset: wall - i128::from(now_ns()),
+            buf: Vec::new(),
+            chunk_cycles: 0,
+            chunk_bytes: 0,
+            chunk_start: None,
         })
     }
 
@@ -268,65 +365,133 @@ impl McapSink {
         u64::try_from(i128::from(mono_ns) + self.wall_offset).unwrap_or(0)
     }
 
-    /// The channel of `topic`, added with `schema` (a JSON Schema) the first time.
-    fn channel(&mut self, topic: &str, schema: Option<(&str, Json)>) -> anyhow::Result<u16> {
+    /// The channel of a JSON record's `topic`.
+    fn json_channel(&mut self, topic: &str) -> anyhow::Result<u16> {
         if let Some(&id) = self.channels.get(topic) {
             return Ok(id);
         }
-        let schema_id = match schema {
-            Some((name, s)) => {
-                self.writer
-                    .add_schema(name, "jsonschema", s.to_string().as_bytes())?
-            }
-            None => 0,
-        };
         let id = self
             .writer
-            .add_channel(schema_id, topic, "json", &BTreeMap::new())?;
+            .add_channel(0, topic, "json", &BTreeMap::new())?;
         self.channels.insert(topic.to_string(), id);
         Ok(id)
     }
 
-    fn put(&mut self, r: Record) -> anyhow::Result<()> {
-        let (topic, schema, j, stamp) = match r {
-            Record::Line(j) => {
-                let kind = j["kind"].as_str().unwrap_or("record").to_string();
-                (format!("/skillfab/{kind}"), None, j, None)
-            }
-            Record::Sample(s) => {
-                let schema = sample_schema(&s);
-                let j = sample_json(&s);
-                let topic = format!("/{}/{}/{}", s.skill, s.dir, s.port);
-                (
-                    topic,
-                    Some((s.type_name.clone(), schema)),
-                    j,
-                    Some(s.stamp_ns),
-                )
+    /// The channel of a sample's source, added with its schema the first time.
+    fn sample_channel(&mut self, source: &Arc<SampleSource>) -> anyhow::Result<u16> {
+        if let Some((_, id)) = self.sources.get(&Arc::as_ptr(source)) {
+            return Ok(*id);
+        }
+        let topic = source.channel();
+        let id = match self.channels.get(&topic) {
+            Some(&id) => id,
+            None => {
+                let m = &source.schema;
+                let id = match self.encoding {
+                    SampleEncoding::Cdr => {
+                        let schema_id = self.writer.add_schema(
+                            &skillfab_proto::ros2msg::schema_name(&m.type_name),
+                            "ros2msg",
+                            skillfab_proto::ros2msg::schema_text(m).as_bytes(),
+                        )?;
+                        let metadata = BTreeMap::from([
+                            ("skill".to_string(), source.skill.clone()),
+                            ("dir".to_string(), source.dir.to_string()),
+                            ("port".to_string(), source.port.clone()),
+                            ("topic".to_string(), source.topic.clone()),
+                            ("type".to_string(), m.type_name.clone()),
+                            ("schema".to_string(), serde_json::to_string(m)?),
+                            ("clock_offset_ns".to_string(), self.wall_offset.to_string()),
+                        ]);
+                        self.writer
+                            .add_channel(schema_id, &topic, "cdr", &metadata)?
+                    }
+                    SampleEncoding::Json => {
+                        let schema = sample_schema(&source.schema);
+                        let schema_id = self.writer.add_schema(
+                            &m.type_name,
+                            "jsonschema",
+                            schema.to_string().as_bytes(),
+                        )?;
+                        self.writer
+                            .add_channel(schema_id, &topic, "json", &BTreeMap::new())?
+                    }
+                };
+                self.channels.insert(topic, id);
+                id
             }
         };
-        let channel_id = self.channel(
-            &topic,
-            schema.as_ref().map(|(n, s)| (n.as_str(), s.clone())),
-        )?;
-        let time = j["time_ns"].as_u64().unwrap_or_else(now_ns);
+        self.sources
+            .insert(Arc::as_ptr(source), (source.clone(), id));
+        Ok(id)
+    }
+
+    fn put(&mut self, r: Record) -> anyhow::Result<()> {
+        let now = now_ns();
+        let (channel_id, sequence, stamp) = match &r {
+            Record::Line(j) => {
+                let kind = j["kind"].as_str().unwrap_or("record");
+                if kind == "cycle" {
+                    self.chunk_cycles += 1;
+                }
+                let id = self.json_channel(&format!("/skillfab/{kind}"))?;
+                (id, j["cycle"].as_u64().unwrap_or(0), None)
+            }
+            Record::Sample(s) => (self.sample_channel(&s.source)?, s.cycle, Some(s.stamp_ns)),
+        };
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        match r {
+            Record::Line(j) => serde_json::to_writer(&mut buf, &j)?,
+            Record::Sample(s) => match self.encoding {
+                SampleEncoding::Cdr => {
+                    skillfab_proto::cdr::encode(&s.source.schema, &s.bytes, &mut buf)
+                }
+                SampleEncoding::Json => serde_json::to_writer(
+                    &mut buf,
+                    &sample_json(s.cycle, now, s.stamp_ns, &s.source, &s.bytes),
+                )?,
+            },
+        }
         let header = mcap::records::MessageHeader {
             channel_id,
-            sequence: j["cycle"].as_u64().map_or(0, |c| c as u32),
-            log_time: self.wall(time),
-            publish_time: self.wall(stamp.unwrap_or(time)),
+            // (As a JSON record's `cycle`: u32 lasts 497 days at 100 Hz.)
+            sequence: sequence as u32,
+            log_time: self.wall(now),
+            publish_time: self.wall(stamp.unwrap_or(now)),
         };
-        self.writer
-            .write_to_known_channel(&header, j.to_string().as_bytes())?;
+        self.chunk_start.get_or_insert_with(Instant::now);
+        self.chunk_bytes += buf.len();
+        let written = self.writer.write_to_known_channel(&header, &buf);
+        self.buf = buf;
+        written?;
+        Ok(())
+    }
+
+    /// Closes the open chunk and flushes the file if the chunk is due (or `now`).
+    fn flush(&mut self, now: bool) -> anyhow::Result<()> {
+        let Some(start) = self.chunk_start else {
+            return Ok(());
+        };
+        if now
+            || self.chunk_cycles >= CHUNK_CYCLES
+            || self.chunk_bytes >= CHUNK_BYTES
+            || start.elapsed() >= CHUNK_AGE
+        {
+            self.writer.flush()?;
+            self.chunk_cycles = 0;
+            self.chunk_bytes = 0;
+            self.chunk_start = None;
+        }
         Ok(())
     }
 }
 
 /// JSON Schema of a sample record, its `value` described by the message schema.
-fn sample_schema(s: &IoSample) -> Json {
-    let value = kind_schema(&s.field.kind);
+fn sample_schema(m: &MessageSchema) -> Json {
+    let value = kind_schema(&skillfab_proto::schema::FieldKind::Struct(m.clone()));
     json!({
-        "title": s.type_name,
+        "title": m.type_name,
         "type": "object",
         "properties": {
             "kind": {"type": "string"}, "cycle": {"type": "integer"},
@@ -360,49 +525,189 @@ fn kind_schema(kind: &skillfab_proto::schema::FieldKind) -> Json {
     }
 }
 
-/// The records of a fabric log file (JSON lines or MCAP), as JSON-lines text. An MCAP file
-/// whose writer was killed (no summary) gives the records written before.
-pub fn read_records(path: &Path) -> anyhow::Result<String> {
+/// A CDR sample channel of an MCAP file, as its metadata describes it.
+#[derive(Debug)]
+pub struct SampleChannel {
+    /// The skill that published (`out`, `cmd`) or read (`in`) it.
+    pub skill: String,
+    /// `in`, `out` or `cmd`.
+    pub dir: String,
+    /// The skill's port.
+    pub port: String,
+    /// The topic it travelled on.
+    pub topic: String,
+    /// The message layout the samples had.
+    pub schema: MessageSchema,
+    /// Wall clock minus monotonic clock when the file was written (ns): a sample's stamp is
+    /// its `publish_time` minus this.
+    pub clock_offset_ns: i128,
+}
+
+impl SampleChannel {
+    fn from_metadata(topic: &str, meta: &BTreeMap<String, String>) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        let get = |k: &str| {
+            meta.get(k).cloned().with_context(|| {
+                format!(
+                    "CDR channel {topic} has no '{k}' in its metadata: not a skillfab recording"
+                )
+            })
+        };
+        Ok(SampleChannel {
+            skill: get("skill")?,
+            dir: get("dir")?,
+            port: get("port")?,
+            topic: get("topic")?,
+            schema: serde_json::from_str(&get("schema")?).with_context(|| {
+                format!("CDR channel {topic}: its 'schema' is not a message schema")
+            })?,
+            clock_offset_ns: get("clock_offset_ns")?
+                .parse()
+                .with_context(|| format!("CDR channel {topic}: a bad 'clock_offset_ns'"))?,
+        })
+    }
+}
+
+/// A sample of an MCAP file's CDR channel, its bytes decoded back through its schema.
+#[derive(Debug)]
+pub struct ReadSample {
+    /// The cycle (the message's `sequence`).
+    pub cycle: u64,
+    /// The producer's stamp (monotonic clock, ns).
+    pub stamp_ns: u64,
+    /// Its channel.
+    pub channel: Arc<SampleChannel>,
+    /// The repr(C) bytes, padding zeroed.
+    pub bytes: Vec<u8>,
+}
+
+/// One record of a fabric log or recording.
+#[derive(Debug)]
+pub enum ReadRecord {
+    /// A JSON record (a JSON-lines file's lines; an MCAP file's `json` messages, a JSON
+    /// sample among them).
+    Json(Json),
+    /// A CDR sample.
+    Sample(ReadSample),
+}
+
+impl ReadSample {
+    /// As the JSON record a JSON-encoded recording holds (`value`, `raw`).
+    pub fn to_json(&self) -> Json {
+        let c = &self.channel;
+        let value = skillfab_proto::value::resolve(&c.schema, "")
+            .ok()
+            .and_then(|f| f.read(&self.bytes))
+            .map_or(Json::Null, |v| skillfab_proto::json::value_json(&v));
+        json!({"kind": "sample", "cycle": self.cycle, "skill": c.skill, "dir": c.dir,
+               "port": c.port, "topic": c.topic, "type": c.schema.type_name,
+               "stamp_ns": self.stamp_ns, "value": value, "raw": hex(&self.bytes)})
+    }
+}
+
+/// Reads every record of a fabric log or recording (JSON lines or MCAP, its samples in CDR or
+/// JSON) in order, handing each to `each`. An MCAP file whose writer was killed gives the
+/// records of its closed chunks.
+pub fn read_file(path: &Path, mut each: impl FnMut(ReadRecord)) -> anyhow::Result<()> {
     use anyhow::Context;
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     if !is_mcap(path) {
-        return String::from_utf8(bytes).with_context(|| format!("{} is not text", path.display()));
+        let text = std::str::from_utf8(&bytes)
+            .with_context(|| format!("{} is not text", path.display()))?;
+        for (n, line) in text.lines().enumerate() {
+            let j = serde_json::from_str(line)
+                .with_context(|| format!("{}:{}: not JSON", path.display(), n + 1))?;
+            each(ReadRecord::Json(j));
+        }
+        return Ok(());
     }
-    let mut out = String::new();
     let stream =
         mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
             .with_context(|| format!("{} is not an MCAP file", path.display()))?;
+    let mut channels: HashMap<u16, Arc<SampleChannel>> = HashMap::new();
+    let mut any = false;
     for m in stream {
-        match m {
-            Ok(m) => {
-                let text = std::str::from_utf8(&m.data).with_context(|| {
-                    format!(
-                        "{}: a message on {} is not JSON text",
-                        path.display(),
-                        m.channel.topic
-                    )
-                })?;
-                out.push_str(text);
-                out.push('\n');
-            }
+        let m = match m {
+            Ok(m) => m,
             // A file cut short (the manager was killed): the records before are good.
-            Err(e) if !out.is_empty() => {
+            Err(e) if any => {
                 tracing::warn!(file = %path.display(), error = %e, "MCAP file ends early");
                 break;
             }
             Err(e) => {
                 return Err(e).with_context(|| format!("reading MCAP file {}", path.display()));
             }
+        };
+        any = true;
+        let topic = &m.channel.topic;
+        match m.channel.message_encoding.as_str() {
+            "json" => {
+                let j = serde_json::from_slice(&m.data).with_context(|| {
+                    format!("{}: a message on {topic} is not JSON", path.display())
+                })?;
+                each(ReadRecord::Json(j));
+            }
+            "cdr" => {
+                let channel = match channels.get(&m.channel.id) {
+                    Some(c) => c.clone(),
+                    None => {
+                        let c = Arc::new(
+                            SampleChannel::from_metadata(topic, &m.channel.metadata)
+                                .with_context(|| path.display().to_string())?,
+                        );
+                        channels.insert(m.channel.id, c.clone());
+                        c
+                    }
+                };
+                let bytes =
+                    skillfab_proto::cdr::decode(&channel.schema, &m.data).with_context(|| {
+                        format!(
+                            "{}: the sample of cycle {} on {topic}",
+                            path.display(),
+                            m.sequence
+                        )
+                    })?;
+                let stamp = i128::from(m.publish_time) - channel.clock_offset_ns;
+                each(ReadRecord::Sample(ReadSample {
+                    cycle: u64::from(m.sequence),
+                    stamp_ns: u64::try_from(stamp).unwrap_or(0),
+                    channel,
+                    bytes,
+                }));
+            }
+            other => anyhow::bail!(
+                "{}: channel {topic} is encoded '{other}', not json or cdr: not a skillfab file",
+                path.display()
+            ),
         }
     }
+    Ok(())
+}
+
+/// The records of a fabric log file (JSON lines or MCAP), as JSON-lines text (a CDR sample as
+/// the JSON record [`ReadSample::to_json`] gives). An MCAP file whose writer was killed gives
+/// the records written before.
+pub fn read_records(path: &Path) -> anyhow::Result<String> {
+    let mut out = String::new();
+    read_file(path, |r| {
+        let j = match r {
+            ReadRecord::Json(j) => j,
+            ReadRecord::Sample(s) => s.to_json(),
+        };
+        out.push_str(&j.to_string());
+        out.push('\n');
+    })?;
     Ok(out)
 }
 
 impl Sink {
-    fn create(path: &Path) -> anyhow::Result<Sink> {
+    fn create(path: &Path, encoding: SampleEncoding) -> anyhow::Result<Sink> {
         Ok(if is_mcap(path) {
             // An MCAP file has one header and one footer: a new file each time.
-            Sink::Mcap(Box::new(McapSink::new(std::fs::File::create(path)?)?))
+            Sink::Mcap(Box::new(McapSink::new(
+                std::fs::File::create(path)?,
+                encoding,
+            )?))
         } else {
             let file = std::fs::OpenOptions::new()
                 .create(true)
@@ -413,7 +718,7 @@ impl Sink {
     }
 }
 
-fn write_loop(path: &Path, rx: &Receiver<Record>) {
+fn write_loop(path: &Path, encoding: SampleEncoding, rx: &Receiver<Record>) {
     let mut failed = false;
     let mut report = |e: anyhow::Error| {
         if !failed {
@@ -423,8 +728,19 @@ fn write_loop(path: &Path, rx: &Receiver<Record>) {
     };
     let mut sink: Option<Sink> = None;
     let mut start: Option<Json> = None;
-    // Block for the first record, then take whatever else is queued, then flush once.
-    while let Ok(first) = rx.recv() {
+    // Block for the first record (an open chunk is closed once it is old enough), then take
+    // whatever else is queued, then flush.
+    loop {
+        let first = match rx.recv_timeout(CHUNK_AGE) {
+            Ok(r) => r,
+            Err(RecvTimeoutError::Timeout) => {
+                if let Some(Err(e)) = sink.as_mut().map(|s| s.flush(true)) {
+                    report(e);
+                }
+                continue;
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
         let mut next = Some(first);
         while let Some(r) = next {
             next = rx.try_recv().ok();
@@ -435,7 +751,7 @@ fn write_loop(path: &Path, rx: &Receiver<Record>) {
                     start = Some(j.clone());
                     continue;
                 }
-                match Sink::create(path) {
+                match Sink::create(path, encoding) {
                     Ok(s) => sink = Some(s),
                     Err(e) => {
                         report(e);
@@ -453,7 +769,7 @@ fn write_loop(path: &Path, rx: &Receiver<Record>) {
                 report(e);
             }
         }
-        if let Some(Err(e)) = sink.as_mut().map(Sink::flush) {
+        if let Some(Err(e)) = sink.as_mut().map(|s| s.flush(false)) {
             report(e);
         }
     }
@@ -545,8 +861,8 @@ mod tests {
         assert_eq!(lines[1]["kind"], "priority");
     }
 
-    fn scaled_sample(cycle: u64, value: f64) -> IoSample {
-        use skillfab_proto::schema::{FieldKind, FieldSchema, MessageSchema, Prim};
+    fn scaled_source(raw: bool) -> Arc<SampleSource> {
+        use skillfab_proto::schema::{FieldKind, FieldSchema, Prim};
         let schema = MessageSchema {
             type_name: "skillfab.Scaled".into(),
             doc: "a scaled tick".into(),
@@ -558,57 +874,69 @@ mod tests {
                 ty: FieldKind::Prim(Prim::F64),
             }],
         };
+        Arc::new(SampleSource::new("scale", "out", "scaled", "scaled", &schema, raw).unwrap())
+    }
+
+    fn scaled_sample(source: &Arc<SampleSource>, cycle: u64, value: f64) -> IoSample {
         IoSample {
             cycle,
-            skill: "scale".into(),
-            dir: "out",
-            port: "scaled".into(),
-            topic: "scaled".into(),
-            type_name: schema.type_name.clone(),
             stamp_ns: now_ns(),
-            field: Arc::new(skillfab_proto::value::resolve(&schema, "").unwrap()),
+            source: source.clone(),
             bytes: value.to_ne_bytes().to_vec(),
-            raw: false,
         }
     }
 
+    /// Writes a parameter change and two samples (one a NaN) to `path`.
+    fn write_some(path: &Path, encoding: SampleEncoding) -> u64 {
+        let r = Recorder::open_with(path, encoding).unwrap();
+        r.param(
+            7,
+            "scale",
+            "gain",
+            ParamValue::Float(2.0),
+            ParamValue::Float(3.0),
+            "1-0",
+        );
+        let source = scaled_source(encoding == SampleEncoding::Json);
+        let s = scaled_sample(&source, 8, 6.0);
+        let stamp = s.stamp_ns;
+        r.sample(s);
+        r.sample(scaled_sample(&source, 9, f64::NAN));
+        stamp
+    }
+
     #[test]
-    fn an_mcap_log_holds_the_same_records_on_channels_with_schemas() {
+    fn an_mcap_log_holds_cdr_samples_on_channels_with_ros_schemas_and_reads_back() {
         let dir = Scratch::new("mcap");
         let path = dir.0.join("log.mcap");
-        {
-            let r = Recorder::open(&path).unwrap();
-            r.param(
-                7,
-                "scale",
-                "gain",
-                ParamValue::Float(2.0),
-                ParamValue::Float(3.0),
-                "1-0",
-            );
-            r.sample(scaled_sample(8, 6.0));
-            r.sample(scaled_sample(9, 9.0));
-        }
+        let stamp = write_some(&path, SampleEncoding::Cdr);
         let bytes = std::fs::read(&path).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert!(!summary.chunk_indexes.is_empty(), "chunked and indexed");
+        assert!(
+            summary.chunk_indexes.iter().all(|c| c.compression == "lz4"),
+            "compressed"
+        );
         let mut topics = Vec::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {
             let m = m.unwrap();
-            assert_eq!(m.channel.message_encoding, "json");
             topics.push((m.channel.topic.clone(), m.sequence));
             if m.channel.topic == "/scale/out/scaled" {
+                assert_eq!(m.channel.message_encoding, "cdr");
                 let schema = m
                     .channel
                     .schema
                     .as_ref()
                     .expect("a sample channel has a schema");
-                assert_eq!(schema.encoding, "jsonschema");
-                let s: Json = serde_json::from_slice(&schema.data).unwrap();
-                assert_eq!(
-                    s["properties"]["value"]["properties"]["value"]["type"],
-                    "number"
-                );
+                assert_eq!(schema.encoding, "ros2msg");
+                assert_eq!(schema.name, "skillfab/msg/Scaled");
+                assert_eq!(&schema.data[..], b"float64 value\n");
+                assert_eq!(m.channel.metadata["skill"], "scale");
+                assert_eq!(m.data.len(), 4 + 8);
                 // Wall-clock nanoseconds (after 2020), not the monotonic clock.
                 assert!(m.log_time > 1_600_000_000_000_000_000, "{}", m.log_time);
+            } else {
+                assert_eq!(m.channel.message_encoding, "json");
             }
         }
         assert_eq!(
@@ -619,6 +947,18 @@ mod tests {
                 ("/scale/out/scaled".to_string(), 9),
             ]
         );
+        let mut samples = Vec::new();
+        read_file(&path, |r| {
+            if let ReadRecord::Sample(s) = r {
+                samples.push(s);
+            }
+        })
+        .unwrap();
+        assert_eq!(samples.len(), 2);
+        assert_eq!((samples[0].cycle, samples[0].stamp_ns), (8, stamp));
+        assert_eq!(samples[0].bytes, 6.0f64.to_ne_bytes());
+        assert_eq!(samples[1].bytes, f64::NAN.to_ne_bytes(), "NaN's bits");
+        assert_eq!(samples[1].channel.port, "scaled");
         // The same records as the JSON-lines file would hold.
         let text = read_records(&path).unwrap();
         let lines: Vec<Json> = text
@@ -627,15 +967,69 @@ mod tests {
             .collect();
         assert_eq!(lines[0]["kind"], "param");
         assert_eq!(lines[0]["new"], 3.0);
-        assert_eq!(lines[2]["kind"], "sample");
-        assert_eq!(lines[2]["value"]["value"], 9.0);
+        assert_eq!(lines[1]["kind"], "sample");
+        assert_eq!(lines[1]["value"]["value"], 6.0);
+        assert_eq!(lines[1]["raw"], hex(&6.0f64.to_ne_bytes()));
 
         // Cut short as if the manager had been killed: the records before the cut are read.
         let cut = dir.0.join("cut.mcap");
         std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).unwrap();
-        let text = read_records(&cut).unwrap();
-        assert!(text.lines().count() >= 2, "{text}");
+        assert!(read_records(&cut).is_ok());
         std::fs::write(&cut, b"not an mcap file").unwrap();
         assert!(read_records(&cut).is_err());
+    }
+
+    #[test]
+    fn the_json_option_writes_samples_as_json_records() {
+        let dir = Scratch::new("mcapjson");
+        let path = dir.0.join("log.mcap");
+        write_some(&path, SampleEncoding::Json);
+        let bytes = std::fs::read(&path).unwrap();
+        let mut n = 0;
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            assert_eq!(m.channel.message_encoding, "json");
+            if m.channel.topic == "/scale/out/scaled" {
+                let schema = m.channel.schema.as_ref().unwrap();
+                assert_eq!(schema.encoding, "jsonschema");
+                let j: Json = serde_json::from_slice(&m.data).unwrap();
+                assert_eq!(j["cycle"], m.sequence);
+                assert!(j["raw"].is_string(), "{j}");
+                n += 1;
+            }
+        }
+        assert_eq!(n, 2);
+    }
+
+    #[test]
+    fn closed_chunks_are_on_disk_while_the_recorder_writes() {
+        let dir = Scratch::new("chunks");
+        let path = dir.0.join("run.mcap");
+        let r = Recorder::open(&path).unwrap();
+        let source = scaled_source(false);
+        for k in 1..=u64::from(CHUNK_CYCLES) * 2 + 10 {
+            r.sample(scaled_sample(&source, k, k as f64));
+            r.line("cycle", Some(k), json!({}));
+        }
+        // Two chunks closed; what a reader of the file as it is sees, while the recorder
+        // still runs (no summary yet).
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let complete = || {
+            let mut last = 0;
+            let _ = read_file(&path, |rec| {
+                if let ReadRecord::Json(j) = rec
+                    && j["kind"] == "cycle"
+                {
+                    last = j["cycle"].as_u64().unwrap_or(0);
+                }
+            });
+            last
+        };
+        while complete() < u64::from(CHUNK_CYCLES) * 2 {
+            assert!(Instant::now() < deadline, "two chunks on disk");
+            std::thread::yield_now();
+        }
+        drop(r);
+        assert_eq!(complete(), u64::from(CHUNK_CYCLES) * 2 + 10);
     }
 }

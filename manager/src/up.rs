@@ -423,6 +423,9 @@ fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
         if !r.topics.is_empty() {
             a.extend(["--topics".into(), r.topics.join(",")]);
         }
+        if r.encoding == crate::recorder::SampleEncoding::Json {
+            a.extend(["--record-encoding".into(), "json".into()]);
+        }
     }
     if opts.json {
         a.push("--json".into());

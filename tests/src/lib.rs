@@ -103,6 +103,67 @@ pub fn build_foreign_examples() {
     }
 }
 
+/// The Python packages of `tests/requirements.txt` (the ROS tools' readers), installed with
+/// pip into `<target>/pydeps` once per target directory, and that directory, for `PYTHONPATH`.
+///
+/// Tests run in parallel, in this process and others: the first one installs, under a file
+/// lock, and the others wait for it; a changed requirements file installs again.
+pub fn python_deps() -> PathBuf {
+    static DIR: std::sync::OnceLock<Result<PathBuf, String>> = std::sync::OnceLock::new();
+    match DIR.get_or_init(install_python_deps) {
+        Ok(dir) => dir.clone(),
+        Err(e) => panic!("{e}"),
+    }
+}
+
+fn install_python_deps() -> Result<PathBuf, String> {
+    let requirements = repo_root().join("tests/requirements.txt");
+    let wanted = std::fs::read_to_string(&requirements)
+        .map_err(|e| format!("{}: {e}", requirements.display()))?;
+    // target/<profile>/ -> target/
+    let target = bin("skillfab")
+        .parent()
+        .and_then(Path::parent)
+        .ok_or("no target directory")?
+        .to_path_buf();
+    let dir = target.join("pydeps");
+    // What was installed: the requirements' text, written once pip succeeded.
+    let stamp = target.join("pydeps.installed");
+    let lock_path = target.join("pydeps.lock");
+    let lock =
+        std::fs::File::create(&lock_path).map_err(|e| format!("{}: {e}", lock_path.display()))?;
+    let _lock = nix::fcntl::Flock::lock(lock, nix::fcntl::FlockArg::LockExclusive)
+        .map_err(|(_, e)| format!("locking {}: {e}", lock_path.display()))?;
+    if std::fs::read_to_string(&stamp).ok().as_deref() == Some(wanted.as_str()) {
+        return Ok(dir);
+    }
+    let _ = std::fs::remove_file(&stamp);
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new("python3")
+        .args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+        ])
+        .arg("--target")
+        .arg(&dir)
+        .arg("-r")
+        .arg(&requirements)
+        .output()
+        .map_err(|e| format!("python3 -m pip: {e} (the tests need python3 with pip)"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "pip install -r {} failed:\n{}",
+            requirements.display(),
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    std::fs::write(&stamp, &wanted).map_err(|e| format!("{}: {e}", stamp.display()))?;
+    Ok(dir)
+}
+
 /// The hello network as a launch file for [`TestDomain::launch_file`].
 pub const HELLO: &str = "[manager]\nperiod_ms = 5\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n[[process]]\nname = \"scale\"\nbin = \"{bin:scale}\"\n[[process]]\nname = \"smooth\"\nbin = \"{bin:smooth}\"\n";
 

@@ -342,6 +342,15 @@ struct DemoRuns {
     /// Record the first run at full rate into this MCAP file (see `skillfab replay`).
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// With --record: samples in `cdr` (with ros2msg schemas) or `json`.
+    #[arg(
+        long,
+        value_enum,
+        value_name = "ENCODING",
+        default_value_t,
+        requires = "record"
+    )]
+    record_encoding: skillfab_manager::recorder::SampleEncoding,
     /// Copy the first run's ground truth here (the simulator's CSV: time, pose, speeds,
     /// collisions, … every 100 ms of the robot's time).
     #[arg(long, value_name = "FILE.csv")]
@@ -374,6 +383,7 @@ impl DemoRuns {
             },
             lockstep: self.lockstep,
             record: self.record.map(std::path::absolute).transpose()?,
+            record_encoding: self.record_encoding,
             truth: self.truth,
             plan,
             tree: None,

@@ -7,7 +7,7 @@
 use super::record::Recording;
 use crate::graph::ChannelPlan;
 use crate::monitors::Monitors;
-use crate::recorder::{IoSample, Recorder};
+use crate::recorder::{IoSample, Recorder, SampleSource};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
 use skillfab_proto::board::{Board, MAX_CHANNELS, MAX_SLOTS};
@@ -16,7 +16,6 @@ use skillfab_proto::control::{ControlError, EventKind};
 use skillfab_proto::decl::{Policy, PortDecl};
 use skillfab_proto::schema::MessageSchema;
 use skillfab_proto::services::RawReader;
-use skillfab_proto::value::FieldPath;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -48,11 +47,8 @@ pub(crate) struct Observers {
 
 /// A port whose samples go to the fabric log.
 pub(crate) struct IoPort {
-    pub(crate) dir: &'static str,
-    pub(crate) port: String,
-    pub(crate) topic: String,
-    pub(crate) type_name: String,
-    pub(crate) field: Arc<FieldPath>,
+    /// The skill, port and type of its samples (shared by each of them).
+    pub(crate) source: Arc<SampleSource>,
     /// On a proposal topic, the proposer's slot.
     pub(crate) slot: Option<u32>,
     /// The cycle of the last sample logged (each sample once).
@@ -165,15 +161,16 @@ impl Observers {
             return;
         };
         let mut polled = HashSet::new();
-        for (skill, ports) in &mut self.io_log {
+        for ports in self.io_log.values_mut() {
             for p in ports.iter_mut() {
-                let Some(reader) = self.readers.get_mut(&p.topic) else {
+                let topic = &p.source.topic;
+                let Some(reader) = self.readers.get_mut(topic) else {
                     continue;
                 };
-                if polled.insert(p.topic.clone())
+                if polled.insert(topic.clone())
                     && let Err(e) = reader.poll()
                 {
-                    tracing::warn!(topic = %p.topic, error = %e, "I/O log read failed");
+                    tracing::warn!(%topic, error = %e, "I/O log read failed");
                 }
                 let Some((bytes, h)) = reader.latest_of(p.slot) else {
                     continue;
@@ -184,15 +181,9 @@ impl Observers {
                 p.last = h.cycle;
                 rec.sample(IoSample {
                     cycle: h.cycle,
-                    skill: skill.clone(),
-                    dir: p.dir,
-                    port: p.port.clone(),
-                    topic: p.topic.clone(),
-                    type_name: p.type_name.clone(),
                     stamp_ns: h.stamp_ns,
-                    field: p.field.clone(),
+                    source: p.source.clone(),
                     bytes: bytes.to_vec(),
-                    raw: false,
                 });
             }
         }

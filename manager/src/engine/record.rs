@@ -6,14 +6,14 @@
 //!
 //! Samples are read from shared memory at the end of each cycle, before anything else reads
 //! them, copied out (a sample must be released to its publisher) and handed to the recorder's
-//! writer thread, which decodes, encodes and writes them: the cycle's own path only pays the
-//! copy. A sample the writer thread has not taken yet waits in its queue, so nothing is dropped
+//! writer thread, which encodes (CDR, or JSON if asked for) and writes them: the cycle's own
+//! path only pays the copy, and a sample's names travel with it as one shared reference. A sample the writer thread has not taken yet waits in its queue, so nothing is dropped
 //! for a slow disk; what a subscriber's buffer could not hold (more than
 //! `SUBSCRIBER_BUFFER` samples of one topic in one cycle) is counted in the cycle markers.
 
 use super::observers::Observers;
 use super::skills::Skills;
-use crate::recorder::{IoSample, Recorder};
+use crate::recorder::{IoSample, Recorder, SampleEncoding, SampleSource};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
 use serde_json::json;
@@ -23,7 +23,6 @@ use skillfab_proto::domain::Domain;
 use skillfab_proto::names;
 use skillfab_proto::schema::MessageSchema;
 use skillfab_proto::services::RawReader;
-use skillfab_proto::value::{self, FieldPath};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -35,6 +34,8 @@ pub struct RecordSpec {
     pub path: PathBuf,
     /// Topics to record; empty: every topic.
     pub topics: Vec<String>,
+    /// How samples are written.
+    pub encoding: SampleEncoding,
 }
 
 /// A recording in progress.
@@ -53,10 +54,9 @@ pub(crate) struct Recording {
 }
 
 struct RecTopic {
-    type_name: String,
-    field: Arc<FieldPath>,
-    /// Producers by board slot: (skill, port, `out` or `cmd`).
-    producers: HashMap<u32, (String, String, &'static str)>,
+    schema: MessageSchema,
+    /// Producers by board slot (a device's command: `cmd`, else `out`).
+    producers: HashMap<u32, Arc<SampleSource>>,
     /// Newest cycle recorded, per producer.
     last: HashMap<String, u64>,
 }
@@ -116,13 +116,14 @@ impl Recording {
             std::fs::create_dir_all(dir).map_err(cannot)?;
         }
         std::fs::File::create(&spec.path).map_err(cannot)?;
-        let rec = Recorder::open(&spec.path).map_err(cannot)?;
+        let rec = Recorder::open_with(&spec.path, spec.encoding).map_err(cannot)?;
         rec.line(
             "start",
             Some(cycle),
             json!({
                 "domain": domain, "pid": std::process::id(),
                 "recording": true, "topics": spec.topics,
+                "encoding": format!("{:?}", spec.encoding).to_lowercase(),
                 "period_ns": clock.period.map(|p| p.as_nanos() as u64),
                 "lockstep": clock.lockstep,
             }),
@@ -175,14 +176,25 @@ impl Recording {
             }
             for (bytes, h) in taken {
                 // A command's header names the proposal that won, not the device.
-                let (skill, port, dir) = h
+                let source = match h
                     .slot
                     .get()
                     .and_then(|s| t.producers.get(&s))
-                    .or_else(|| t.producers.values().find(|p| p.2 == "cmd"))
-                    .cloned()
-                    .unwrap_or_else(|| (format!("slot{}", h.slot), topic.clone(), "out"));
-                let last = t.last.entry(skill.clone()).or_insert(0);
+                    .or_else(|| t.producers.values().find(|p| p.dir == "cmd"))
+                {
+                    Some(s) => s.clone(),
+                    None => {
+                        let name = format!("slot{}", h.slot);
+                        match SampleSource::new(&name, "out", topic, topic, &t.schema, true) {
+                            Ok(s) => Arc::new(s),
+                            Err(_) => continue,
+                        }
+                    }
+                };
+                let last = match t.last.get_mut(&source.skill) {
+                    Some(l) => l,
+                    None => t.last.entry(source.skill.clone()).or_insert(0),
+                };
                 if h.cycle <= *last && *last > 0 {
                     self.out_of_order += 1;
                 }
@@ -190,15 +202,9 @@ impl Recording {
                 n += 1;
                 self.rec.sample(IoSample {
                     cycle: h.cycle,
-                    skill,
-                    dir,
-                    port,
-                    topic: topic.clone(),
-                    type_name: t.type_name.clone(),
                     stamp_ns: h.stamp_ns,
-                    field: t.field.clone(),
+                    source,
                     bytes,
-                    raw: true,
                 });
             }
         }
@@ -275,6 +281,7 @@ impl Observers {
                     RecordSpec {
                         path: PathBuf::from(f),
                         topics,
+                        encoding: SampleEncoding::default(),
                     },
                     at,
                 )
@@ -372,16 +379,23 @@ impl Observers {
                     }
                 }
             }
-            let Ok(field) = value::resolve(&schema, "") else {
+            let Ok(source) = SampleSource::new(&skill, dir, &port, &topic, &schema, true) else {
                 continue;
             };
             let t = rec.topics.entry(topic).or_insert_with(|| RecTopic {
-                type_name: schema.type_name.clone(),
-                field: Arc::new(field),
+                schema,
                 producers: HashMap::new(),
                 last: HashMap::new(),
             });
-            t.producers.insert(slot, (skill, port, dir));
+            // The same source as before (the writer's channel cache is keyed by it) unless it
+            // changed.
+            let same = t.producers.get(&slot).is_some_and(|s| {
+                (s.skill.as_str(), s.port.as_str(), s.dir) == (skill.as_str(), port.as_str(), dir)
+                    && s.schema == source.schema
+            });
+            if !same {
+                t.producers.insert(slot, Arc::new(source));
+            }
         }
     }
 

@@ -189,15 +189,13 @@ fn without_host(v: &mut serde_json::Value) {
     }
 }
 
-/// Every JSON record of an MCAP recording, in order, without what is of the host
-/// ([`OF_THE_HOST`]).
+/// Every record of an MCAP recording, in order (a CDR sample as the JSON record of its
+/// decoded value and bytes), without what is of the host ([`OF_THE_HOST`]).
 fn records(file: &std::path::Path) -> Vec<serde_json::Value> {
-    let bytes = std::fs::read(file).unwrap();
-    mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
-        .unwrap()
-        .map_while(Result::ok)
-        .map(|m| {
-            let mut r: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+    let text = skillfab_manager::recorder::read_records(file).unwrap();
+    text.lines()
+        .map(|l| {
+            let mut r: serde_json::Value = serde_json::from_str(l).unwrap();
             without_host(&mut r);
             r
         })

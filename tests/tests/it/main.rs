@@ -17,4 +17,5 @@ mod faults;
 mod newcomer;
 mod polyglot;
 mod replay;
+mod ros_tools;
 mod sequence;

@@ -7,6 +7,7 @@
 use nix::sys::signal::Signal;
 use serde_json::Value as Json;
 use skillfab_client::Client;
+use skillfab_manager::recorder::{ReadRecord, read_file};
 use skillfab_tests::{TestDomain, bin};
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -73,42 +74,39 @@ pub(crate) fn replay(t: &TestDomain, file: &Path, args: &[&str]) -> (Json, Outpu
     (report, out)
 }
 
-/// Every JSON record of an MCAP recording, in order.
+/// Every record of an MCAP recording, in order (a CDR sample as the JSON record of its
+/// decoded value and bytes); of a file still being written, those of its closed chunks (none
+/// before the first).
 fn records(file: &Path) -> Vec<Json> {
-    let bytes = std::fs::read(file).unwrap();
-    mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
-        .unwrap()
-        .map_while(Result::ok)
-        .map(|m| serde_json::from_slice(&m.data).unwrap())
-        .collect()
+    let mut out = Vec::new();
+    let _ = read_file(file, |r| {
+        out.push(match r {
+            ReadRecord::Json(j) => j,
+            ReadRecord::Sample(s) => s.to_json(),
+        });
+    });
+    out
 }
 
 /// The cycle after which to kill each of `skills` in a replay of `rec`: the middle of the
 /// cycles it published in (it runs then, with what it learnt since its activation), in the
 /// order of those cycles; and the `--kill` argument that asks for them.
 pub(crate) fn mid_mission_kills(rec: &Path, skills: &[&str]) -> (Vec<(String, u64)>, String) {
-    /// What is read of each record (a long mission's are many: not every value decoded).
-    #[derive(serde::Deserialize)]
-    struct Head {
-        kind: String,
-        skill: Option<String>,
-        cycle: Option<u64>,
-    }
-    let bytes = std::fs::read(rec).unwrap();
-    let heads: Vec<Head> =
-        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
-            .unwrap()
-            .map_while(Result::ok)
-            .map(|m| serde_json::from_slice(&m.data).unwrap())
-            .filter(|h: &Head| h.kind == "sample")
-            .collect();
+    // Who published in which cycle (a long mission's samples are many: no value decoded).
+    let mut heads: Vec<(String, u64)> = Vec::new();
+    read_file(rec, |r| {
+        if let ReadRecord::Sample(s) = r {
+            heads.push((s.channel.skill.clone(), s.cycle));
+        }
+    })
+    .unwrap();
     let mut kills: Vec<(String, u64)> = skills
         .iter()
         .map(|skill| {
             let cycles: Vec<u64> = heads
                 .iter()
-                .filter(|h| h.skill.as_deref() == Some(*skill))
-                .filter_map(|h| h.cycle)
+                .filter(|h| h.0 == *skill)
+                .map(|h| h.1)
                 .collect();
             // (`deliver` publishes only when its progress changes: a few samples.)
             assert!(cycles.len() >= 3, "{skill} ran in the recorded mission");
@@ -338,4 +336,94 @@ fn a_recording_cut_short_by_kill_9_replays_to_its_last_complete_cycle_wander_kil
         r["samples"].as_u64().unwrap() > 500,
         "proposals compared: {r}"
     );
+}
+
+#[test]
+fn a_recording_of_json_samples_holds_what_a_cdr_one_holds_and_replays_as_well() {
+    let t = TestDomain::new("replayjson");
+    let traj = t.dir.join("truth.csv");
+    let launch = wandering(&t, 3, &traj);
+    let (json, cdr) = (t.dir.join("json.mcap"), t.dir.join("cdr.mcap"));
+    for (file, encoding) in [(&json, "json"), (&cdr, "cdr")] {
+        let report = t.up_json(
+            &launch,
+            &[
+                "--lockstep",
+                "--cycles",
+                "800",
+                "--record",
+                file.to_str().unwrap(),
+                "--record-encoding",
+                encoding,
+            ],
+        );
+        assert_eq!(report["overruns"], 0, "{report}");
+    }
+    // Each file's samples in its encoding.
+    let encodings = |file: &Path| {
+        let bytes = std::fs::read(file).unwrap();
+        let mut seen = std::collections::BTreeSet::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            if m.channel.topic == "/wander/out/drive" {
+                seen.insert(m.channel.message_encoding.clone());
+            }
+        }
+        seen.into_iter().collect::<Vec<_>>()
+    };
+    assert_eq!(encodings(&json), ["json"]);
+    assert_eq!(encodings(&cdr), ["cdr"]);
+    // One seed, one run: every sample's cycle, producer and bytes alike in both (a JSON
+    // file's `raw` holds the padding the publisher's memory held, a CDR one zeros: the JSON
+    // sample's padding is zeroed through its schema).
+    let samples = |file: &Path| -> Vec<(u64, String, String, String, Vec<u8>)> {
+        let mut out = Vec::new();
+        read_file(file, |r| match r {
+            ReadRecord::Sample(s) => out.push((
+                s.cycle,
+                s.channel.skill.clone(),
+                s.channel.port.clone(),
+                s.channel.schema.type_name.clone(),
+                s.bytes,
+            )),
+            ReadRecord::Json(j) if j["kind"] == "sample" => {
+                let text = |k: &str| j[k].as_str().unwrap().to_string();
+                let schema = skillfab_msgs::registry()
+                    .iter()
+                    .find(|t| t.type_name == j["type"])
+                    .map(|t| (t.schema)())
+                    .unwrap();
+                let raw = skillfab_manager::recorder::unhex(j["raw"].as_str().unwrap()).unwrap();
+                let mut cdr = Vec::new();
+                skillfab_proto::cdr::encode(&schema, &raw, &mut cdr);
+                out.push((
+                    j["cycle"].as_u64().unwrap(),
+                    text("skill"),
+                    text("port"),
+                    text("type"),
+                    skillfab_proto::cdr::decode(&schema, &cdr).unwrap(),
+                ));
+            }
+            ReadRecord::Json(_) => {}
+        })
+        .unwrap();
+        out
+    };
+    let (a, b) = (samples(&json), samples(&cdr));
+    assert!(a.len() > 2000, "{} samples", a.len());
+    if let Some(i) = (0..a.len().min(b.len())).find(|&i| a[i] != b[i]) {
+        panic!("sample {i}: JSON {:?} / CDR {:?}", a[i], b[i]);
+    }
+    assert_eq!(a.len(), b.len());
+    // Both replay, cycle for cycle.
+    for file in [&json, &cdr] {
+        let (r, out) = replay(&t, file, &["--skills", "avoid,wander"]);
+        assert!(out.status.success(), "{}: {r}", file.display());
+        assert_eq!(r["divergence"], Json::Null, "{r}");
+        assert_eq!(r["identical_cycles"], r["cycles"], "{r}");
+        assert!(
+            r["samples"].as_u64().unwrap() >= 800,
+            "outputs compared: {r}"
+        );
+    }
 }

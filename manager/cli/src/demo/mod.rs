@@ -89,6 +89,8 @@ pub struct DemoOptions {
     pub lockstep: bool,
     /// Record the first run here (MCAP, every topic).
     pub record: Option<PathBuf>,
+    /// How the recording's samples are written.
+    pub record_encoding: skillfab_manager::recorder::SampleEncoding,
     /// Copy the first run's ground truth (the simulator's trajectory CSV) here.
     pub truth: Option<PathBuf>,
     /// The plan file (`skillfab sequence`'s format, checked) that drives the robot. It runs
@@ -367,6 +369,9 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     });
     if let Some(r) = opts.record.as_ref().filter(|_| run == 0) {
         cmd.arg("--record").arg(r);
+        if opts.record_encoding == skillfab_manager::recorder::SampleEncoding::Json {
+            cmd.args(["--record-encoding", "json"]);
+        }
     }
     cmd.env_remove("SKILLFAB_DOMAIN")
         .stdin(Stdio::null())

@@ -91,14 +91,20 @@ fn leaves_of(kind: &FieldKind, path: String, offset: usize, out: &mut Vec<Leaf>)
     }
 }
 
-/// The fields of a message type of the shared catalog, in declaration order (`None`: a type
-/// the catalog does not hold).
-fn leaves(type_name: &str) -> Option<Vec<Leaf>> {
-    let t = skillfab_msgs::registry()
-        .iter()
-        .find(|t| t.type_name == type_name)?;
+/// The fields of a sample's message type in declaration order: of the layout the recording
+/// gives, else of the shared catalog (`None`: neither knows it).
+fn leaves(sample: &Sample) -> Option<Vec<Leaf>> {
+    let schema = match &sample.schema {
+        Some(s) => s.as_ref().clone(),
+        None => {
+            let t = skillfab_msgs::registry()
+                .iter()
+                .find(|t| t.type_name == sample.type_name)?;
+            (t.schema)()
+        }
+    };
     let mut out = Vec::new();
-    leaves_of(&FieldKind::Struct((t.schema)()), String::new(), 0, &mut out);
+    leaves_of(&FieldKind::Struct(schema), String::new(), 0, &mut out);
     Some(out)
 }
 
@@ -191,7 +197,7 @@ pub(super) fn compare(
                 (Some(a), Some(b)) => {
                     let fields = layouts
                         .entry(a.type_name.clone())
-                        .or_insert_with(|| leaves(&a.type_name));
+                        .or_insert_with(|| leaves(a));
                     sample_difference(a, b, fields.as_deref())
                 }
                 (a, b) => Some((
@@ -242,6 +248,7 @@ mod tests {
             topic: "t".into(),
             type_name: type_name.into(),
             bytes,
+            schema: None,
             value: Json::Null,
         }
     }
@@ -252,7 +259,7 @@ mod tests {
         let mut a = vec![0u8; 40];
         let mut b = a.clone();
         a[1..8].copy_from_slice(&[0x66, 0xc4, 0x33, 0xef, 0x55, 0, 0]);
-        let fields = leaves("skillfab.Door").unwrap();
+        let fields = leaves(&sample("skillfab.Door", Vec::new())).unwrap();
         assert!(
             sample_difference(
                 &sample("skillfab.Door", a.clone()),

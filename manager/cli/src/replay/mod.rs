@@ -22,9 +22,10 @@ use serde::Serialize;
 use serde_json::Value as Json;
 use skillfab_client::Client;
 use skillfab_manager::launch::{LaunchFile, ManagerSection, ProcessEntry, find_program};
-use skillfab_manager::recorder::{hex, read_records, unhex};
+use skillfab_manager::recorder::{ReadRecord, hex, read_file, unhex};
 use skillfab_proto::control::SkillState;
 use skillfab_proto::domain::Domain;
+use skillfab_proto::schema::MessageSchema;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -75,6 +76,9 @@ struct Sample {
     topic: String,
     type_name: String,
     bytes: Vec<u8>,
+    /// Its layout as the recording gives it (a CDR recording; a JSON one has the `value`).
+    schema: Option<std::sync::Arc<MessageSchema>>,
+    /// The decoded value of a JSON recording's sample (`Null` in a CDR recording).
     value: Json,
 }
 
@@ -94,11 +98,30 @@ struct Recording {
 
 impl Recording {
     fn read(path: &Path) -> anyhow::Result<Recording> {
-        let text = read_records(path)?;
         let mut r = Recording::default();
-        for (n, line) in text.lines().enumerate() {
-            let j: Json = serde_json::from_str(line)
-                .with_context(|| format!("{}: record {} is not JSON", path.display(), n + 1))?;
+        // A CDR channel's schema, shared by its samples.
+        let mut schemas: BTreeMap<String, std::sync::Arc<MessageSchema>> = BTreeMap::new();
+        read_file(path, |record| {
+            let j = match record {
+                ReadRecord::Json(j) => j,
+                ReadRecord::Sample(s) => {
+                    let c = &s.channel;
+                    let schema = schemas
+                        .entry(c.topic.clone() + "/" + &c.schema.type_name)
+                        .or_insert_with(|| std::sync::Arc::new(c.schema.clone()))
+                        .clone();
+                    r.samples.entry(s.cycle).or_default().push(Sample {
+                        skill: c.skill.clone(),
+                        port: c.port.clone(),
+                        topic: c.topic.clone(),
+                        type_name: c.schema.type_name.clone(),
+                        bytes: s.bytes,
+                        schema: Some(schema),
+                        value: Json::Null,
+                    });
+                    return;
+                }
+            };
             let cycle = j["cycle"].as_u64();
             match j["kind"].as_str() {
                 Some("start") if j["recording"] == true => r.period_ns = j["period_ns"].as_u64(),
@@ -107,10 +130,11 @@ impl Recording {
                 Some("cycle") => {
                     r.complete.extend(cycle);
                 }
+                // A JSON recording's sample (recordings before CDR, `--record-encoding json`).
                 Some("sample") => {
                     let (Some(cycle), Some(bytes)) = (cycle, j["raw"].as_str().and_then(unhex))
                     else {
-                        continue;
+                        return;
                     };
                     let text = |k: &str| j[k].as_str().unwrap_or_default().to_string();
                     r.samples.entry(cycle).or_default().push(Sample {
@@ -119,12 +143,13 @@ impl Recording {
                         topic: text("topic"),
                         type_name: text("type"),
                         bytes,
+                        schema: None,
                         value: j["value"].clone(),
                     });
                 }
                 _ => {}
             }
-        }
+        })?;
         if r.complete.is_empty() {
             bail!(
                 "{} holds no complete cycle: is it a recording (skillfab up --record)?",

@@ -3,10 +3,10 @@
 use super::unknown;
 use crate::engine::observers::{IoPort, Observers, cannot_read};
 use crate::engine::skills::Skills;
+use crate::recorder::SampleSource;
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
 use skillfab_proto::control::{ControlError, Reply, Response};
-use skillfab_proto::value;
 
 /// Starts or stops logging a skill's input and output samples to the fabric log, at `cycle`.
 pub(crate) fn set_io_log(
@@ -39,33 +39,23 @@ pub(crate) fn set_io_log(
     let sides = [("in", &e.decl.inputs), ("out", &e.decl.outputs)];
     for (dir, decls) in sides {
         for p in decls {
-            let field = value::resolve(&p.schema, "").map_err(|error| ControlError::BadPath {
-                path: format!("{skill}.{}", p.port),
-                error,
-            })?;
+            let source = SampleSource::new(skill, dir, &p.port, &p.topic, &p.schema, false)
+                .map_err(|error| ControlError::BadPath {
+                    path: format!("{skill}.{}", p.port),
+                    error,
+                })?;
             let slot = (dir == "out" && p.kind == skillfab_proto::decl::PortKind::Proposal)
                 .then_some(s as u32);
-            ports.push((
-                dir,
-                p.port.clone(),
-                p.topic.clone(),
-                p.schema.clone(),
-                field,
-                slot,
-            ));
+            ports.push((p.schema.clone(), source, slot));
         }
     }
     let mut logged = Vec::new();
-    for (dir, port, topic, schema, field, slot) in ports {
+    for (schema, source, slot) in ports {
         observers
-            .read(node, &topic, &schema)
-            .map_err(|e| cannot_read(&topic, &e))?;
+            .read(node, &source.topic, &schema)
+            .map_err(|e| cannot_read(&source.topic, &e))?;
         logged.push(IoPort {
-            dir,
-            port,
-            topic,
-            type_name: schema.type_name.clone(),
-            field: std::sync::Arc::new(field),
+            source: std::sync::Arc::new(source),
             slot,
             last: cycle,
         });

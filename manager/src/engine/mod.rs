@@ -18,12 +18,13 @@
 //! The manager's state is in parts that each own one job: the registry ([`skills`]), the
 //! cycles ([`Cycles`]: plan, pacing, holds, figures), the observers ([`observers`]: readers,
 //! monitors, fabric log, recording, channels, bridges), the events on their way out
-//! ([`Outbox`]) and the state file ([`state`]). Requests are carried out by handlers handed the
+//! ([`Outbox`]), the running plan's live tree ([`plans`]) and the state file ([`state`]). Requests are carried out by handlers handed the
 //! parts they need ([`requests`]).
 
 mod cycle;
 mod holds;
 mod observers;
+mod plans;
 mod record;
 mod registry;
 mod requests;
@@ -298,6 +299,8 @@ pub struct Manager {
     cycles: Cycles,
     observers: Observers,
     events: Outbox,
+    /// The running plan's tree and statuses, as its runner reports them.
+    plans: plans::Plans,
     state: state::StateFile,
     /// Requests in, answers and events out.
     control: ControlPlane,
@@ -388,6 +391,7 @@ impl Manager {
             cycles,
             observers: Observers::new(fabric_log),
             events: Outbox::default(),
+            plans: plans::Plans::default(),
             state: state::StateFile::default(),
             control,
             ran: false,

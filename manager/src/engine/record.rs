@@ -399,6 +399,14 @@ impl Observers {
         }
     }
 
+    /// A plan's whole tree, as it arrived in `cycle` (its changes follow as events).
+    pub(crate) fn record_plan(&self, cycle: u64, tree: &skillfab_proto::control::PlanTree) {
+        if let Some(r) = &self.recording {
+            r.rec
+                .line("plan", Some(cycle), skillfab_proto::json::plan_json(tree));
+        }
+    }
+
     /// Events go into the recording as they are published.
     pub(crate) fn record_events(&self, events: &[Event]) {
         if let Some(r) = &self.recording {

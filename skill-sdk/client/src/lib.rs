@@ -62,8 +62,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use skillfab_proto::board::Board;
 use skillfab_proto::control::{
-    self, ControlError, Event, GaveUpInfo, MonitorFate, MonitorInfo, MonitorMode, ParamArg, Reply,
-    Request, SkillInfo, Stats,
+    self, ControlError, Event, GaveUpInfo, MonitorFate, MonitorInfo, MonitorMode, ParamArg,
+    PlanReport, PlanTree, Reply, Request, SkillInfo, Stats,
 };
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::{LogLine, LogReader};
@@ -702,6 +702,25 @@ impl Client {
             Reply::GaveUp(list) => Ok(list),
             other => Err(ClientError::Unexpected(Box::new(other))),
         }
+    }
+
+    /// The plan running now — its tree, and each node's status with the cycle it has had it
+    /// since — or `None` when no plan runs. Its changes come as `EventKind::PlanChanged`
+    /// events ([`Client::subscribe`]); a `PlanStarted` event says a new tree replaced it.
+    pub fn plan(&self) -> Result<Option<PlanTree>, ClientError> {
+        match self.request(&Request::CurrentPlan)? {
+            Reply::Plan(tree) => Ok(tree),
+            other => Err(ClientError::Unexpected(Box::new(other))),
+        }
+    }
+
+    /// A plan runner's report to the manager: its plan's tree when it starts, the status
+    /// changes of a tick (`skillfab sequence` sends them; docs/sequence.md). A report about
+    /// a plan the manager does not run for this client is refused with
+    /// `ControlError::PlanNotCurrent`, one naming a node the tree does not have with
+    /// `ControlError::UnknownPlanNode`, a malformed tree with `ControlError::BadPlanTree`.
+    pub fn report_plan(&self, report: PlanReport) -> Result<(), ClientError> {
+        self.done(Request::Plan(report))
     }
 
     /// Removes a monitor.

@@ -1,7 +1,7 @@
 //! The fabric's values and events as JSON: what `skillfab ctl --json`, the fabric log and the
 //! C and Python clients print and parse.
 
-use crate::control::{Event, EventKind, PortInfo, SkillInfo, Stats};
+use crate::control::{Event, EventKind, PlanTree, PortInfo, SkillInfo, Stats};
 use crate::param::ParamValue;
 use crate::value::Value;
 use serde_json::{Value as Json, json};
@@ -121,6 +121,29 @@ pub fn event_json(e: &Event) -> Json {
             "process_gave_up",
             json!({"process": process, "restarts": restarts, "status": status}),
         ),
+        EventKind::PlanChanged {
+            plan,
+            cycle,
+            changes,
+        } => (
+            "plan_changed",
+            json!({"plan": plan, "at": cycle,
+                   "changes": changes.iter().map(|c| json!({"id": c.id, "status": c.status.as_str()}))
+                       .collect::<Vec<_>>()}),
+        ),
+        EventKind::PlanStarted {
+            plan,
+            client,
+            nodes,
+            replaced,
+        } => (
+            "plan_started",
+            json!({"plan": plan, "client": client, "nodes": nodes, "replaced": replaced}),
+        ),
+        EventKind::PlanEnded { plan, status } => (
+            "plan_ended",
+            json!({"plan": plan, "status": status.as_str()}),
+        ),
         EventKind::ChannelWinner {
             channel,
             winner,
@@ -139,6 +162,21 @@ pub fn event_json(e: &Event) -> Json {
         o.extend(f);
     }
     obj
+}
+
+/// A plan's tree as JSON (what `skillfab ctl --json plan` prints, and a recording's `plan`
+/// record): `{"plan", "nodes": [{"id", "parent", "name", "kind", "detail", "status", "since"}]}`.
+pub fn plan_json(t: &PlanTree) -> Json {
+    let nodes: Vec<Json> = t
+        .nodes
+        .iter()
+        .map(|n| {
+            let (status, since) = t.status.get(n.id as usize).copied().unwrap_or_default();
+            json!({"id": n.id, "parent": n.parent, "name": n.name, "kind": n.kind,
+                   "detail": n.detail, "status": status.as_str(), "since": since})
+        })
+        .collect();
+    json!({"plan": t.plan, "nodes": nodes})
 }
 
 /// A registered skill as JSON (what `skillfab ctl --json ls` prints per skill).

@@ -6,12 +6,13 @@
 //! control changes (the recording and the fabric log keep them), a replan. [`Manager::apply`]
 //! carries effects out in one place. One file per family: `list` (skills, stats, schemas),
 //! `params` (activation, parameters, priorities), `query` (values), `monitors`, `logging` (the
-//! fabric log's I/O log).
+//! fabric log's I/O log), `plan` (the running plan's tree and statuses).
 
 mod list;
 mod logging;
 mod monitors;
 mod params;
+mod plan;
 mod query;
 
 pub(crate) use logging::set_io_log;
@@ -41,6 +42,9 @@ pub(crate) struct Effects {
     pub(crate) events: Vec<EventKind>,
     /// The cycle plan must be made again before the next cycle (activation, priority).
     pub(crate) replan: bool,
+    /// Plan trees that arrived whole: the recording keeps each as a `plan` record, so that
+    /// a replay can rebuild the tree the `plan_changed` events change.
+    pub(crate) plan_trees: Vec<skillfab_proto::control::PlanTree>,
 }
 
 /// A control change a client made, which takes effect from the next cycle to start.
@@ -215,6 +219,14 @@ impl Manager {
                 Effects::default(),
             ),
             Request::Stats => (Ok(Reply::Stats(self.stats_info())), Effects::default()),
+            Request::Plan(report) => {
+                let at = self.in_progress();
+                split(plan::report(&mut self.plans, client, report, at))
+            }
+            Request::CurrentPlan => (
+                Ok(Reply::Plan(self.plans.current().cloned())),
+                Effects::default(),
+            ),
             Request::Latencies(n) => {
                 let n = (n as usize).min(MAX_LATENCIES);
                 let stats = &self.cycles.stats;
@@ -382,6 +394,9 @@ impl Manager {
             };
             self.observers.record_control(from, what, fields);
             self.events.push(event);
+        }
+        for tree in &effects.plan_trees {
+            self.observers.record_plan(from - 1, tree);
         }
         for event in effects.events {
             self.events.push(event);

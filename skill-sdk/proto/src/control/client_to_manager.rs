@@ -148,6 +148,13 @@ pub enum Request {
     /// parameters); a skill that is away, its last one. `skillfab sequence --check` checks a
     /// plan's names against them.
     Declaration(String),
+    /// A plan runner's report: its plan's shape when it starts, the status changes of each
+    /// tick ([`crate::control::PlanReport`]). The manager stamps them with the cycle they
+    /// arrived in, keeps the tree and publishes
+    /// [`crate::control::EventKind::PlanChanged`].
+    Plan(crate::control::PlanReport),
+    /// The plan running now, with each node's status ([`crate::control::Reply::Plan`]).
+    CurrentPlan,
 }
 
 /// Encodes a request.

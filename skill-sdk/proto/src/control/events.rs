@@ -138,6 +138,35 @@ pub enum EventKind {
         /// The last cycle run.
         cycle: u64,
     },
+    /// Nodes of the running plan changed status (a tick of its runner). A tick that changed
+    /// more nodes than one event carries comes as several, in order.
+    PlanChanged {
+        /// The plan ([`crate::control::PlanTree::plan`]).
+        plan: String,
+        /// The cycle the changes arrived in (each node has its status since then).
+        cycle: u64,
+        /// The nodes and their new statuses.
+        changes: Vec<crate::control::PlanNodeChange>,
+    },
+    /// A plan's tree arrived: a plan started, or a new runner took it over (its statuses
+    /// are the tree's now; `Request::CurrentPlan` gives the tree).
+    PlanStarted {
+        /// The plan.
+        plan: String,
+        /// The runner (client id).
+        client: String,
+        /// Nodes in its tree.
+        nodes: u32,
+        /// The plan it replaced (another runner's, or this plan's previous runner's).
+        replaced: Option<String>,
+    },
+    /// The running plan ended (succeeded, failed, or was halted): no plan runs now.
+    PlanEnded {
+        /// The plan.
+        plan: String,
+        /// Its root's last status (`Idle`: halted).
+        status: crate::control::NodeStatus,
+    },
 }
 
 /// One event of the stream.

@@ -215,6 +215,8 @@ pub enum Reply {
     GaveUp(Vec<GaveUpInfo>),
     /// A skill's declaration ([`crate::control::Request::Declaration`]).
     Declaration(Box<crate::decl::SkillDecl>),
+    /// The plan running now, if one is ([`crate::control::Request::CurrentPlan`]).
+    Plan(Option<crate::control::PlanTree>),
 }
 
 /// A process `skillfab up` gave up restarting, as it told the manager.
@@ -352,6 +354,34 @@ pub enum ControlError {
     CannotWriteParams {
         /// The skill.
         skill: String,
+    },
+    /// A plan's shape that cannot be taken in.
+    #[error("the tree of plan '{plan}': {problem}")]
+    BadPlanTree {
+        /// The plan, as named (shortened).
+        plan: String,
+        /// What is wrong.
+        problem: crate::control::PlanTreeProblem,
+    },
+    /// A plan report about a plan that is not the running one of this client: the manager
+    /// has none (it restarted, or never had its shape: send it), or another runner's plan
+    /// replaced it.
+    #[error("plan '{plan}' is not running here ({})", match current { Some(c) => format!("'{c}' is"), None => "no plan is".to_string() })]
+    PlanNotCurrent {
+        /// The plan reported on.
+        plan: String,
+        /// The plan the manager has, if any.
+        current: Option<String>,
+    },
+    /// A status change of a node the plan's tree does not have.
+    #[error("plan '{plan}' has no node {id} (it has {nodes})")]
+    UnknownPlanNode {
+        /// The plan.
+        plan: String,
+        /// The node id sent.
+        id: u32,
+        /// Nodes in the tree.
+        nodes: u32,
     },
 }
 

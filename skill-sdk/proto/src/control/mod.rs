@@ -10,10 +10,12 @@
 mod client_to_manager;
 mod events;
 mod manager_to_client;
+mod plan;
 
 pub use client_to_manager::*;
 pub use events::*;
 pub use manager_to_client::*;
+pub use plan::*;
 
 use crate::schema::MessageSchema;
 

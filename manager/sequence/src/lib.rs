@@ -9,12 +9,14 @@
 //! docs/sequence.md.
 //!
 //! Layout: [`plan`] reads and checks the file; [`tree`] is the behaviour tree engine over a
-//! [`tree::Fabric`] (unit-tested without a fabric); [`run`] drives a real one through the
-//! client library.
+//! [`tree::Fabric`] (unit-tested without a fabric); [`live`] reports each node's status to
+//! the manager (the plan as a live tree); [`run`] drives a real one through the client
+//! library.
 
 #![warn(missing_docs)]
 
 pub mod keep;
+pub mod live;
 pub mod plan;
 pub mod run;
 pub mod tree;
@@ -23,6 +25,7 @@ pub mod tree;
 mod tests;
 
 pub use keep::{Kept, PlanState, PlanStore};
+pub use live::LiveTree;
 pub use plan::{Plan, PlanError, Reference, Use};
 pub use run::{ClientFabric, LockStep, Opening, Sequencer, run};
 pub use tree::{Fabric, FabricError, SeqError, Status};

@@ -729,3 +729,87 @@ impl Kind {
         }
     }
 }
+
+/// The longest [`Kind::detail`] (characters): a node's detail travels in the plan's tree
+/// to the manager, whose requests are bounded.
+const MAX_DETAIL: usize = 200;
+
+impl Kind {
+    /// Its BehaviorTree.CPP tag, as a plan is written (a sub-tree is shown as the tree it
+    /// names, so `SubTree` is never a node of a running tree).
+    pub fn tag(&self) -> &'static str {
+        match self {
+            Kind::Sequence(_) => "Sequence",
+            Kind::Fallback(_) => "Fallback",
+            Kind::Parallel { .. } => "Parallel",
+            Kind::Retry { .. } => "RetryUntilSuccessful",
+            Kind::Timeout { .. } => "Timeout",
+            Kind::Inverter(_) => "Inverter",
+            Kind::KeepRunningUntilFailure(_) => "KeepRunningUntilFailure",
+            Kind::ForceSuccess(_) => "ForceSuccess",
+            Kind::ForceFailure(_) => "ForceFailure",
+            Kind::WithParam { .. } => "WithParam",
+            Kind::Activate(_) => "Activate",
+            Kind::Deactivate(_) => "Deactivate",
+            Kind::SetParam { .. } => "SetParam",
+            Kind::WaitFor { .. } => "WaitFor",
+            Kind::Sleep(_) => "Sleep",
+            Kind::WaitGaveUp(_) => "WaitGaveUp",
+            Kind::Log(_) => "Log",
+            Kind::AlwaysSuccess => "AlwaysSuccess",
+            Kind::AlwaysFailure => "AlwaysFailure",
+            Kind::SubTree(_) => "SubTree",
+        }
+    }
+
+    /// What the node does, in short (its attributes as they matter to a reader of the live
+    /// tree), at most 200 characters; empty when there is nothing to say.
+    pub fn detail(&self) -> String {
+        let ms = |d: &Duration| format!("{} ms", d.as_millis());
+        let text = match self {
+            Kind::Parallel {
+                success, failure, ..
+            } => match success {
+                Some(s) => format!("success {s}, failure {failure}"),
+                None => format!("success all, failure {failure}"),
+            },
+            Kind::Retry { attempts, .. } => match attempts {
+                Some(n) => format!("{n} attempts"),
+                None => "for ever".to_string(),
+            },
+            Kind::Timeout { after, .. } => ms(after),
+            Kind::Sleep(d) => ms(d),
+            Kind::WithParam {
+                skill,
+                param,
+                value,
+                ..
+            }
+            | Kind::SetParam {
+                skill,
+                param,
+                value,
+            } => format!("{skill}.{param} = {value}"),
+            Kind::Activate(s) | Kind::Deactivate(s) => s.join(", "),
+            Kind::WaitFor { condition, hold } if *hold > 0 => {
+                format!("{condition} (held {hold} cycles)")
+            }
+            Kind::WaitFor { condition, .. } => condition.clone(),
+            Kind::WaitGaveUp(p) => p.clone(),
+            Kind::Log(m) => m.clone(),
+            Kind::SubTree(id) => id.clone(),
+            Kind::Sequence(_)
+            | Kind::Fallback(_)
+            | Kind::Inverter(_)
+            | Kind::KeepRunningUntilFailure(_)
+            | Kind::ForceSuccess(_)
+            | Kind::ForceFailure(_)
+            | Kind::AlwaysSuccess
+            | Kind::AlwaysFailure => String::new(),
+        };
+        match text.char_indices().nth(MAX_DETAIL) {
+            Some((cut, _)) => format!("{}…", &text[..cut]),
+            None => text,
+        }
+    }
+}

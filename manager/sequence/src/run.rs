@@ -2,10 +2,11 @@
 //! lock-step, resume the paused manager once the plan has reacted.
 
 use crate::keep::{Kept, PlanState, PlanStore};
+use crate::live::LiveTree;
 use crate::plan::{Plan, PlanError};
 use crate::tree::{Cx, Fabric, FabricError, Node, Override, Saved, SeqError, Status};
 use skillfab_client::{Client, ClientError};
-use skillfab_proto::control::{EventKind, MonitorFate, MonitorMode};
+use skillfab_proto::control::{EventKind, MonitorFate, MonitorMode, PlanReport, PlanTree};
 use skillfab_proto::param::ParamValue;
 use std::collections::HashSet;
 use std::time::{Duration, Instant, SystemTime};
@@ -97,6 +98,14 @@ impl Fabric for ClientFabric<'_> {
         }
         self.client.clock().map_or(Duration::ZERO, |c| c.time)
     }
+
+    fn report_plan(&mut self, report: PlanReport) -> Result<(), FabricError> {
+        self.client.report_plan(report).map_err(fabric_error)
+    }
+
+    fn current_plan(&mut self) -> Result<Option<PlanTree>, FabricError> {
+        self.client.plan().map_err(fabric_error)
+    }
 }
 
 /// A plan being run: its tree, the monitors of this client that fired, the step log, the
@@ -113,6 +122,8 @@ pub struct Sequencer {
     gave_up: HashSet<String>,
     /// Whether the manager was asked for them.
     asked_gave_up: bool,
+    /// Each node's status, reported to the manager as it changes.
+    live: LiveTree,
 }
 
 /// A plan whose state is kept ([`Sequencer::kept`]).
@@ -148,10 +159,14 @@ pub enum Opening {
 }
 
 impl Sequencer {
-    /// A sequencer for `plan`'s tree `tree` (its main tree if `None`).
+    /// A sequencer for `plan`'s tree `tree` (its main tree if `None`); its live tree is
+    /// named after the tree.
     pub fn new(plan: &Plan, tree: Option<&str>) -> Result<Sequencer, PlanError> {
+        let tree = tree.unwrap_or(&plan.main);
+        let (root, shape) = Node::build_shaped(plan, tree)?;
         Ok(Sequencer {
-            root: Node::build(plan, tree.unwrap_or(&plan.main))?,
+            root,
+            live: LiveTree::new(tree, shape),
             fired: HashSet::new(),
             steps: Vec::new(),
             origin: Instant::now(),
@@ -176,6 +191,12 @@ impl Sequencer {
     ) -> Result<Sequencer, PlanError> {
         let tree = tree.unwrap_or(&plan.main);
         let mut seq = Sequencer::new(plan, Some(tree))?;
+        // The live tree's name: the file, and the tree if not the one the file runs.
+        if tree == plan.main {
+            seq.live.rename(file);
+        } else {
+            seq.live.rename(&format!("{file} ({tree})"));
+        }
         seq.keep = Some(Keeping {
             store,
             state: PlanState::new(file, tree, plan.fingerprint, ""),
@@ -185,6 +206,11 @@ impl Sequencer {
             warned: false,
         });
         Ok(seq)
+    }
+
+    /// The plan's live tree: its shape and each node's status.
+    pub fn live(&self) -> &LiveTree {
+        &self.live
     }
 
     /// How this runner started (after [`Sequencer::open`]; `None` for a plan not kept).
@@ -455,6 +481,8 @@ impl Sequencer {
             self.gave_up.extend(listed);
             self.asked_gave_up = true;
         }
+        let resumed = self.resumed();
+        self.live.announce(fabric, resumed);
         let keep = &mut self.keep;
         let mut keep = |o: &[Override]| {
             if let Some(k) = keep.as_mut() {
@@ -469,21 +497,37 @@ impl Sequencer {
             overrides: &mut self.overrides,
             gave_up: &self.gave_up,
             keep: &mut keep,
+            status: &mut self.live.status,
         };
         // A tick cut short by the fabric is not kept (as if its runner died in it): the
         // runner halts the tree, and the halted state is kept.
         let status = self.root.tick(&mut cx)?;
-        let now = cx.fabric.now();
+        let now = fabric.now();
         match status {
             Status::Running => self.commit(now),
             // The plan ended: nothing to take over.
             Status::Success | Status::Failure => self.ended(),
         }
+        self.live.report(fabric, status != Status::Running);
         Ok(status)
     }
 
-    /// Halts the tree: monitors removed, parameters restored.
+    /// Halts the tree: monitors removed, parameters restored; its state is kept (a runner
+    /// started again takes it over).
     pub fn halt(&mut self, fabric: &mut dyn Fabric) {
+        self.halt_tree(fabric);
+        self.live.report(fabric, false);
+    }
+
+    /// Halts the tree and ends the plan (Ctrl-C): nothing is kept for another runner, and
+    /// the manager is told the plan ended.
+    pub fn halt_and_end(&mut self, fabric: &mut dyn Fabric) {
+        self.halt_tree(fabric);
+        self.ended();
+        self.live.report(fabric, true);
+    }
+
+    fn halt_tree(&mut self, fabric: &mut dyn Fabric) {
         let mut keep = |_: &[Override]| {};
         let mut cx = Cx {
             fabric,
@@ -492,9 +536,10 @@ impl Sequencer {
             overrides: &mut self.overrides,
             gave_up: &self.gave_up,
             keep: &mut keep,
+            status: &mut self.live.status,
         };
         self.root.halt(&mut cx);
-        let now = cx.fabric.now();
+        let now = fabric.now();
         self.commit(now);
     }
 
@@ -653,8 +698,7 @@ fn drive(
     }
     loop {
         if stop() {
-            seq.halt(&mut ClientFabric::new(client, seq.origin()));
-            seq.ended();
+            seq.halt_and_end(&mut ClientFabric::new(client, seq.origin()));
             for s in seq.take_steps() {
                 on_step(client, &s);
             }

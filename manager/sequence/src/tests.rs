@@ -4,7 +4,9 @@
 use crate::plan::Plan;
 use crate::run::Sequencer;
 use crate::tree::{Fabric, FabricError, Status};
-use skillfab_proto::control::{ControlError, MonitorFate};
+use skillfab_proto::control::{
+    ControlError, MonitorFate, NodeStatus, PlanNodeChange, PlanReport, PlanTree,
+};
 use skillfab_proto::param::{ParamError, ParamKind, ParamValue};
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -29,6 +31,11 @@ struct Mock {
     log: Vec<String>,
     /// Processes `up` gave up on, as the manager lists them.
     gave_up: Vec<String>,
+    /// The plan reports sent, in order (not counted as requests: they change nothing the
+    /// plan reads).
+    reports: Vec<PlanReport>,
+    /// The live tree as a manager keeps it.
+    tree: Option<PlanTree>,
 }
 
 impl Mock {
@@ -193,6 +200,60 @@ impl Fabric for Mock {
 
     fn now(&mut self) -> Duration {
         self.now
+    }
+
+    fn report_plan(&mut self, report: PlanReport) -> Result<(), FabricError> {
+        self.reports.push(report.clone());
+        match report {
+            PlanReport::Shape {
+                plan,
+                nodes,
+                status,
+                ..
+            } => {
+                let status = status.into_iter().map(|s| (s, 0)).collect::<Vec<_>>();
+                match &mut self.tree {
+                    Some(t) if nodes.first().is_some_and(|n| n.id > 0) => {
+                        t.nodes.extend(nodes);
+                        t.status.extend(status);
+                    }
+                    _ => {
+                        self.tree = Some(PlanTree {
+                            plan,
+                            nodes,
+                            status,
+                        })
+                    }
+                }
+            }
+            PlanReport::Tick {
+                plan,
+                changes,
+                ended,
+            } => {
+                let Some(t) = self.tree.as_mut().filter(|t| t.plan == plan) else {
+                    return Err(ControlError::PlanNotCurrent {
+                        plan,
+                        current: self.tree.as_ref().map(|t| t.plan.clone()),
+                    }
+                    .into());
+                };
+                t.apply(&changes, self.now.as_millis() as u64)
+                    .map_err(|id| ControlError::UnknownPlanNode {
+                        plan: plan.clone(),
+                        id,
+                        nodes: t.nodes.len() as u32,
+                    })?;
+                if ended {
+                    self.tree = None;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn current_plan(&mut self) -> Result<Option<PlanTree>, FabricError> {
+        Ok(self.tree.clone())
     }
 }
 
@@ -785,4 +846,246 @@ fn another_plan_a_changed_file_or_fresh_first_undoes_what_the_last_runner_set() 
     };
     assert!(why.contains("unreadable"), "{why}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The statuses a manager holds of the plan's live tree, by node number.
+fn held(f: &Mock) -> Vec<NodeStatus> {
+    f.tree
+        .as_ref()
+        .expect("the manager has the plan")
+        .status
+        .iter()
+        .map(|s| s.0)
+        .collect()
+}
+
+/// The changes of each `Tick` report sent after the first `skip` reports.
+fn ticks(f: &Mock, skip: usize) -> Vec<(Vec<PlanNodeChange>, bool)> {
+    f.reports[skip..]
+        .iter()
+        .map(|r| match r {
+            PlanReport::Tick { changes, ended, .. } => (changes.clone(), *ended),
+            other => panic!("a tick's report expected: {other:?}"),
+        })
+        .collect()
+}
+
+fn ch(id: u32, status: NodeStatus) -> PlanNodeChange {
+    PlanNodeChange { id, status }
+}
+
+#[test]
+fn the_live_tree_is_sent_once_then_only_what_each_tick_changed() {
+    use NodeStatus::*;
+    let p = plan(
+        r#"<Sequence name="mission">
+             <Activate skills="wander, avoid"/>
+             <WaitFor name="seen" condition="barcode_track.target.seen == 1"/>
+             <Log message="seen"/>
+           </Sequence>"#,
+    );
+    let mut f = Mock::new(&["wander", "avoid"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    let shape = seq.live().shape().to_vec();
+    let described: Vec<(u32, Option<u32>, &str, &str, &str)> = shape
+        .iter()
+        .map(|n| {
+            (
+                n.id,
+                n.parent,
+                n.name.as_str(),
+                n.kind.as_str(),
+                n.detail.as_str(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        described,
+        [
+            (0, None, "mission", "Sequence", ""),
+            (1, Some(0), "Activate", "Activate", "wander, avoid"),
+            (
+                2,
+                Some(0),
+                "seen",
+                "WaitFor",
+                "barcode_track.target.seen == 1"
+            ),
+            (3, Some(0), "Log", "Log", "seen"),
+        ]
+    );
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    // The shape first, every node idle; then the first tick's changes.
+    let PlanReport::Shape {
+        plan: name,
+        total,
+        nodes,
+        status,
+    } = &f.reports[0]
+    else {
+        panic!("{:?}", f.reports)
+    };
+    assert_eq!((name.as_str(), *total), ("Main", 4));
+    assert_eq!((nodes, status), (&shape, &vec![Idle; 4]));
+    assert_eq!(
+        ticks(&f, 1),
+        [(vec![ch(0, Running), ch(1, Success), ch(2, Running)], false)]
+    );
+    // A tick that changed nothing sends nothing.
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(f.reports.len(), 2);
+    assert_eq!(held(&f), [Running, Success, Running, Idle]);
+    let id = f.monitor("barcode_track.target.seen == 1");
+    fire(&mut seq, &mut f, id);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert_eq!(
+        ticks(&f, 2),
+        [(vec![ch(0, Success), ch(2, Success), ch(3, Success)], true)]
+    );
+    assert!(f.tree.is_none(), "the plan ended: the manager forgets it");
+    // Nothing is reported after the end.
+    seq.halt(&mut f);
+    assert_eq!(f.reports.len(), 3);
+}
+
+#[test]
+fn a_halted_branch_goes_idle_and_a_restarted_manager_gets_the_tree_again() {
+    use NodeStatus::*;
+    let p = plan(
+        r#"<Parallel success_count="1">
+             <WaitFor condition="door_locate.door.found == 1"/>
+             <Sequence>
+               <Activate skills="wander"/>
+               <Sleep msec="5000"/>
+             </Sequence>
+           </Parallel>"#,
+    );
+    let mut f = Mock::new(&["wander"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(held(&f), [Running, Running, Running, Success, Running]);
+    // The manager restarted: it has no plan; the next change brings the whole tree again,
+    // with the statuses as they are.
+    f.tree = None;
+    let sent = f.reports.len();
+    f.now = Duration::from_secs(1);
+    let id = f.monitor("door_locate.door.found == 1");
+    fire(&mut seq, &mut f, id);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert!(matches!(f.reports[sent], PlanReport::Tick { .. }));
+    assert!(
+        matches!(&f.reports[sent + 1], PlanReport::Shape { status, .. } if *status == [Success, Success, Idle, Idle, Idle]),
+        "{:?}",
+        &f.reports[sent..]
+    );
+    // The halted sequence and all below it are idle, as if never ticked; the end follows.
+    assert_eq!(ticks(&f, sent + 2), [(vec![], true)]);
+    assert!(f.tree.is_none());
+}
+
+#[test]
+fn halting_a_plan_on_ctrl_c_leaves_every_node_idle_and_ends_it() {
+    use NodeStatus::*;
+    let p = plan(
+        r#"<Sequence>
+             <Activate skills="wander"/>
+             <Sleep msec="5000"/>
+           </Sequence>"#,
+    );
+    let mut f = Mock::new(&["wander"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    assert_eq!(held(&f), [Running, Success, Running]);
+    let sent = f.reports.len();
+    seq.halt_and_end(&mut f);
+    assert_eq!(
+        ticks(&f, sent),
+        [(vec![ch(0, Idle), ch(1, Idle), ch(2, Idle)], true)]
+    );
+    assert_eq!(seq.live().status(), [Idle; 3]);
+}
+
+#[test]
+fn a_refused_report_stops_the_reports_not_the_plan() {
+    let p = plan(r#"<Sequence><Activate skills="wander"/><Sleep msec="5000"/></Sequence>"#);
+    let mut f = Mock::new(&["wander"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    // Another runner's plan replaced this one.
+    f.tree.as_mut().unwrap().plan = "other.xml".into();
+    let sent = f.reports.len();
+    f.now = Duration::from_secs(6);
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert_eq!(f.reports.len(), sent + 1, "refused once, then no more");
+    assert_eq!(f.on(), ["wander"]);
+}
+
+#[test]
+fn a_large_tree_goes_in_parts_each_within_a_request_and_numbered_in_order() {
+    // 3000 nodes with long details: more than one request can carry.
+    let leaves: String = (0..2999)
+        .map(|i| format!(r#"<Log name="step {i}" message="{}"/>"#, "x".repeat(150)))
+        .collect();
+    let p = plan(&format!("<Sequence>{leaves}</Sequence>"));
+    let seq = Sequencer::new(&p, None).unwrap();
+    let live = seq.live();
+    let parts = crate::live::shape_parts(live.plan(), live.shape(), live.status());
+    assert!(parts.len() > 1, "{} part(s)", parts.len());
+    let mut next = 0;
+    for part in &parts {
+        let bytes = skillfab_proto::control::encode_request(
+            "123456-7",
+            u64::MAX,
+            &skillfab_proto::control::Request::Plan(part.clone()),
+        )
+        .unwrap();
+        assert!(bytes.len() <= skillfab_proto::control::MAX_REQUEST_BYTES);
+        let PlanReport::Shape { nodes, total, .. } = part else {
+            panic!("{part:?}")
+        };
+        assert_eq!(*total, 3000);
+        for n in nodes {
+            assert_eq!(n.id, next);
+            next += 1;
+        }
+    }
+    assert_eq!(next, 3000);
+    assert_eq!(
+        crate::live::changes(
+            &[NodeStatus::Idle, NodeStatus::Running, NodeStatus::Success],
+            &[
+                NodeStatus::Running,
+                NodeStatus::Running,
+                NodeStatus::Failure
+            ],
+        ),
+        [ch(0, NodeStatus::Running), ch(2, NodeStatus::Failure)]
+    );
+}
+
+#[test]
+fn sub_trees_are_inlined_in_the_shape_under_the_node_that_names_them() {
+    let text = r#"<root BTCPP_format="4" main_tree_to_execute="Main">
+        <BehaviorTree ID="Main"><Sequence><SubTree ID="Search"/><Log message="done"/></Sequence></BehaviorTree>
+        <BehaviorTree ID="Search"><Fallback name="search"><Sleep msec="10"/><AlwaysFailure/></Fallback></BehaviorTree>
+      </root>"#;
+    let p = Plan::parse(text, "sub.xml").unwrap();
+    let seq = Sequencer::new(&p, None).unwrap();
+    let shape: Vec<(u32, Option<u32>, &str)> = seq
+        .live()
+        .shape()
+        .iter()
+        .map(|n| (n.id, n.parent, n.kind.as_str()))
+        .collect();
+    assert_eq!(
+        shape,
+        [
+            (0, None, "Sequence"),
+            (1, Some(0), "Fallback"),
+            (2, Some(1), "Sleep"),
+            (3, Some(1), "AlwaysFailure"),
+            (4, Some(0), "Log"),
+        ]
+    );
 }

@@ -4,7 +4,9 @@
 
 use crate::plan::{Kind, Plan, PlanError, Spec};
 use serde::{Deserialize, Serialize};
-use skillfab_proto::control::{ControlError, MonitorFate};
+use skillfab_proto::control::{
+    ControlError, MonitorFate, NodeStatus, PlanNode, PlanReport, PlanTree,
+};
 use skillfab_proto::param::ParamValue;
 use std::collections::HashSet;
 use std::time::Duration;
@@ -18,6 +20,16 @@ pub enum Status {
     Success,
     /// Done, and it did not.
     Failure,
+}
+
+impl From<Status> for NodeStatus {
+    fn from(s: Status) -> NodeStatus {
+        match s {
+            Status::Running => NodeStatus::Running,
+            Status::Success => NodeStatus::Success,
+            Status::Failure => NodeStatus::Failure,
+        }
+    }
 }
 
 /// Why a fabric request did not do what was asked.
@@ -68,6 +80,12 @@ pub trait Fabric {
     fn gave_up(&mut self) -> Result<Vec<String>, FabricError>;
     /// The fabric's time (cycle × period with a period; lock-step included).
     fn now(&mut self) -> Duration;
+    /// Tells the manager how the plan stands: its tree, or the status changes of a tick
+    /// (the live tree; docs/sequence.md).
+    fn report_plan(&mut self, report: PlanReport) -> Result<(), FabricError>;
+    /// The plan the manager has running, with its statuses (a runner that takes a plan over
+    /// goes on from them).
+    fn current_plan(&mut self) -> Result<Option<PlanTree>, FabricError>;
 }
 
 /// Why a plan stopped without an outcome.
@@ -137,6 +155,9 @@ pub struct Cx<'a> {
     pub gave_up: &'a HashSet<String>,
     /// Keeps `overrides` where a restarted runner finds them (before a parameter is set).
     pub keep: &'a mut dyn FnMut(&[Override]),
+    /// Each node's status, by node number: what its last tick returned, `Idle` if never
+    /// ticked or halted since (the live tree's statuses; a number past its end is not kept).
+    pub status: &'a mut [NodeStatus],
 }
 
 impl Cx<'_> {
@@ -236,6 +257,12 @@ enum State {
 impl Node {
     /// The runtime tree of `plan`'s tree `id` (sub-trees inlined).
     pub fn build(plan: &Plan, id: &str) -> Result<Node, PlanError> {
+        Node::build_shaped(plan, id).map(|(node, _)| node)
+    }
+
+    /// The runtime tree of `plan`'s tree `id`, and its shape as the live tree shows it: one
+    /// [`PlanNode`] per node, numbered as the nodes are (preorder, sub-trees inlined).
+    pub fn build_shaped(plan: &Plan, id: &str) -> Result<(Node, Vec<PlanNode>), PlanError> {
         let spec = plan.trees.get(id).ok_or_else(|| PlanError {
             file: String::new(),
             line: 0,
@@ -244,20 +271,42 @@ impl Node {
                 plan.trees.keys().cloned().collect::<Vec<_>>().join(", ")
             ),
         })?;
-        Ok(Node::from_spec(plan, spec, &mut 0))
+        let mut shape = Vec::new();
+        let node = Node::from_spec(plan, spec, &mut 0, None, &mut shape);
+        Ok((node, shape))
     }
 
-    fn from_spec(plan: &Plan, spec: &Spec, next: &mut usize) -> Node {
+    fn from_spec(
+        plan: &Plan,
+        spec: &Spec,
+        next: &mut usize,
+        parent: Option<u32>,
+        shape: &mut Vec<PlanNode>,
+    ) -> Node {
+        // A sub-tree is its tree's root, in its place (it takes no number of its own).
+        if let Kind::SubTree(tree) = &spec.kind
+            && let Some(t) = plan.trees.get(tree)
+        {
+            return Node::from_spec(plan, t, next, parent, shape);
+        }
         let id = *next;
         *next += 1;
+        shape.push(PlanNode {
+            id: id as u32,
+            parent,
+            name: spec.name.clone(),
+            kind: spec.kind.tag().to_string(),
+            detail: spec.kind.detail(),
+        });
+        let me = Some(id as u32);
         let state = match &spec.kind {
             Kind::Sequence(c) => State::Chain {
-                children: Node::many(plan, c, next),
+                children: Node::many(plan, c, next, me, shape),
                 at: 0,
                 go_on: Status::Success,
             },
             Kind::Fallback(c) => State::Chain {
-                children: Node::many(plan, c, next),
+                children: Node::many(plan, c, next, me, shape),
                 at: 0,
                 go_on: Status::Failure,
             },
@@ -269,29 +318,33 @@ impl Node {
                 done: vec![None; children.len()],
                 success: success.unwrap_or(children.len()),
                 failure: *failure,
-                children: Node::many(plan, children, next),
+                children: Node::many(plan, children, next, me, shape),
             },
             Kind::Retry { attempts, child } => State::Retry {
-                child: Box::new(Node::from_spec(plan, child, next)),
+                child: Box::new(Node::from_spec(plan, child, next, me, shape)),
                 attempts: *attempts,
                 failed: 0,
                 again: false,
             },
             Kind::Timeout { after, child } => State::Timeout {
-                child: Box::new(Node::from_spec(plan, child, next)),
+                child: Box::new(Node::from_spec(plan, child, next, me, shape)),
                 after: *after,
                 since: None,
             },
-            Kind::Inverter(c) => State::Inverter(Box::new(Node::from_spec(plan, c, next))),
+            Kind::Inverter(c) => {
+                State::Inverter(Box::new(Node::from_spec(plan, c, next, me, shape)))
+            }
             Kind::KeepRunningUntilFailure(c) => {
-                State::KeepRunning(Box::new(Node::from_spec(plan, c, next)))
+                State::KeepRunning(Box::new(Node::from_spec(plan, c, next, me, shape)))
             }
-            Kind::ForceSuccess(c) => {
-                State::Force(Box::new(Node::from_spec(plan, c, next)), Status::Success)
-            }
-            Kind::ForceFailure(c) => {
-                State::Force(Box::new(Node::from_spec(plan, c, next)), Status::Failure)
-            }
+            Kind::ForceSuccess(c) => State::Force(
+                Box::new(Node::from_spec(plan, c, next, me, shape)),
+                Status::Success,
+            ),
+            Kind::ForceFailure(c) => State::Force(
+                Box::new(Node::from_spec(plan, c, next, me, shape)),
+                Status::Failure,
+            ),
             Kind::WithParam {
                 skill,
                 param,
@@ -301,7 +354,7 @@ impl Node {
                 skill: skill.clone(),
                 param: param.clone(),
                 value: value.clone(),
-                child: Box::new(Node::from_spec(plan, child, next)),
+                child: Box::new(Node::from_spec(plan, child, next, me, shape)),
                 old: None,
             },
             Kind::Activate(_)
@@ -320,14 +373,9 @@ impl Node {
                 since: None,
             },
             Kind::WaitGaveUp(p) => State::WaitGaveUp(p.clone()),
-            // Checked when the plan was read: the tree exists and does not contain itself.
-            Kind::SubTree(id) => match plan.trees.get(id) {
-                Some(t) => {
-                    *next -= 1;
-                    return Node::from_spec(plan, t, next);
-                }
-                None => State::Act(Kind::AlwaysFailure),
-            },
+            // Checked when the plan was read: the tree exists (handled above) and does not
+            // contain itself.
+            Kind::SubTree(_) => State::Act(Kind::AlwaysFailure),
         };
         Node {
             name: spec.name.clone(),
@@ -336,15 +384,29 @@ impl Node {
         }
     }
 
-    fn many(plan: &Plan, specs: &[Spec], next: &mut usize) -> Vec<Node> {
+    fn many(
+        plan: &Plan,
+        specs: &[Spec],
+        next: &mut usize,
+        parent: Option<u32>,
+        shape: &mut Vec<PlanNode>,
+    ) -> Vec<Node> {
         specs
             .iter()
-            .map(|s| Node::from_spec(plan, s, next))
+            .map(|s| Node::from_spec(plan, s, next, parent, shape))
             .collect()
     }
 
-    /// Ticks the node once.
+    /// Ticks the node once; its status in the live tree is what it returns.
     pub fn tick(&mut self, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
+        let status = self.tick_own(cx)?;
+        if let Some(s) = cx.status.get_mut(self.id) {
+            *s = status.into();
+        }
+        Ok(status)
+    }
+
+    fn tick_own(&mut self, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
         let (name, id) = (&self.name, self.id);
         match &mut self.state {
             State::Chain {
@@ -580,8 +642,24 @@ impl Node {
             .min()
     }
 
-    /// Stops a running node: what it holds is undone, its state is as if never ticked.
+    /// Stops a running node: what it holds is undone, its state is as if never ticked — and
+    /// so is its status and every status below it (`Idle`, as BehaviorTree.CPP resets them).
     pub fn halt(&mut self, cx: &mut Cx<'_>) {
+        self.halt_own(cx);
+        self.idle(cx.status);
+    }
+
+    /// Its status and every one below it `Idle`.
+    fn idle(&self, status: &mut [NodeStatus]) {
+        if let Some(s) = status.get_mut(self.id) {
+            *s = NodeStatus::Idle;
+        }
+        for c in self.children() {
+            c.idle(status);
+        }
+    }
+
+    fn halt_own(&mut self, cx: &mut Cx<'_>) {
         let id = self.id;
         match &mut self.state {
             State::Chain { children, at, .. } => {

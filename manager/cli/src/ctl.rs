@@ -67,6 +67,8 @@ pub enum CtlCmd {
     Monitors,
     /// The processes `skillfab up` gave up restarting (and not back since).
     GaveUp,
+    /// The running plan as a tree: each node's status and the cycle it has had it since.
+    Plan,
     /// Remove a monitor.
     Unmonitor {
         /// Its id.
@@ -375,6 +377,10 @@ pub fn run(address: Address, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> 
                 }
             }
         }
+        CtlCmd::Plan => match c.plan()? {
+            None => print("no plan is running".to_string(), Json::Null),
+            Some(t) => print(plan_text(&t), skillfab_proto::json::plan_json(&t)),
+        },
         CtlCmd::GaveUp => {
             let list = c.gave_up()?;
             let human = list
@@ -555,4 +561,36 @@ mod tests {
         assert!(changes("{\"kind\":\"param\"}", None).is_err());
         assert!(changes("not json", None).is_err());
     }
+}
+
+/// A plan's tree as text: a line per node, indented by depth — its status letter (`·` idle,
+/// `R` running, `S` success, `F` failure), name, kind and detail, the cycle since when; `▶`
+/// marks the branch that runs.
+fn plan_text(t: &skillfab_proto::control::PlanTree) -> String {
+    use skillfab_proto::control::NodeStatus;
+    let depths = t.depths();
+    let branch = t.running_branch();
+    let mut out = format!("plan {} ({} nodes)", t.plan, t.nodes.len());
+    for n in &t.nodes {
+        let i = n.id as usize;
+        let (status, since) = t.status[i];
+        let mut line = format!(
+            "\n{}{}{} {}",
+            if branch[i] { "▶" } else { " " },
+            "  ".repeat(depths[i] + 1),
+            status.letter(),
+            n.name
+        );
+        if n.kind != n.name {
+            line.push_str(&format!(" [{}]", n.kind));
+        }
+        if !n.detail.is_empty() {
+            line.push_str(&format!(" {}", n.detail));
+        }
+        if status != NodeStatus::Idle {
+            line.push_str(&format!(" ({status} since cycle {since})"));
+        }
+        out.push_str(&line);
+    }
+    out
 }

@@ -3,13 +3,16 @@
 //! [`App::on_key`], which returns the [`Command`]s for the worker.
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
-use skillfab_proto::control::{SkillInfo, SkillState, Stats};
+use skillfab_proto::control::{NodeStatus, SkillInfo, SkillState, Stats};
 use skillfab_proto::log::{Level, LogLine};
 use skillfab_proto::value::Value;
 use std::collections::VecDeque;
 
 /// Log lines the console keeps (all skills together).
 pub const LOG_KEEP: usize = 2000;
+
+/// Lines a page key scrolls the plan pane by.
+pub const PLAN_PAGE: usize = 20;
 
 /// Whether a port is read or written by the skill.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,6 +57,24 @@ pub struct Snapshot {
     pub io_skills: Vec<String>,
 }
 
+/// The plan as the console shows it: the manager's tree, kept after the plan ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanView {
+    /// The tree and each node's status.
+    pub tree: skillfab_proto::control::PlanTree,
+    /// The plan ended, its root with this status (the tree is its last state).
+    pub ended: Option<NodeStatus>,
+}
+
+/// Which pane fills the screen under the latency line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pane {
+    /// The skills table and the selected skill.
+    Skills,
+    /// The running plan as a tree (`t`).
+    Plan,
+}
+
 /// What the worker tells the console.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Update {
@@ -67,6 +88,8 @@ pub enum Update {
     Failed(String),
     /// New log lines.
     Logs(Vec<LogLine>),
+    /// The plan changed (`None`: no plan has run since the console connected).
+    Plan(Option<Box<PlanView>>),
     /// SIGINT/SIGTERM: leave.
     Quit,
 }
@@ -150,6 +173,14 @@ pub struct App {
     pub prompt: Option<Prompt>,
     /// The console should exit.
     pub quit: bool,
+    /// The pane shown.
+    pub pane: Pane,
+    /// The running plan (or the last one, ended).
+    pub plan: Option<PlanView>,
+    /// The plan pane's first line (a node number) when not following.
+    pub plan_scroll: usize,
+    /// The plan pane keeps the running branch in view (until a scroll key is pressed).
+    pub plan_follow: bool,
 }
 
 impl App {
@@ -168,6 +199,10 @@ impl App {
             status: None,
             prompt: None,
             quit: false,
+            pane: Pane::Skills,
+            plan: None,
+            plan_scroll: 0,
+            plan_follow: true,
         }
     }
 
@@ -230,6 +265,7 @@ impl App {
                     self.logs.pop_front();
                 }
             }
+            Update::Plan(p) => self.plan = p.map(|p| *p),
             Update::Quit => self.quit = true,
         }
         None
@@ -282,6 +318,16 @@ impl App {
         }
         if self.prompt.is_some() {
             return self.on_prompt_key(key.code);
+        }
+        if key.code == KeyCode::Char('t') {
+            self.pane = match self.pane {
+                Pane::Skills => Pane::Plan,
+                Pane::Plan => Pane::Skills,
+            };
+            return None;
+        }
+        if self.pane == Pane::Plan {
+            return self.on_plan_key(key.code);
         }
         let n = self.skills().len();
         match key.code {
@@ -369,6 +415,55 @@ impl App {
             KeyCode::Char('s') => self.connected().then_some(Command::Step),
             _ => None,
         }
+    }
+
+    /// The deepest running node of the plan (0 when none runs): the place followed.
+    pub fn plan_anchor(&self) -> usize {
+        self.plan.as_ref().map_or(0, |p| {
+            p.tree
+                .status
+                .iter()
+                .rposition(|s| s.0 == NodeStatus::Running)
+                .unwrap_or(0)
+        })
+    }
+
+    /// Keys of the plan pane: scrolling (which stops following the running branch; `f`
+    /// follows it again), `r`/`s` as everywhere, `q` to quit.
+    fn on_plan_key(&mut self, code: KeyCode) -> Option<Command> {
+        let n = self.plan.as_ref().map_or(0, |p| p.tree.nodes.len());
+        let last = n.saturating_sub(1);
+        // Scrolling from the followed place starts near the deepest running node.
+        let at = if self.plan_follow {
+            self.plan_anchor().saturating_sub(PLAN_PAGE / 3)
+        } else {
+            self.plan_scroll
+        };
+        let mut scroll = |to: usize| {
+            self.plan_follow = false;
+            self.plan_scroll = to.min(last);
+        };
+        match code {
+            KeyCode::Char('q') | KeyCode::Esc => self.quit = true,
+            KeyCode::Up | KeyCode::Char('k') => scroll(at.saturating_sub(1)),
+            KeyCode::Down | KeyCode::Char('j') => scroll(at + 1),
+            KeyCode::PageUp => scroll(at.saturating_sub(PLAN_PAGE)),
+            KeyCode::PageDown => scroll(at + PLAN_PAGE),
+            KeyCode::Home | KeyCode::Char('g') => scroll(0),
+            KeyCode::End | KeyCode::Char('G') => scroll(last),
+            KeyCode::Char('f') => self.plan_follow = true,
+            KeyCode::Char('r') => {
+                let running = self.snap.as_ref().is_some_and(|s| s.stats.running);
+                return self.connected().then_some(if running {
+                    Command::Stop
+                } else {
+                    Command::Run
+                });
+            }
+            KeyCode::Char('s') => return self.connected().then_some(Command::Step),
+            _ => {}
+        }
+        None
     }
 
     fn on_prompt_key(&mut self, code: KeyCode) -> Option<Command> {

@@ -21,10 +21,10 @@ pub use app::{App, Command, Update};
 pub use view::render;
 
 use anyhow::Context;
-use app::{Dir, PortView, Snapshot};
+use app::{Dir, PlanView, PortView, Snapshot};
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 use skillfab_client::{Address, Client, ClientError};
-use skillfab_proto::control::{PortInfo, SkillInfo};
+use skillfab_proto::control::{EventKind, PortInfo, SkillInfo};
 use skillfab_proto::log::LogReader;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::time::{Duration, Instant};
@@ -94,6 +94,11 @@ struct Worker {
     logs: Option<LogReader>,
     selected: Option<String>,
     last_down: Option<String>,
+    /// The plan as last sent to the screen; fetched whole when the client connects (or
+    /// events were lost, or a new tree arrived), then changed by `PlanChanged` events.
+    plan: Option<PlanView>,
+    /// The plan must be fetched whole.
+    plan_stale: bool,
 }
 
 /// The error as one line (its message carries its cause).
@@ -120,6 +125,8 @@ impl Worker {
             logs,
             selected: None,
             last_down: None,
+            plan: None,
+            plan_stale: true,
         }
     }
 
@@ -144,6 +151,7 @@ impl Worker {
                 let connected = self.refresh();
                 next_refresh = Instant::now() + if connected { REFRESH } else { RECONNECT };
             }
+            self.follow_plan();
             if let Some(logs) = &self.logs {
                 if let Ok(lines) = logs.poll()
                     && !lines.is_empty()
@@ -174,14 +182,21 @@ impl Worker {
         let _ = self.updates.send(Update::Disconnected(why));
     }
 
-    /// The client, connecting if needed.
+    /// The client, connecting if needed (a new client subscribes to the events and fetches
+    /// the plan afresh).
     fn client(&mut self) -> Option<&Client> {
         if self.client.is_none() {
             match self.address.connect() {
                 Ok(mut c) => {
                     c.set_timeout(REQUEST_TIMEOUT);
+                    if let Err(e) = c.subscribe() {
+                        let _ = self
+                            .updates
+                            .send(Update::Failed(format!("no events, no live plan: {e}")));
+                    }
                     self.client = Some(c);
                     self.last_down = None;
+                    self.plan_stale = true;
                 }
                 Err(e) => {
                     self.down(describe(&e));
@@ -229,6 +244,66 @@ impl Worker {
                 self.down(describe(&e));
                 false
             }
+        }
+    }
+
+    /// Takes in the plan's events (a tree fetched whole when needed) and sends the screen the
+    /// plan when it changed.
+    fn follow_plan(&mut self) {
+        let Some(c) = self.client.as_mut() else {
+            return;
+        };
+        let lost = c.lost_events();
+        let mut changed = false;
+        loop {
+            let ev = match c.next_event(Duration::ZERO) {
+                Ok(Some(ev)) => ev,
+                Ok(None) => break,
+                Err(_) => {
+                    self.plan_stale = true;
+                    break;
+                }
+            };
+            match (ev.kind, self.plan.as_mut()) {
+                (
+                    EventKind::PlanChanged {
+                        plan,
+                        cycle,
+                        changes,
+                    },
+                    Some(p),
+                ) if p.tree.plan == plan && p.ended.is_none() => {
+                    // A node the tree does not have: the tree is not the manager's.
+                    self.plan_stale |= p.tree.apply(&changes, cycle).is_err();
+                    changed = true;
+                }
+                (EventKind::PlanChanged { .. } | EventKind::PlanStarted { .. }, _) => {
+                    self.plan_stale = true
+                }
+                (EventKind::PlanEnded { plan, status }, Some(p)) if p.tree.plan == plan => {
+                    p.ended = Some(status);
+                    changed = true;
+                }
+                _ => {}
+            }
+        }
+        self.plan_stale |= c.lost_events() != lost;
+        if self.plan_stale {
+            match c.plan() {
+                // No plan runs: the last one, ended, stays on the screen.
+                Ok(None) => {}
+                Ok(Some(tree)) => {
+                    self.plan = Some(PlanView { tree, ended: None });
+                    changed = true;
+                }
+                Err(_) => return,
+            }
+            self.plan_stale = false;
+        }
+        if changed {
+            let _ = self
+                .updates
+                .send(Update::Plan(self.plan.clone().map(Box::new)));
         }
     }
 

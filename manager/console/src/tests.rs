@@ -1,13 +1,14 @@
 //! Rendering and key tests on ratatui's `TestBackend`: the console's main states drawn into
 //! a buffer and read back as text.
 
-use super::app::{App, Command, Dir, Link, PortView, Snapshot, Update};
+use super::app::{App, Command, Dir, Link, Pane, PlanView, PortView, Snapshot, Update};
 use super::view::{bar_strip, compact, render};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent};
 use skillfab_proto::control::{
-    ChannelStat, Percentiles, PortInfo, SkillFigures, SkillInfo, SkillState, Stats,
+    ChannelStat, NodeStatus, Percentiles, PlanNode, PlanTree, PortInfo, SkillFigures, SkillInfo,
+    SkillState, Stats,
 };
 use skillfab_proto::decl::Mode;
 use skillfab_proto::log::{Level, LogLine};
@@ -415,4 +416,109 @@ fn values_are_compact() {
         ])),
         "seen=true range=1.500"
     );
+}
+
+/// A delivery-sized plan: a root sequence of `legs` legs, each a sequence of an `Activate`
+/// and a `WaitFor` (1 + 3 × legs nodes); the legs before `at` succeeded, leg `at` waits.
+fn big_plan(legs: u32, at: u32) -> PlanView {
+    let mut nodes = vec![PlanNode {
+        id: 0,
+        parent: None,
+        name: "deliver".into(),
+        kind: "Sequence".into(),
+        detail: String::new(),
+    }];
+    let mut status = vec![(NodeStatus::Running, 10)];
+    for leg in 0..legs {
+        let id = 1 + 3 * leg;
+        let done = leg < at;
+        let s = |running| match (done, leg == at) {
+            (true, _) => (NodeStatus::Success, 20 + u64::from(leg)),
+            (false, true) => (running, 30),
+            (false, false) => (NodeStatus::Idle, 0),
+        };
+        nodes.push(PlanNode {
+            id,
+            parent: Some(0),
+            name: format!("leg {leg}"),
+            kind: "Sequence".into(),
+            detail: String::new(),
+        });
+        status.push(s(NodeStatus::Running));
+        nodes.push(PlanNode {
+            id: id + 1,
+            parent: Some(id),
+            name: "Activate".into(),
+            kind: "Activate".into(),
+            detail: "hall_follow, avoid".into(),
+        });
+        status.push(s(NodeStatus::Success));
+        nodes.push(PlanNode {
+            id: id + 2,
+            parent: Some(id),
+            name: format!("arrived {leg}"),
+            kind: "WaitFor".into(),
+            detail: format!("deliver.progress.leg > {leg}"),
+        });
+        status.push(s(NodeStatus::Running));
+    }
+    PlanView {
+        tree: PlanTree {
+            plan: "deliver.xml".into(),
+            nodes,
+            status,
+        },
+        ended: None,
+    }
+}
+
+#[test]
+fn the_plan_view_shows_every_node_follows_the_running_branch_and_scrolls() {
+    let mut app = connected();
+    app.apply(Update::Plan(Some(Box::new(big_plan(40, 30)))));
+    assert_eq!(app.on_key(key('t')), None);
+    assert_eq!(app.pane, Pane::Plan);
+    let s = screen(&app, 110, 34);
+    if std::env::var_os("SKILLFAB_PRINT_CONSOLE").is_some() {
+        println!("{s}");
+    }
+    // The title says where the plan is; the view follows the running branch, deep in a
+    // tree far larger than 20 nodes.
+    for want in [
+        "plan deliver.xml · 121 nodes · at arrived 30",
+        "▶   R leg 30 Sequence · cycle 30",
+        "▶     R arrived 30 WaitFor · deliver.progress.leg > 30 · cycle 30",
+        "S Activate · hall_follow, avoid · cycle 49",
+        "· arrived 31 WaitFor · deliver.progress.leg > 31",
+        "t skills",
+        "f follow",
+    ] {
+        assert!(s.contains(want), "missing {want:?} in\n{s}");
+    }
+    assert!(!s.contains("leg 0 "), "the top is scrolled away:\n{s}");
+    // Scrolled to the top: the root, and the first legs that succeeded, not marked running.
+    app.on_key(key('g'));
+    let s = screen(&app, 110, 34);
+    assert!(s.contains("│▶ R deliver Sequence · cycle 10"), "{s}");
+    assert!(s.contains("│    S leg 0 Sequence · cycle 20"), "{s}");
+    assert!(!s.contains("leg > 30"), "{s}");
+    // To the end: the last leg, never ticked.
+    app.on_key(key('G'));
+    let s = screen(&app, 110, 34);
+    assert!(s.contains("· arrived 39 WaitFor"), "{s}");
+    // Follow again, then the plan ends: the last tree stays, marked so.
+    app.on_key(key('f'));
+    let mut ended = big_plan(40, 40);
+    ended.tree.status[0] = (NodeStatus::Success, 99);
+    ended.ended = Some(NodeStatus::Success);
+    app.apply(Update::Plan(Some(Box::new(ended))));
+    let s = screen(&app, 110, 34);
+    assert!(s.contains("121 nodes · ended: success"), "{s}");
+    // Back to the skills; no plan at all says so.
+    app.on_key(key('t'));
+    assert_eq!(app.pane, Pane::Skills);
+    assert!(screen(&app, 110, 34).contains("▶ scale"));
+    let mut none = connected();
+    none.on_key(key('t'));
+    assert!(screen(&none, 110, 34).contains("no plan has run since the console connected"));
 }

@@ -1,13 +1,13 @@
 //! Drawing the console: `render(&App, &mut Frame)`, nothing else. Every size is worked out
 //! from the frame, so any terminal size (and a resize) just draws again.
 
-use super::app::{App, Dir, Link, Prompt};
+use super::app::{App, Dir, Link, Pane, PlanView, Prompt};
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Borders, Cell, Paragraph, Row, Sparkline, Table, TableState};
-use skillfab_proto::control::{SkillInfo, SkillState};
+use skillfab_proto::control::{NodeStatus, SkillInfo, SkillState};
 use skillfab_proto::log::Level;
 use skillfab_proto::value::Value;
 
@@ -125,6 +125,22 @@ fn state_style(state: SkillState) -> Style {
 /// Draws the whole console.
 pub fn render(app: &App, f: &mut Frame) {
     let area = f.area();
+    if app.pane == Pane::Plan {
+        let [bar, spark, plan, status, help] = Layout::vertical([
+            Constraint::Length(1),
+            Constraint::Length(2),
+            Constraint::Min(3),
+            Constraint::Length(1),
+            Constraint::Length(1),
+        ])
+        .areas(area);
+        manager_bar(app, f, bar);
+        latency(app, f, spark);
+        plan_pane(app, f, plan);
+        status_line(app, f, status);
+        help_line(app, f, help);
+        return;
+    }
     let n = app.skills().len() as u16;
     let [bar, spark, table, channels, detail, status, help] = Layout::vertical([
         Constraint::Length(1),
@@ -484,21 +500,139 @@ fn status_line(app: &App, f: &mut Frame, area: Rect) {
     f.render_widget(Paragraph::new(line), area);
 }
 
-fn help_line(_app: &App, f: &mut Frame, area: Rect) {
-    let keys = [
+/// A node status's colour: idle grey, running yellow, success green, failure red.
+fn status_style(s: NodeStatus) -> Style {
+    match s {
+        NodeStatus::Idle => dim(),
+        NodeStatus::Running => Style::default().fg(Color::Yellow),
+        NodeStatus::Success => Style::default().fg(Color::Green),
+        NodeStatus::Failure => Style::default().fg(Color::Red),
+    }
+}
+
+/// The first node shown: where the user scrolled to, or (following) so that the deepest
+/// running node is in the upper third of the pane.
+pub fn plan_first_line(app: &App, plan: &PlanView, height: usize) -> usize {
+    let n = plan.tree.nodes.len();
+    let first = if app.plan_follow {
+        app.plan_anchor().saturating_sub(height / 3)
+    } else {
+        app.plan_scroll
+    };
+    first.min(n.saturating_sub(height))
+}
+
+/// The plan as a tree, every node (no cap): indented by depth, its status as a coloured
+/// letter, the branch that runs highlighted, the cycle of its last change.
+fn plan_pane(app: &App, f: &mut Frame, area: Rect) {
+    let Some(plan) = &app.plan else {
+        f.render_widget(
+            Paragraph::new("no plan has run since the console connected (skillfab sequence FILE)")
+                .style(dim())
+                .block(Block::default().borders(Borders::ALL).title(" plan ")),
+            area,
+        );
+        return;
+    };
+    let t = &plan.tree;
+    let branch = t.running_branch();
+    let depths = t.depths();
+    let mut parent = vec![false; t.nodes.len()];
+    for p in t.nodes.iter().filter_map(|n| n.parent) {
+        if let Some(x) = parent.get_mut(p as usize) {
+            *x = true;
+        }
+    }
+    // The running leaves: where the plan is.
+    let running: Vec<&str> = t
+        .nodes
+        .iter()
+        .filter(|n| t.status[n.id as usize].0 == NodeStatus::Running && !parent[n.id as usize])
+        .map(|n| n.name.as_str())
+        .collect();
+    let state = match plan.ended {
+        Some(s) => format!("ended: {s}"),
+        None if running.is_empty() => "running".to_string(),
+        None => format!("at {}", running.join(", ")),
+    };
+    let title = format!(" plan {} · {} nodes · {state} ", t.plan, t.nodes.len());
+    let block = Block::default().borders(Borders::ALL).title(title);
+    let inner = block.inner(area);
+    f.render_widget(block, area);
+    let height = inner.height as usize;
+    let first = plan_first_line(app, plan, height);
+    let lines: Vec<Line> = t
+        .nodes
+        .iter()
+        .skip(first)
+        .take(height)
+        .map(|n| {
+            let i = n.id as usize;
+            let (status, since) = t.status[i];
+            let on = branch[i];
+            let name_style = if on {
+                Style::default()
+                    .fg(Color::Yellow)
+                    .add_modifier(Modifier::BOLD)
+            } else if status == NodeStatus::Idle {
+                dim()
+            } else {
+                Style::default()
+            };
+            let mut spans = vec![
+                Span::styled(if on { "▶" } else { " " }, name_style),
+                Span::raw(" ".repeat(1 + 2 * depths[i])),
+                Span::styled(
+                    status.letter().to_string(),
+                    status_style(status).add_modifier(Modifier::BOLD),
+                ),
+                Span::raw(" "),
+                Span::styled(n.name.clone(), name_style),
+            ];
+            if n.kind != n.name {
+                spans.push(Span::styled(format!(" {}", n.kind), dim()));
+            }
+            if !n.detail.is_empty() {
+                spans.push(Span::styled(format!(" · {}", n.detail), dim()));
+            }
+            if status != NodeStatus::Idle {
+                spans.push(Span::styled(format!(" · cycle {since}"), dim()));
+            }
+            Line::from(spans)
+        })
+        .collect();
+    f.render_widget(Paragraph::new(lines), inner);
+}
+
+fn help_line(app: &App, f: &mut Frame, area: Rect) {
+    let skills_keys = [
         ("↑↓/jk", "select"),
         ("a", "(de)activate"),
-        ("tab", "param"),
-        ("e", "edit"),
-        ("p", "priority"),
+        ("tab/e", "param"),
+        ("p", "prio"),
         ("l", "io log"),
         ("v", "verbose"),
+        ("t", "plan"),
         ("r", "run/stop"),
         ("s", "step"),
         ("q", "quit"),
     ];
+    let plan_keys = [
+        ("↑↓/jk", "scroll"),
+        ("PgUp/PgDn", "page"),
+        ("g/G", "top/end"),
+        ("f", "follow"),
+        ("t", "skills"),
+        ("r", "run/stop"),
+        ("s", "step"),
+        ("q", "quit"),
+    ];
+    let keys: &[(&str, &str)] = match app.pane {
+        Pane::Skills => &skills_keys,
+        Pane::Plan => &plan_keys,
+    };
     let mut spans = vec![Span::raw(" ")];
-    for (k, what) in keys {
+    for &(k, what) in keys {
         spans.push(Span::styled(
             k,
             Style::default()

@@ -77,7 +77,7 @@ pub(crate) fn replay(t: &TestDomain, file: &Path, args: &[&str]) -> (Json, Outpu
 /// Every record of an MCAP recording, in order (a CDR sample as the JSON record of its
 /// decoded value and bytes); of a file still being written, those of its closed chunks (none
 /// before the first).
-fn records(file: &Path) -> Vec<Json> {
+pub(crate) fn records(file: &Path) -> Vec<Json> {
     let mut out = Vec::new();
     let _ = read_file(file, |r| {
         out.push(match r {

@@ -9,7 +9,7 @@
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use skillfab_client::Client;
-use skillfab_proto::control::SkillState;
+use skillfab_proto::control::{EventKind, NodeStatus, SkillState};
 use skillfab_proto::param::ParamValue;
 use skillfab_tests::TestDomain;
 use std::path::{Path, PathBuf};
@@ -553,4 +553,166 @@ fn a_plans_names_are_checked_against_a_launch_files_skills_and_a_running_domain(
     let renamed = plan(&t, r#"<WaitFor condition="smooth.smoothd.value &gt; 10"/>"#);
     let (ok, text) = check(&t, &renamed, &[]);
     assert!(!ok && text.contains("has no output 'smoothd'"), "{text}");
+}
+
+/// The plan of `the_running_plan_is_a_live_tree_…`, by node number: (name, status it ends
+/// with, whether it runs for a while before it ends).
+const LIVE_NODES: [(&str, NodeStatus, bool); 7] = [
+    ("live", NodeStatus::Success, true),
+    ("Activate", NodeStatus::Success, false),
+    ("ticking", NodeStatus::Success, true),
+    ("Fallback", NodeStatus::Success, true),
+    ("Timeout", NodeStatus::Failure, true),
+    // Halted by its timeout: as if never ticked.
+    ("never", NodeStatus::Idle, true),
+    ("Log", NodeStatus::Success, false),
+];
+
+#[test]
+fn the_running_plan_is_a_live_tree_in_the_manager_the_events_and_the_recording() {
+    let mut t = TestDomain::new("seqlive");
+    let rec = t.dir.join("live.mcap");
+    t.hello(&["--record", rec.to_str().unwrap()]);
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+    assert_eq!(c.plan().unwrap(), None, "no plan runs yet");
+    let p = plan(
+        &t,
+        r#"<Sequence name="live">
+             <Activate skills="smooth"/>
+             <WaitFor name="ticking" condition="ticker.tick.value &gt; 20"/>
+             <Fallback>
+               <Timeout msec="1500"><WaitFor name="never" condition="ticker.tick.value &lt; 0"/></Timeout>
+               <Log message="the other way"/>
+             </Fallback>
+           </Sequence>"#,
+    );
+    let child = t
+        .command("skillfab")
+        .args(["sequence", p.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // While it waits under its timeout, the manager has the tree, the running branch being
+    // the root, the fallback, the timeout and the monitor's wait.
+    let mut seen = None;
+    t.wait_until(
+        "the live tree to show the plan waiting under its timeout",
+        || {
+            seen = c.plan().unwrap();
+            seen.as_ref()
+                .is_some_and(|tree| tree.status[5].0 == NodeStatus::Running)
+        },
+    );
+    let running = seen.unwrap();
+    let names: Vec<&str> = running.nodes.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(names, LIVE_NODES.map(|n| n.0));
+    assert_eq!(running.nodes[4].kind, "Timeout");
+    assert_eq!(running.nodes[4].detail, "1500 ms");
+    assert_eq!(running.nodes[5].parent, Some(4));
+    assert_eq!(
+        running.running_branch(),
+        [true, false, false, true, true, true, false]
+    );
+    let out = child.wait_with_output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert_eq!(c.plan().unwrap(), None, "the plan ended: none runs");
+
+    // The events: the tree arrived, then each node's changes, then the end.
+    let mut changes: Vec<(u64, u32, NodeStatus)> = Vec::new();
+    let mut started = false;
+    loop {
+        let ev = c
+            .next_event(std::time::Duration::from_secs(10))
+            .unwrap()
+            .expect("the plan's events");
+        match ev.kind {
+            EventKind::PlanStarted {
+                nodes, replaced, ..
+            } => {
+                assert_eq!((nodes, replaced), (7, None));
+                started = true;
+            }
+            EventKind::PlanChanged {
+                cycle, changes: c, ..
+            } => {
+                assert!(started, "the tree comes before its changes");
+                changes.extend(c.iter().map(|c| (cycle, c.id, c.status)));
+            }
+            EventKind::PlanEnded { status, .. } => {
+                assert_eq!(status, NodeStatus::Success);
+                break;
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(c.lost_events(), 0);
+    let cycles: Vec<u64> = changes.iter().map(|c| c.0).collect();
+    assert!(cycles.is_sorted(), "cycles never go back: {changes:?}");
+    for (id, (name, last, runs)) in LIVE_NODES.iter().enumerate() {
+        let mine: Vec<NodeStatus> = changes
+            .iter()
+            .filter(|c| c.1 == id as u32)
+            .map(|c| c.2)
+            .collect();
+        assert!(
+            mine.windows(2).all(|w| w[0] != w[1]),
+            "{name}: each change is a change: {mine:?}"
+        );
+        assert_eq!(mine.last(), Some(last), "{name}: {mine:?}");
+        if *runs {
+            assert_eq!(mine[0], NodeStatus::Running, "{name} runs first: {mine:?}");
+        }
+    }
+    // What the manager answered while the plan ran is what the events had said by then.
+    let (_, since) = running.status[5];
+    assert!(
+        changes.contains(&(since, 5, NodeStatus::Running)),
+        "{changes:?}"
+    );
+
+    // The recording holds the tree and every change: rebuilt from it, the statuses follow
+    // the same steps.
+    let mut recorded: Vec<(u64, u32, NodeStatus)> = Vec::new();
+    t.wait_until("the recording to hold the plan's end", || {
+        let records = crate::replay::records(&rec);
+        let Some(tree) = records.iter().find(|r| r["kind"] == "plan") else {
+            return false;
+        };
+        assert_eq!(tree["nodes"].as_array().unwrap().len(), 7);
+        assert_eq!(tree["nodes"][5]["name"], "never");
+        assert_eq!(tree["nodes"][5]["parent"], 4);
+        let status = |s: &str| match s {
+            "idle" => NodeStatus::Idle,
+            "running" => NodeStatus::Running,
+            "success" => NodeStatus::Success,
+            "failure" => NodeStatus::Failure,
+            other => panic!("status {other}"),
+        };
+        recorded = records
+            .iter()
+            .filter(|r| r["kind"] == "event" && r["event"] == "plan_changed")
+            .flat_map(|r| {
+                let at = r["at"].as_u64().unwrap();
+                r["changes"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(move |c| {
+                        (
+                            at,
+                            c["id"].as_u64().unwrap() as u32,
+                            status(c["status"].as_str().unwrap()),
+                        )
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        records
+            .iter()
+            .any(|r| r["kind"] == "event" && r["event"] == "plan_ended" && r["status"] == "success")
+    });
+    assert_eq!(recorded, changes);
 }

@@ -1089,3 +1089,39 @@ fn sub_trees_are_inlined_in_the_shape_under_the_node_that_names_them() {
         ]
     );
 }
+
+#[test]
+fn a_runner_that_takes_a_plan_over_goes_on_from_the_live_tree_its_predecessor_reported() {
+    use NodeStatus::*;
+    let dir = std::env::temp_dir().join(format!("sf-plan-live-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let store = || crate::keep::PlanStore::at(dir.join("plan"));
+    let p = plan(RESUMABLE);
+    let mut f = Mock::new(&["wander"]);
+    f.client = "runner-1".into();
+    let mut seq = Sequencer::kept(&p, None, "test.xml", store(), false).unwrap();
+    seq.open(&mut f, "runner-1").unwrap();
+    seq.tick(&mut f).unwrap();
+    let before = held(&f);
+    assert_eq!(before[0], Running);
+    assert_eq!(before[1], Success, "the Activate");
+    assert_eq!(f.tree.as_ref().unwrap().plan, "test.xml");
+    drop(seq);
+    // The next runner sends the same tree with the statuses the manager has: nothing it
+    // did not do itself changes; its first tick changes nothing either (the same nodes run).
+    f.client = "runner-2".into();
+    let mut seq = Sequencer::kept(&p, None, "test.xml", store(), false).unwrap();
+    let sent = f.reports.len();
+    assert!(matches!(
+        seq.open(&mut f, "runner-2").unwrap(),
+        crate::run::Opening::Resumed { .. }
+    ));
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Running);
+    let PlanReport::Shape { status, .. } = &f.reports[sent] else {
+        panic!("{:?}", &f.reports[sent..])
+    };
+    assert_eq!(*status, before);
+    assert_eq!(f.reports.len(), sent + 1, "{:?}", &f.reports[sent..]);
+    assert_eq!(held(&f), before);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -374,3 +374,50 @@ fn ctl_logs_prints_skill_lines() {
     let _ = logs.kill();
     let _ = logs.wait();
 }
+
+#[test]
+fn t_shows_the_running_plan_as_a_tree_that_follows_its_events() {
+    let mut t = TestDomain::new("consoleplan");
+    t.hello(&[]);
+    let mut con = Console::start(&t, 40, 120);
+    con.wait_for("skills (3)");
+    con.keys(b"t");
+    con.wait_for("no plan has run since the console connected");
+    // A plan started after the console: its tree arrives through the events.
+    let plan = t.dir.join("plan.xml");
+    std::fs::write(
+        &plan,
+        r#"<root BTCPP_format="4"><BehaviorTree ID="Main">
+             <Sequence name="mission">
+               <Activate skills="smooth"/>
+               <WaitFor name="released" condition="scale.scaled.value &lt; 0"/>
+             </Sequence>
+           </BehaviorTree></root>"#,
+    )
+    .unwrap();
+    let mut runner = t
+        .command("skillfab")
+        .args(["sequence", plan.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    // (Each waited for: a frame reaches the emulator in pieces.)
+    for want in [
+        "plan.xml · 3 nodes · at released",
+        "▶ R mission Sequence",
+        "S Activate · smooth",
+        "▶   R released WaitFor · scale.scaled.value < 0",
+        "t skills",
+    ] {
+        con.wait_for(want);
+    }
+    // The gain turned negative: the wait ends, the plan succeeds; the tree stays, ended.
+    t.ctl(&["set", "scale.gain=-1"]);
+    con.wait_for("ended: success");
+    con.wait_for("S released WaitFor");
+    assert!(runner.wait().unwrap().success());
+    con.keys(b"t");
+    con.wait_for("skills (3)");
+    con.keys(b"q");
+    assert!(con.wait_exit().success());
+}

@@ -537,32 +537,6 @@ samples logged of: {}",
     Ok(())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn replay_reads_param_and_priority_lines() {
-        let log = r#"{"kind":"start","domain":"d","pid":1,"time_ns":1,"unix_ms":2}
-{"kind":"param","cycle":5,"time_ns":1,"unix_ms":2,"skill":"scale","param":"gain","old":2.0,"new":3.5,"by":"1-0"}
-{"kind":"sample","cycle":6,"skill":"scale","dir":"out","port":"scaled","value":{"value":1.0}}
-{"kind":"param","cycle":7,"time_ns":1,"unix_ms":2,"skill":"wander","param":"seed","old":1,"new":9,"by":"1-0"}
-{"kind":"priority","cycle":8,"time_ns":1,"unix_ms":2,"skill":"avoid","old":8,"new":-2,"by":"1-0"}
-"#;
-        assert_eq!(
-            changes(log, None).unwrap(),
-            vec![
-                Change::Param("scale".into(), "gain".into(), ParamValue::Float(3.5)),
-                Change::Param("wander".into(), "seed".into(), ParamValue::UInt(9)),
-                Change::Priority("avoid".into(), -2),
-            ]
-        );
-        assert_eq!(changes(log, Some("avoid")).unwrap().len(), 1);
-        assert!(changes("{\"kind\":\"param\"}", None).is_err());
-        assert!(changes("not json", None).is_err());
-    }
-}
-
 /// A plan's tree as text: a line per node, indented by depth — its status letter (`·` idle,
 /// `R` running, `S` success, `F` failure), name, kind and detail, the cycle since when; `▶`
 /// marks the branch that runs.
@@ -593,4 +567,65 @@ fn plan_text(t: &skillfab_proto::control::PlanTree) -> String {
         out.push_str(&line);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replay_reads_param_and_priority_lines() {
+        let log = r#"{"kind":"start","domain":"d","pid":1,"time_ns":1,"unix_ms":2}
+{"kind":"param","cycle":5,"time_ns":1,"unix_ms":2,"skill":"scale","param":"gain","old":2.0,"new":3.5,"by":"1-0"}
+{"kind":"sample","cycle":6,"skill":"scale","dir":"out","port":"scaled","value":{"value":1.0}}
+{"kind":"param","cycle":7,"time_ns":1,"unix_ms":2,"skill":"wander","param":"seed","old":1,"new":9,"by":"1-0"}
+{"kind":"priority","cycle":8,"time_ns":1,"unix_ms":2,"skill":"avoid","old":8,"new":-2,"by":"1-0"}
+"#;
+        assert_eq!(
+            changes(log, None).unwrap(),
+            vec![
+                Change::Param("scale".into(), "gain".into(), ParamValue::Float(3.5)),
+                Change::Param("wander".into(), "seed".into(), ParamValue::UInt(9)),
+                Change::Priority("avoid".into(), -2),
+            ]
+        );
+        assert_eq!(changes(log, Some("avoid")).unwrap().len(), 1);
+        assert!(changes("{\"kind\":\"param\"}", None).is_err());
+        assert!(changes("not json", None).is_err());
+    }
+
+    #[test]
+    fn a_plan_prints_as_an_indented_tree_with_its_running_branch_marked() {
+        use skillfab_proto::control::{NodeStatus, PlanNode, PlanTree};
+        let node = |id, parent, name: &str, kind: &str, detail: &str| PlanNode {
+            id,
+            parent,
+            name: name.into(),
+            kind: kind.into(),
+            detail: detail.into(),
+        };
+        let t = PlanTree {
+            plan: "p.xml".into(),
+            nodes: vec![
+                node(0, None, "main", "Sequence", ""),
+                node(1, Some(0), "Activate", "Activate", "a, b"),
+                node(2, Some(0), "wait", "WaitFor", "x.y.z > 1"),
+                node(3, Some(0), "Log", "Log", "done"),
+            ],
+            status: vec![
+                (NodeStatus::Running, 3),
+                (NodeStatus::Success, 3),
+                (NodeStatus::Running, 4),
+                (NodeStatus::Idle, 0),
+            ],
+        };
+        assert_eq!(
+            plan_text(&t),
+            "plan p.xml (4 nodes)\n\
+             ▶  R main [Sequence] (running since cycle 3)\n\
+             \x20    S Activate a, b (success since cycle 3)\n\
+             ▶    R wait [WaitFor] x.y.z > 1 (running since cycle 4)\n\
+             \x20    · Log done"
+        );
+    }
 }

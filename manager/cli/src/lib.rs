@@ -100,6 +100,10 @@ enum Cmd {
         #[command(flatten)]
         remote: RemoteArg,
     },
+    /// Serve the running fabric to Foxglove (WebSocket protocol, `ws://127.0.0.1:8765`):
+    /// every topic, transforms, the world as a 3-D scene, the sonar ring, events, logs, the
+    /// plan tree, parameters, activation (docs/view.md). `--snapshot F.svg` draws one moment.
+    View(skillfab_view::ViewArgs),
     /// Carry topics, the control plane, events and logs between this domain and other hosts
     /// over Zenoh (docs/bridge.md). Remote producers feed local skills as async producers do.
     Bridge(BridgeArgs),
@@ -546,6 +550,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Cmd::Replay { opts, json } => replay(&opts, json),
         Cmd::Console { remote } => skillfab_console::run(remote.address(&domain)?),
+        Cmd::View(args) => Ok(skillfab_view::run(&domain, &args, &|addr| {
+            if args.snapshot.is_none() {
+                eprintln!(
+                    "skillfab view: serving ws://{addr} (Foxglove: Open connection → Foxglove WebSocket)"
+                );
+            }
+        })?),
         Cmd::Clean { all_dead, json } => clean(&domain, all_dead, json),
         Cmd::Schema {
             c,

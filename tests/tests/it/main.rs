@@ -19,3 +19,4 @@ mod polyglot;
 mod replay;
 mod ros_tools;
 mod sequence;
+mod view;

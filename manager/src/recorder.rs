@@ -3,7 +3,10 @@
 //! one JSON-lines file.
 //!
 //! The manager hands records to a writer thread over a channel, so a slow disk never holds up
-//! a cycle; samples are copied out as bytes and decoded through their schema on that thread.
+//! a cycle; samples are copied out as bytes, each with a shared reference to where it comes
+//! from (`SampleSource`), and encoded on that thread. The full-rate recording
+//! (`crate::engine::record`) is written by the same writer. [`read_file`] reads either format
+//! back, CDR samples decoded to their bytes.
 //!
 //! Format: one JSON object per line (keys in alphabetical order), told apart by `kind`;
 //! `time_ns` is the host's monotonic clock — the clock of sample stamps and events — and

@@ -20,6 +20,7 @@ use serde_json::json;
 use skillfab_proto::board::{Board, Clock};
 use skillfab_proto::control::{ControlError, Event, Reply, Response};
 use skillfab_proto::domain::Domain;
+use skillfab_proto::header::MaybeSlot;
 use skillfab_proto::names;
 use skillfab_proto::schema::MessageSchema;
 use skillfab_proto::services::RawReader;
@@ -57,6 +58,8 @@ struct RecTopic {
     schema: MessageSchema,
     /// Producers by board slot (a device's command: `cmd`, else `out`).
     producers: HashMap<u32, Arc<SampleSource>>,
+    /// Samples of a slot no declaration names (`slot<N>`), made once per slot.
+    strangers: HashMap<MaybeSlot, Arc<SampleSource>>,
     /// Newest cycle recorded, per producer.
     last: HashMap<String, u64>,
 }
@@ -183,13 +186,20 @@ impl Recording {
                     .or_else(|| t.producers.values().find(|p| p.dir == "cmd"))
                 {
                     Some(s) => s.clone(),
-                    None => {
-                        let name = format!("slot{}", h.slot);
-                        match SampleSource::new(&name, "out", topic, topic, &t.schema, true) {
-                            Ok(s) => Arc::new(s),
-                            Err(_) => continue,
+                    None => match t.strangers.get(&h.slot) {
+                        Some(s) => s.clone(),
+                        None => {
+                            let name = format!("slot{}", h.slot);
+                            let Ok(s) =
+                                SampleSource::new(&name, "out", topic, topic, &t.schema, true)
+                            else {
+                                continue;
+                            };
+                            let s = Arc::new(s);
+                            t.strangers.insert(h.slot, s.clone());
+                            s
                         }
-                    }
+                    },
                 };
                 let last = match t.last.get_mut(&source.skill) {
                     Some(l) => l,
@@ -385,6 +395,7 @@ impl Observers {
             let t = rec.topics.entry(topic).or_insert_with(|| RecTopic {
                 schema,
                 producers: HashMap::new(),
+                strangers: HashMap::new(),
                 last: HashMap::new(),
             });
             // The same source as before (the writer's channel cache is keyed by it) unless it

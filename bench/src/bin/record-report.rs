@@ -1,7 +1,7 @@
 //! `record-report`: what full-rate recording (`skillfab up --record`) costs the cycle.
 //!
 //! ```text
-//! record-report [--pairs N] [--cycles C] [--world FILE] [--json]
+//! record-report [--pairs N] [--cycles C] [--world FILE] [--record-encoding cdr|json] [--json]
 //! ```
 //!
 //! The exit-lab network in real time at 100 Hz — simulator, Denning device, wander, avoid and
@@ -10,7 +10,8 @@
 //! interleaved and alternating which goes first, on release binaries beside this one. Per run:
 //! the manager's cycle latency (cycle start → last run done) p50/p99 and overruns; per
 //! recorded run: complete cycles in the file, samples, cycles in which a device output is
-//! missing, samples out of order, bytes per cycle.
+//! missing, samples out of order, bytes per cycle. `--record-encoding` is passed to `up`
+//! (samples as CDR, the default, or JSON).
 
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -76,6 +77,10 @@ fn run(
         .env_remove("SKILLFAB_DOMAIN");
     if let Some(r) = record {
         c.arg("--record").arg(r);
+        let args: Vec<String> = std::env::args().collect();
+        if let Some(e) = arg_value(&args, "--record-encoding") {
+            c.args(["--record-encoding", &e]);
+        }
     }
     let out = c.output().map_err(because("skillfab up"))?;
     serde_json::from_slice(&out.stdout)

@@ -299,33 +299,28 @@ pub fn plan_json(tree: &PlanTree, cycle: u64) -> Json {
         })
         .collect();
     json!({"plan": tree.plan, "cycle": cycle, "nodes": nodes,
-           "running_branch": running_branch(tree)})
+           "running_branch": running_branch(tree).into_iter()
+               .map(|(depth, node)| json!({"depth": depth, "node": node}))
+               .collect::<Vec<_>>()})
 }
 
-/// The names along the running branch, root first: each running node's running child, down
-/// to the deepest.
-pub fn running_branch(tree: &PlanTree) -> Vec<String> {
-    let running = |id: u32| {
-        tree.status
-            .get(id as usize)
-            .is_some_and(|(s, _)| *s == NodeStatus::Running)
-    };
-    let mut out = Vec::new();
-    let mut at: Option<u32> = None;
-    loop {
-        let next = tree.nodes.iter().find(|n| n.parent == at && running(n.id));
-        match next {
-            Some(n) => {
-                out.push(if n.name.is_empty() || n.name == n.kind {
-                    n.kind.clone()
-                } else {
-                    format!("{} {}", n.kind, n.name)
-                });
-                at = Some(n.id);
-            }
-            None => return out,
-        }
-    }
+/// Where the plan is: every node that is running or holds a running node below it, in tree
+/// order, with its depth (a `Parallel` has several running children: each branch is there).
+pub fn running_branch(tree: &PlanTree) -> Vec<(usize, String)> {
+    let depths = tree.depths();
+    tree.running_branch()
+        .iter()
+        .zip(&tree.nodes)
+        .filter(|(on, _)| **on)
+        .map(|(_, n)| {
+            let label = if n.name.is_empty() || n.name == n.kind {
+                n.kind.clone()
+            } else {
+                format!("{} {}", n.kind, n.name)
+            };
+            (depths.get(n.id as usize).copied().unwrap_or(0), label)
+        })
+        .collect()
 }
 
 /// The last complete record of a ground-truth file `len` bytes long, reading its header and
@@ -1266,9 +1261,18 @@ mod tests {
                 (NodeStatus::Idle, 0),
             ],
         };
+        let branch = running_branch(&tree);
+        let branch: Vec<(usize, &str)> = branch.iter().map(|(d, n)| (*d, n.as_str())).collect();
         assert_eq!(
-            running_branch(&tree),
-            ["Sequence", "Fallback find", "Action b"]
+            branch,
+            [(0, "Sequence"), (1, "Fallback find"), (2, "Action b")]
+        );
+        let mut both = tree.clone();
+        both.status[4] = (NodeStatus::Running, 4);
+        assert_eq!(
+            running_branch(&both).len(),
+            4,
+            "both branches of a sequence's children"
         );
         let j = plan_json(&tree, 9);
         assert_eq!(j["nodes"][2]["status"], json!("failure"));

@@ -505,18 +505,13 @@ fn draw(seen: &Seen, title: &str) -> String {
                 0.0,
             );
             line(&mut svg, "running branch:", "#222", 12, 0.0);
-            for (depth, n) in p["running_branch"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .enumerate()
-            {
+            for n in p["running_branch"].as_array().into_iter().flatten() {
                 line(
                     &mut svg,
-                    n.as_str().unwrap_or_default(),
+                    n["node"].as_str().unwrap_or_default(),
                     status_color("running"),
                     12,
-                    10.0 + 12.0 * depth as f64,
+                    10.0 + 12.0 * n["depth"].as_f64().unwrap_or(0.0),
                 );
             }
             let mut counts: HashMap<&str, usize> = HashMap::new();
@@ -601,7 +596,8 @@ mod tests {
         seen.take(
             "/plan",
             json!({"plan": "exit-lab", "cycle": 7, "nodes": [{"status": "running"}],
-                   "running_branch": ["Sequence", "Action explore"]}),
+                   "running_branch": [{"depth": 0, "node": "Sequence"},
+                                      {"depth": 1, "node": "Action explore"}]}),
         );
         assert!(seen.complete(true, false));
         let svg = draw(&seen, "box");

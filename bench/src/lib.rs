@@ -18,6 +18,7 @@ pub mod crowd;
 pub mod dora;
 pub mod floors;
 pub mod futex;
+pub mod network;
 pub mod report;
 pub mod soak;
 

@@ -14,48 +14,9 @@
 //! (samples as CDR, the default, or JSON).
 
 use serde_json::{Value, json};
-use std::path::{Path, PathBuf};
+use skillfab_bench::network::{arg_value, arg_world, because, launch, median};
+use std::path::Path;
 use std::process::Command;
-
-const SKILLS: [(&str, bool); 8] = [
-    ("wander", true),
-    ("avoid", true),
-    ("barcode_track", true),
-    ("wall_follow", false),
-    ("home", false),
-    ("door_locate", false),
-    ("go_through", false),
-    ("stop", false),
-];
-
-fn arg_value(args: &[String], name: &str) -> Option<String> {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1).cloned())
-}
-
-fn launch(world: &Path, link: &Path) -> String {
-    let mut s = format!(
-        "[manager]\nperiod_ms = 10\n\
-         [[process]]\nname = \"denning-sim\"\nbin = \"denning-sim\"\nregisters = false\n\
-         args = [\"--world\", \"{}\", \"--link\", \"{}\", \"--seed\", \"1\"]\n\
-         [[process]]\nname = \"denning\"\nbin = \"denning\"\nargs = [\"--port\", \"{}\"]\n",
-        world.display(),
-        link.display(),
-        link.display()
-    );
-    for (name, active) in SKILLS {
-        s.push_str(&format!(
-            "[[process]]\nname = \"{name}\"\nbin = \"{name}\"\nactive = {active}\n"
-        ));
-    }
-    s
-}
-
-/// A failed step's reason.
-fn because<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> String + '_ {
-    move |e| format!("{what}: {e}")
-}
 
 /// One `skillfab up` run; returns the manager's report.
 fn run(
@@ -85,13 +46,6 @@ fn run(
     let out = c.output().map_err(because("skillfab up"))?;
     serde_json::from_slice(&out.stdout)
         .map_err(|e| format!("no report ({e}): {}", String::from_utf8_lossy(&out.stderr)))
-}
-
-fn arg_world() -> Result<PathBuf, String> {
-    let args: Vec<String> = std::env::args().collect();
-    let w = arg_value(&args, "--world")
-        .unwrap_or_else(|| "devices/denning-sim/worlds/exit-lab.toml".into());
-    std::fs::canonicalize(&w).map_err(|e| format!("world {w}: {e}"))
 }
 
 /// What a recording holds: complete cycles, samples, cycles missing a device output,
@@ -140,11 +94,6 @@ fn inspect(path: &Path) -> Result<Value, String> {
         "overruns": overruns.len(),
         "out_of_order": out_of_order, "bytes_per_cycle": bytes / (cycles.len().max(1) as u64),
     }))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 fn main() -> std::process::ExitCode {

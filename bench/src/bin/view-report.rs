@@ -15,60 +15,15 @@
 //! → last run done) p50/p99 and overruns; per viewed run: frames and bytes the viewer got.
 
 use serde_json::{Value, json};
+use skillfab_bench::network::{arg_value, arg_world, because, launch, median};
 use std::io::ErrorKind;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use tungstenite::Message;
 use tungstenite::client::IntoClientRequest;
-
-const SKILLS: [(&str, bool); 8] = [
-    ("wander", true),
-    ("avoid", true),
-    ("barcode_track", true),
-    ("wall_follow", false),
-    ("home", false),
-    ("door_locate", false),
-    ("go_through", false),
-    ("stop", false),
-];
-
-fn arg_value(args: &[String], name: &str) -> Option<String> {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1).cloned())
-}
-
-fn launch(world: &Path, link: &Path) -> String {
-    let mut s = format!(
-        "[manager]\nperiod_ms = 10\n\
-         [[process]]\nname = \"denning-sim\"\nbin = \"denning-sim\"\nregisters = false\n\
-         args = [\"--world\", \"{}\", \"--link\", \"{}\", \"--seed\", \"1\"]\n\
-         [[process]]\nname = \"denning\"\nbin = \"denning\"\nargs = [\"--port\", \"{}\"]\n",
-        world.display(),
-        link.display(),
-        link.display()
-    );
-    for (name, active) in SKILLS {
-        s.push_str(&format!(
-            "[[process]]\nname = \"{name}\"\nbin = \"{name}\"\nactive = {active}\n"
-        ));
-    }
-    s
-}
-
-fn because<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> String + '_ {
-    move |e| format!("{what}: {e}")
-}
-
-fn world() -> Result<PathBuf, String> {
-    let args: Vec<String> = std::env::args().collect();
-    let w = arg_value(&args, "--world")
-        .unwrap_or_else(|| "devices/denning-sim/worlds/exit-lab.toml".into());
-    std::fs::canonicalize(&w).map_err(|e| format!("world {w}: {e}"))
-}
 
 /// What the viewer got.
 #[derive(Default)]
@@ -164,7 +119,7 @@ fn run(
 ) -> Result<(Value, Option<Got>), String> {
     let link = dir.join(format!("robot-{tag}"));
     let file = dir.join(format!("{tag}.toml"));
-    let world = world()?;
+    let world = arg_world()?;
     std::fs::write(&file, launch(&world, &link)).map_err(because("launch file"))?;
     let domain = format!("view-{}-{tag}", std::process::id());
     let mut watch = None;
@@ -206,11 +161,6 @@ fn run(
     let report = serde_json::from_slice(&out.stdout)
         .map_err(|e| format!("no report ({e}): {}", String::from_utf8_lossy(&out.stderr)))?;
     Ok((report, got))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 fn main() -> std::process::ExitCode {

@@ -165,10 +165,11 @@ fn lockstep_run(t: &TestDomain, extra: &[&str]) -> serde_json::Value {
 
 /// What a run's records hold of the host rather than of the run: the host's clock (events'
 /// times, samples' publication stamps), process ids, the domain's name, clients' names (process
-/// ids in them), and a sample's raw bytes (its decoded value is compared; its padding bytes
-/// are whatever its producer's stack held).
-const OF_THE_HOST: [&str; 8] = [
-    "time_ns", "unix_ms", "stamp_ns", "pid", "domain", "client", "by", "raw",
+/// ids in them), a sample's raw bytes (its decoded value is compared; its padding bytes
+/// are whatever its producer's stack held), and the running plan's name (its file: the demo's
+/// copy of it, in a directory named after the demo's process).
+const OF_THE_HOST: [&str; 9] = [
+    "time_ns", "unix_ms", "stamp_ns", "pid", "domain", "client", "by", "raw", "plan",
 ];
 
 /// The device's serial-link statistics (frames, connections), counted from before the first

@@ -92,11 +92,6 @@ fn viewer(port: u16, stop: &AtomicBool) -> Result<Got, String> {
     Ok(got)
 }
 
-fn free_port() -> Result<u16, String> {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").map_err(because("a free port"))?;
-    Ok(l.local_addr().map_err(because("a free port"))?.port())
-}
-
 struct Killed(Child);
 
 impl Drop for Killed {
@@ -124,7 +119,7 @@ fn run(
     let domain = format!("view-{}-{tag}", std::process::id());
     let mut watch = None;
     if viewed {
-        let port = free_port()?;
+        let port = skillfab_tests::free_port();
         let view = Command::new(skillfab)
             .args(["view", "--listen", &format!("127.0.0.1:{port}"), "--world"])
             .arg(&world)

@@ -250,16 +250,7 @@ fn changes(text: &str, only: Option<&str>) -> anyhow::Result<Vec<Change>> {
         let bad = || anyhow::anyhow!("line {}: malformed {} record", n + 1, j["kind"]);
         match j["kind"].as_str() {
             Some("param") => {
-                let new = &j["new"];
-                let v = if let Some(b) = new.as_bool() {
-                    ParamValue::Bool(b)
-                } else if let Some(u) = new.as_u64() {
-                    ParamValue::UInt(u)
-                } else if let Some(i) = new.as_i64() {
-                    ParamValue::Int(i)
-                } else {
-                    ParamValue::Float(new.as_f64().ok_or_else(bad)?)
-                };
+                let v = skillfab_proto::json::param_from_json(&j["new"]).ok_or_else(bad)?;
                 let param = j["param"].as_str().ok_or_else(bad)?.to_string();
                 out.push(Change::Param(skill, param, v));
             }

@@ -26,6 +26,7 @@ use crate::protocol::{
 use crate::scene::{self, Scene};
 use serde_json::{Value as Json, json};
 use skillfab_client::{Client, ClientError};
+use skillfab_proto::bridge::unix_now_ns;
 use skillfab_proto::control::{Event, EventKind, NodeStatus, PlanTree, SkillInfo};
 use skillfab_proto::domain::Domain;
 use skillfab_proto::log::{Level as LogLevel, LogLine};
@@ -39,7 +40,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 /// A viewer's number, for the server's life.
 pub type ViewerId = u64;
@@ -171,12 +172,6 @@ pub struct Hub {
     last_static: Instant,
 }
 
-fn now_unix_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
 fn stamp(ns: u64) -> Json {
     json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
 }
@@ -248,33 +243,20 @@ fn services() -> Vec<Service> {
     .collect()
 }
 
-fn param_json(v: ParamValue) -> Parameter {
-    let (value, ty) = match v {
-        ParamValue::Bool(b) => (json!(b), None),
-        ParamValue::Int(i) => (json!(i), None),
-        ParamValue::UInt(u) => (json!(u), None),
-        ParamValue::Float(f) => (json!(f), Some("float64".to_string())),
-    };
+/// A parameter as the protocol sends it: `float64` marks a float, so a client keeps `2.0` one.
+fn parameter(name: String, v: ParamValue) -> Parameter {
     Parameter {
-        name: String::new(),
-        value,
-        ty,
+        name,
+        value: skillfab_proto::json::param_json(&v),
+        ty: matches!(v, ParamValue::Float(_)).then(|| "float64".to_string()),
     }
 }
 
 /// A parameter's JSON value as the declared kind, or why not.
 fn param_value(j: &Json, kind: ParamKind) -> Result<ParamValue, String> {
-    let v = match j {
-        Json::Bool(b) => ParamValue::Bool(*b),
-        Json::Number(n) => match (n.as_i64(), n.as_u64(), n.as_f64()) {
-            (Some(i), _, _) => ParamValue::Int(i),
-            (_, Some(u), _) => ParamValue::UInt(u),
-            (_, _, Some(f)) => ParamValue::Float(f),
-            _ => return Err(format!("{n} is not a number this server reads")),
-        },
-        other => return Err(format!("{other} is not a {kind}")),
-    };
-    v.coerce(kind).ok_or_else(|| format!("{j} is not a {kind}"))
+    skillfab_proto::json::param_from_json(j)
+        .and_then(|v| v.coerce(kind))
+        .ok_or_else(|| format!("{j} is not a {kind}"))
 }
 
 fn split_param(name: &str) -> Option<(&str, &str)> {
@@ -583,7 +565,7 @@ impl Hub {
     fn fan_out(&mut self, channel: u32, payload: &mut dyn FnMut() -> Option<Vec<u8>>) {
         let now = Instant::now();
         let mut built: Option<Option<Vec<u8>>> = None;
-        let time = now_unix_ns();
+        let time = unix_now_ns();
         for v in self.viewers.values_mut() {
             let Some((subs, last)) = v.by_channel.get_mut(&channel) else {
                 continue;
@@ -662,7 +644,7 @@ impl Hub {
                 Some(out)
             });
         }
-        let now = stamp(now_unix_ns());
+        let now = stamp(unix_now_ns());
         if let Some(r) = sonar {
             self.send_own(Own::Robot, &scene::robot_update("base_link", &r, &now));
         }
@@ -680,7 +662,7 @@ impl Hub {
             .scene
             .as_ref()
             .map_or(([0.0; 3], 0.0), Scene::odom_origin);
-        json!({"transforms": [{"timestamp": stamp(now_unix_ns()), "parent_frame_id": "map",
+        json!({"transforms": [{"timestamp": stamp(unix_now_ns()), "parent_frame_id": "map",
             "child_frame_id": "odom", "translation": {"x": at[0], "y": at[1], "z": at[2]},
             "rotation": scene::quaternion(yaw)}]})
     }
@@ -704,7 +686,7 @@ impl Hub {
         let Some(r) = last_truth_record(path, meta.len()) else {
             return;
         };
-        let tf = json!({"transforms": [{"timestamp": stamp(now_unix_ns()),
+        let tf = json!({"transforms": [{"timestamp": stamp(unix_now_ns()),
             "parent_frame_id": "map", "child_frame_id": "truth",
             "translation": {"x": r.x, "y": r.y, "z": f64::from(r.floor) * scene::FLOOR_HEIGHT},
             "rotation": scene::quaternion(r.theta)}]});
@@ -728,7 +710,7 @@ impl Hub {
     }
 
     fn event(&mut self, ev: &Event) {
-        let log = json!({"timestamp": stamp(now_unix_ns()), "level": event_level(&ev.kind),
+        let log = json!({"timestamp": stamp(unix_now_ns()), "level": event_level(&ev.kind),
             "message": format!("cycle {}: {}", ev.cycle, skillfab_proto::json::event_json(ev)),
             "name": "manager", "file": "", "line": 0});
         self.send_own(Own::Events, &log);
@@ -737,10 +719,8 @@ impl Hub {
                 skill, param, new, ..
             } => {
                 let name = format!("/{skill}/{param}");
-                let mut p = param_json(*new);
-                p.name = name.clone();
                 let m = ServerMessage::ParameterValues {
-                    parameters: vec![p],
+                    parameters: vec![parameter(name.clone(), *new)],
                     id: None,
                 };
                 for v in self.viewers.values() {
@@ -809,7 +789,7 @@ impl Hub {
             Err(e) => return self.lost_manager(&e),
         };
         for l in lines {
-            let msg = json!({"timestamp": stamp(now_unix_ns()), "level": log_level(l.level),
+            let msg = json!({"timestamp": stamp(unix_now_ns()), "level": log_level(l.level),
                 "message": l.to_string(), "name": l.skill, "file": l.target, "line": 0});
             self.send_own(Own::Log, &msg);
         }
@@ -835,7 +815,7 @@ impl Hub {
                     ]
                     .into_iter()
                     .collect(),
-                    session_id: format!("{}-{}", std::process::id(), now_unix_ns()),
+                    session_id: format!("{}-{}", std::process::id(), unix_now_ns()),
                 });
                 outbox.text(&ServerMessage::Advertise {
                     channels: self.channels.values().map(|c| c.channel.clone()).collect(),
@@ -907,7 +887,7 @@ impl Hub {
                             .opts
                             .scene
                             .as_ref()
-                            .map(|sc| sc.update(stamp(now_unix_ns()))),
+                            .map(|sc| sc.update(stamp(unix_now_ns()))),
                         Some(Source::Own(Own::Tf)) => Some(self.static_tf()),
                         Some(Source::Own(Own::Plan)) => {
                             self.plan.as_ref().map(|p| plan_json(p, self.plan_cycle))
@@ -917,7 +897,7 @@ impl Hub {
                     if let (Some(msg), Some(v)) = (msg, self.viewers.get(&id)) {
                         v.outbox.data(protocol::message_data(
                             s.id,
-                            now_unix_ns(),
+                            unix_now_ns(),
                             msg.to_string().as_bytes(),
                         ));
                     }
@@ -1032,9 +1012,7 @@ impl Hub {
             for (param, value) in &s.values {
                 let name = format!("/{}/{param}", s.name);
                 if names.is_empty() || names.contains(&name) {
-                    let mut p = param_json(*value);
-                    p.name = name.clone();
-                    out.push(p);
+                    out.push(parameter(name.clone(), *value));
                     found.insert(name);
                 }
             }

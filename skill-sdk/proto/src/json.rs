@@ -16,6 +16,21 @@ pub fn param_json(v: &ParamValue) -> Json {
     }
 }
 
+/// A parameter value back from [`param_json`]'s JSON: a bool, else an unsigned, a signed or
+/// a float number (the declared kind then decides, [`ParamValue::coerce`]); `None` for
+/// anything else.
+pub fn param_from_json(j: &Json) -> Option<ParamValue> {
+    if let Some(b) = j.as_bool() {
+        Some(ParamValue::Bool(b))
+    } else if let Some(u) = j.as_u64() {
+        Some(ParamValue::UInt(u))
+    } else if let Some(i) = j.as_i64() {
+        Some(ParamValue::Int(i))
+    } else {
+        j.as_f64().map(ParamValue::Float)
+    }
+}
+
 /// A decoded value as JSON.
 pub fn value_json(v: &Value) -> Json {
     // Built directly (it was a round trip through text: the recorder calls this for every

@@ -228,14 +228,26 @@ impl Fabric {
     /// Starts `case` with a cycle every `period` (whole milliseconds; `None`: back to back);
     /// returns once every skill runs.
     pub fn start_every(case: Case, period: Option<Duration>) -> Fabric {
+        Fabric::start_spinning(case, period, 0)
+    }
+
+    /// [`Fabric::start_every`] with every skill in spin mode (`[manager] spin_us`; 0: none).
+    pub fn start_spinning(case: Case, period: Option<Duration>, spin_us: u64) -> Fabric {
         if matches!(case, Case::Lang(_)) {
             skillfab_tests::build_foreign_examples();
         }
         let mut t = TestDomain::new(&case.name());
         let period = period.map_or(0, |p| p.as_millis().max(1) as u64);
-        let text = case
+        let mut text = case
             .launch(period)
             .replace("{dir}", t.dir.to_str().unwrap());
+        if spin_us > 0 {
+            text = text.replacen(
+                "[manager]\n",
+                &format!("[manager]\nspin_us = {spin_us}\n"),
+                1,
+            );
+        }
         let launch = t.launch_file(&text);
         let up = t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
         let board = t.board();

@@ -311,6 +311,129 @@ pub fn scale_json(points: &[ScalePoint]) -> Json {
         .collect()
 }
 
+/// One point of the spin curve: a chain at 100 Hz with every skill's spin budget.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpinPoint {
+    /// Skill processes in the chain.
+    pub depth: usize,
+    /// Spin budget of every skill (µs; 0: they sleep, the default).
+    pub spin_us: u64,
+    /// Cycle latency (start → last run done), µs, over every repeat.
+    pub latency: Summary,
+    /// CPU of the manager and every skill process (% of one core), mean over the repeats.
+    pub cpu_percent: f64,
+}
+
+/// Latency against CPU as the spin budget grows: chains of each depth at 100 Hz with every
+/// skill's budget in `budgets_us` (0: sleeping), next to the futex ring of the same depth
+/// (budget `None` in the result), `cycles` per run, the runs of one depth interleaved
+/// `repeats` times.
+pub fn spin_curve(
+    depths: &[usize],
+    budgets_us: &[u64],
+    cycles: usize,
+    repeats: usize,
+) -> Vec<(SpinPoint, Option<SpinPoint>)> {
+    let cpu = |pids: &[u32]| pids.iter().map(|&p| cpu_time(p)).sum::<Duration>();
+    let mut out = Vec::new();
+    for &depth in depths {
+        let mut lat: Vec<Vec<f64>> = vec![Vec::new(); budgets_us.len() + 1];
+        let mut cpu_pct: Vec<f64> = vec![0.0; budgets_us.len() + 1];
+        for _ in 0..repeats.max(1) {
+            // The floor first, then every budget.
+            let mut ring = crate::futex::Futex::start(floors::Shape::Ring(depth));
+            let nodes = ring.node_pids();
+            let (n0, d0, t0) = (cpu(&nodes), thread_cpu(), Instant::now());
+            let floor = ring.rounds_every(cycles, Some(crate::PACE));
+            cpu_pct[0] += ((cpu(&nodes) - n0) + (thread_cpu() - d0)).as_secs_f64()
+                / t0.elapsed().as_secs_f64()
+                * 100.0;
+            lat[0].extend(floors::hops(&floor));
+            drop(ring);
+            for (i, &spin_us) in budgets_us.iter().enumerate() {
+                let mut f = Fabric::start_spinning(Case::Chain(depth), Some(crate::PACE), spin_us);
+                let (manager, skills) = f.pids();
+                let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
+                let (c0, t0) = (cpu(&all), Instant::now());
+                let times = f.times(cycles);
+                cpu_pct[i + 1] +=
+                    (cpu(&all) - c0).as_secs_f64() / t0.elapsed().as_secs_f64() * 100.0;
+                lat[i + 1].extend(floors::hops(&times));
+            }
+        }
+        let reps = repeats.max(1) as f64;
+        let point = |i: usize, spin_us: u64| SpinPoint {
+            depth,
+            spin_us,
+            latency: Summary::of(&lat[i]),
+            cpu_percent: cpu_pct[i] / reps,
+        };
+        let floor = point(0, 0);
+        for (i, &b) in budgets_us.iter().enumerate() {
+            let p = point(i + 1, b);
+            eprintln!(
+                "spin: chain-{depth}@100Hz spin {b} µs: p50 {:.0} µs (futex floor {:.0}), CPU {:.1} % (floor {:.1} %)",
+                p.latency.p50, floor.latency.p50, p.cpu_percent, floor.cpu_percent
+            );
+            out.push((p, (i == 0).then_some(floor)));
+        }
+    }
+    out
+}
+
+/// The spin curve as a table for people (the futex floor on the first line of each depth).
+pub fn spin_curve_text(points: &[(SpinPoint, Option<SpinPoint>)]) -> String {
+    let mut s = String::from(
+        "spin: chain-D@100Hz, every skill spinning up to the budget after cycle start; cycle \
+         latency (start → last run done) µs, CPU of all processes (% of one core)\n",
+    );
+    s.push_str(&format!(
+        "{:>5} {:>12} {:>18} {:>8} {:>8}\n",
+        "depth", "spin", "p50 / p99", "÷futex", "CPU"
+    ));
+    let mut floor_p50 = f64::NAN;
+    for (p, floor) in points {
+        if let Some(f) = floor {
+            floor_p50 = f.latency.p50;
+            s.push_str(&format!(
+                "{:>5} {:>12} {:>18} {:>8} {:>7.1}%\n",
+                f.depth,
+                "futex floor",
+                format!("{:.0} / {:.0}", f.latency.p50, f.latency.p99),
+                "1.00",
+                f.cpu_percent
+            ));
+        }
+        s.push_str(&format!(
+            "{:>5} {:>9} µs {:>18} {:>8.2} {:>7.1}%\n",
+            p.depth,
+            p.spin_us,
+            format!("{:.0} / {:.0}", p.latency.p50, p.latency.p99),
+            p.latency.p50 / floor_p50,
+            p.cpu_percent
+        ));
+    }
+    s
+}
+
+/// The spin curve as JSON.
+pub fn spin_curve_json(points: &[(SpinPoint, Option<SpinPoint>)]) -> Json {
+    let one = |p: &SpinPoint| {
+        json!({"depth": p.depth, "spin_us": p.spin_us, "latency": summary_json(&p.latency),
+               "cpu_percent": (p.cpu_percent * 10.0).round() / 10.0})
+    };
+    points
+        .iter()
+        .map(|(p, floor)| {
+            let mut v = one(p);
+            if let Some(f) = floor {
+                v["futex_floor"] = one(f);
+            }
+            v
+        })
+        .collect()
+}
+
 /// CPU time of the calling thread.
 fn thread_cpu() -> Duration {
     nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID)

@@ -4,6 +4,7 @@
 //! [manager]
 //! period_ms = 10          # 0: free-running
 //! deadline_ms = 50        # default: the period
+//! spin_us = 0             # every process's spin budget (µs) unless it sets its own
 //!
 //! [[process]]
 //! name = "scale"          # instance name (unique in the domain)
@@ -17,6 +18,8 @@
 //! max_restarts = 5
 //! backoff_ms = 200
 //! registers = true        # false for processes that are not skills (e.g. a simulator)
+//! spin_us = 300           # poll for its inputs up to 300 µs after cycle start, not sleep
+//!                         # (default: [manager] spin_us, else 0; docs/realtime.md)
 //!
 //! [bridge]                # `skillfab bridge` (docs/bridge.md), supervised like a process
 //! listen = ["tcp/0.0.0.0:7447"]   # and/or connect = ["tcp/HOST:PORT"]
@@ -174,6 +177,10 @@ pub struct ManagerSection {
     /// Cycle deadline (ms).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub deadline_ms: Option<f64>,
+    /// Spin budget (µs) of every registering process that does not set its own (`--spin-us`;
+    /// default 0: they sleep between rings).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spin_us: Option<u64>,
 }
 
 /// One `[[process]]` of a launch file.
@@ -211,6 +218,10 @@ pub struct ProcessEntry {
     /// Whether it registers as a skill (default true; false: e.g. a simulator).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub registers: Option<bool>,
+    /// Spin budget after each cycle's start (µs; `--spin-us`): polls its doorbell instead of
+    /// sleeping on it until it has run (default: `[manager] spin_us`, else 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spin_us: Option<u64>,
 }
 
 /// When a process that exited is started again.
@@ -258,6 +269,9 @@ pub struct Launch {
     /// Processes in file order.
     pub processes: Vec<ProcessSpec>,
 }
+
+/// The largest spin budget a launch file may give (µs).
+const MAX_SPIN_US: u64 = 1_000_000;
 
 fn toml_value_text(v: &toml::Value) -> Option<String> {
     match v {
@@ -359,6 +373,26 @@ impl Launch {
             for (port, topic) in &p.remap {
                 args.push("--remap".into());
                 args.push(format!("{port}={topic}"));
+            }
+            match (
+                p.spin_us.or(raw.manager.spin_us),
+                p.registers.unwrap_or(true),
+            ) {
+                (Some(us), _) if us > MAX_SPIN_US => {
+                    return Err(bad(format!(
+                        "spin_us = {us}: at most {MAX_SPIN_US} (1 s); a budget is meant to cover a cycle's chain, not to hold a core"
+                    )));
+                }
+                (Some(us), true) if us > 0 => {
+                    args.push("--spin-us".into());
+                    args.push(us.to_string());
+                }
+                (Some(us), false) if us > 0 && p.spin_us.is_some() => {
+                    return Err(bad(
+                        "spin_us is for processes that register (skills, devices)".into(),
+                    ));
+                }
+                _ => {}
             }
             args.extend(p.args.iter().cloned());
             processes.push(ProcessSpec {
@@ -508,6 +542,36 @@ mod tests {
         );
         assert_eq!(p.restart, Restart::Always);
         assert_eq!(p.program, PathBuf::from("/bin/sh"));
+    }
+
+    #[test]
+    fn a_spin_budget_is_the_processs_own_else_the_managers_default() {
+        let l = parse(
+            "[manager]\nspin_us = 200\n\
+             [[process]]\nname = \"a\"\nbin = \"/bin/sh\"\n\
+             [[process]]\nname = \"b\"\nbin = \"/bin/sh\"\nspin_us = 50\n\
+             [[process]]\nname = \"c\"\nbin = \"/bin/sh\"\nspin_us = 0\n\
+             [[process]]\nname = \"sim\"\nbin = \"/bin/sh\"\nregisters = false\n",
+        )
+        .unwrap();
+        let spin = |i: usize| {
+            let a = &l.processes[i].args;
+            a.iter()
+                .position(|x| x == "--spin-us")
+                .map(|j| a[j + 1].clone())
+        };
+        assert_eq!(spin(0).as_deref(), Some("200"));
+        assert_eq!(spin(1).as_deref(), Some("50"));
+        assert_eq!(spin(2), None, "0 is sleeping, the default");
+        assert_eq!(spin(3), None, "a simulator does not take the default");
+        let e =
+            parse("[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\nspin_us = 5000000\n").unwrap_err();
+        assert!(e.to_string().contains("at most 1000000"), "{e}");
+        let e = parse(
+            "[[process]]\nname = \"sim\"\nbin = \"/bin/sh\"\nregisters = false\nspin_us = 10\n",
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("register"), "{e}");
     }
 
     #[test]

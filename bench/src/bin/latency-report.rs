@@ -5,6 +5,8 @@
 //! trips, and the ratio skillfab ÷ iceoryx2 ring; then the idle cost against its floor.
 //! `--scale [SECS]`: the scale sweep instead (chains of 1…64 skills at 100 Hz and 1 kHz).
 //! `--peer dora`: skillfab against dora-rs 1.1 on the same chains instead.
+//! `--spin-curve`: chains of 1…8 skills at 100 Hz with every skill's spin budget from 0 to
+//! 1000 µs, latency and CPU next to the futex ring of the same depth.
 //! Build first: `cargo build --release --workspace && target/release/latency-report`.
 
 use skillfab_bench::Case;
@@ -15,7 +17,7 @@ fn main() -> ExitCode {
     let mut args = std::env::args().skip(1);
     let (mut json, mut cycles, mut svg, mut only, mut repeats) =
         (false, 400usize, None, None, 3usize);
-    let (mut scale, mut peer) = (None, None);
+    let (mut scale, mut peer, mut spin_curve) = (None, None, false);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--json" => json = true,
@@ -62,6 +64,7 @@ fn main() -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             "--scale" => scale = Some(args.next().and_then(|s| s.parse().ok()).unwrap_or(3.0)),
+            "--spin-curve" => spin_curve = true,
             "--peer" => match args.next().as_deref() {
                 Some("dora") => peer = Some("dora"),
                 _ => return usage("--peer takes 'dora'"),
@@ -72,12 +75,26 @@ fn main() -> ExitCode {
             },
             "-h" | "--help" => {
                 println!(
-                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--json] | --peer dora [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
+                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--json] | --spin-curve [--cycles N] [--repeats R] [--json] | --peer dora [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
                 );
                 return ExitCode::SUCCESS;
             }
             other => return usage(&format!("unknown argument '{other}'")),
         }
+    }
+    if spin_curve {
+        let points = report::spin_curve(
+            &[1, 2, 4, 8],
+            &[0, 25, 50, 100, 200, 500, 1000],
+            cycles / 2,
+            repeats,
+        );
+        if json {
+            println!("{}", report::spin_curve_json(&points));
+        } else {
+            print!("{}", report::spin_curve_text(&points));
+        }
+        return ExitCode::SUCCESS;
     }
     if let Some(secs) = scale {
         let points = report::scale(&[1, 2, 4, 6, 8, 16, 32, 64], &[100, 1000], secs);

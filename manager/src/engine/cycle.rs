@@ -194,6 +194,14 @@ impl Manager {
         for &s in &self.cycles.plan.sources {
             self.board.slot(s).bell.ring();
         }
+        // Units in spin mode are woken now too, after the sources: their wake-up overlaps
+        // their producers' runs, and the rings that carry their inputs find them polling.
+        for &s in &self.cycles.plan.expected {
+            let slot = self.board.slot(s);
+            if slot.spin_ns.load(Ordering::Relaxed) != 0 && !self.cycles.plan.sources.contains(&s) {
+                slot.bell.ring();
+            }
+        }
         self.cycles.running = Some(run);
     }
 

@@ -33,7 +33,7 @@ pub const MAX_CHANNELS: usize = 4;
 pub const PARAM_BYTES: usize = 4096;
 /// Most outputs of one skill (the published mask is a `u64`).
 pub const MAX_OUTPUTS: usize = 64;
-const MAGIC: u64 = 0x5346_424f_4152_4405; // "SFBOARD" + layout version 5 (5: a refusal is encoded)
+const MAGIC: u64 = 0x5346_424f_4152_4406; // "SFBOARD" + layout version 6 (5: a refusal is encoded; 6: a unit's spin budget)
 
 /// Life of a slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -206,6 +206,12 @@ pub struct Slot {
     pub channel_winner: [AtomicMaybeSlot; MAX_CHANNELS],
     /// For a device: per channel, the slots whose proposals made the command.
     pub channel_mask: [AtomicU64; MAX_CHANNELS],
+    /// The unit's spin budget (ns, written by the unit before it is ready): 0, it sleeps on
+    /// its doorbell until rung (the default); else the manager rings it at cycle start as it
+    /// does a source, and it polls its doorbell instead of sleeping until its run is done or
+    /// this long after the cycle's start, so the producers' rings reach it as a cache-line
+    /// transfer rather than a kernel wake-up.
+    pub spin_ns: AtomicU64,
     /// Parameter snapshot generation (a seqlock: odd while the manager writes).
     pub param_gen: AtomicU64,
     param_len: AtomicU32,

@@ -88,6 +88,12 @@ pub struct SkillArgs {
     /// Wire a port to another topic, or a proposal/channel to another channel (repeatable).
     #[arg(long = "remap", value_name = "PORT=TOPIC")]
     pub remaps: Vec<String>,
+    /// Spin budget (µs; 0, the default: sleep). A sync unit with a budget is woken at every
+    /// cycle's start and polls its doorbell, instead of sleeping on it, until it has run or
+    /// this long after the cycle's start: its producers' rings reach it without a kernel
+    /// wake-up, at the price of a core spent polling (docs/realtime.md).
+    #[arg(long = "spin-us", value_name = "MICROSECONDS", default_value_t = 0)]
+    pub spin_us: u64,
     /// Print the declaration these options make (JSON: ports with topics and message
     /// schemas, parameters with values) and exit, without joining a fabric (`skillfab
     /// sequence --check --launch` reads it).
@@ -262,6 +268,8 @@ pub(crate) struct Common<P> {
     state_warned: bool,
     /// Wakes from other threads (a gateway's).
     waker: Option<Waker>,
+    /// Spin budget after a cycle's start (ns; 0: sleep on the doorbell).
+    spin_ns: u64,
 }
 
 /// A unit's runtime ports.
@@ -381,6 +389,7 @@ fn run<U: Unit>(
         state_buf: Vec::new(),
         state_warned: false,
         waker: unit.waker(),
+        spin_ns: args.spin_us.saturating_mul(1000),
     };
     let mut decl = decl;
     loop {
@@ -421,6 +430,10 @@ fn run<U: Unit>(
         let Some(io) = io.as_mut() else {
             continue;
         };
+        board
+            .slot(idx)
+            .spin_ns
+            .store(common.spin_ns, Ordering::Release);
         if !board
             .slot(idx)
             .transition(SlotState::Accepted, SlotState::Ready)

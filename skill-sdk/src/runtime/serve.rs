@@ -9,6 +9,7 @@ use crate::params::Params;
 use crate::services;
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
+use skillfab_proto::header::now_ns;
 use skillfab_proto::registration::Refusal;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
@@ -155,8 +156,54 @@ pub(super) fn serve<U: Unit>(
         if services::termination_requested() {
             return Ok(End::Terminated);
         }
+        if common.spin_ns != 0 && spin(board, idx, seen, common.spin_ns) {
+            continue;
+        }
         slot.bell
             .wait(seen, next_tick.saturating_duration_since(Instant::now()));
+    }
+}
+
+/// How many polls of the doorbell between two looks at the clock (a poll is a load and a
+/// pause: ~10–40 ns).
+const POLLS_PER_CLOCK: u32 = 64;
+
+/// Spin mode: while this unit is expected in the running cycle and has not finished it, polls
+/// its doorbell instead of sleeping, until `spin_ns` after the cycle's start. True when the
+/// doorbell was rung (look for work again); false when there is nothing to spin for or the
+/// budget ran out (sleep on the doorbell: a ring after `seen` still ends that sleep at once).
+///
+/// The CPU is yielded between polls (`sched_yield`), so a spinner shares its core with a
+/// runnable process of the fabric (its producer, on a machine with fewer cores than
+/// processes) instead of holding it until its budget ends.
+fn spin(board: &Board, idx: usize, seen: u32, spin_ns: u64) -> bool {
+    let slot = board.slot(idx);
+    let h = board.header();
+    let k = h.cycle.load(Ordering::Acquire);
+    if slot.expected_cycle.load(Ordering::Acquire) != k
+        || slot.done_cycle.load(Ordering::Acquire) == k
+        || slot.cancelled_cycle.load(Ordering::Acquire) == k
+    {
+        return false;
+    }
+    let until = h
+        .cycle_start_ns
+        .load(Ordering::Acquire)
+        .saturating_add(spin_ns);
+    loop {
+        for _ in 0..POLLS_PER_CLOCK {
+            if slot.bell.seen() != seen {
+                return true;
+            }
+            std::hint::spin_loop();
+        }
+        if now_ns() >= until
+            || services::termination_requested()
+            || slot.cancelled_cycle.load(Ordering::Acquire) == k
+        {
+            return slot.bell.seen() != seen;
+        }
+        std::thread::yield_now();
     }
 }
 
@@ -174,5 +221,69 @@ fn apply_params<P: Params>(params: &mut P, bytes: &[u8]) {
             }
         }
         Err(e) => tracing::warn!(error = %e, "unreadable parameter snapshot"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    /// A board whose cycle 5 started now and expects slot 0.
+    fn board(tag: &str) -> Arc<Board> {
+        let prefix = format!("sf_unit-spin-{tag}-{}_", std::process::id());
+        let b = Board::create(&prefix).unwrap();
+        b.slot(0).expected_cycle.store(5, Ordering::Release);
+        b.header().cycle_start_ns.store(now_ns(), Ordering::Release);
+        b.header().cycle.store(5, Ordering::Release);
+        Arc::new(b)
+    }
+
+    #[test]
+    fn a_ring_during_the_spin_ends_it_without_a_sleep() {
+        let b = board("ring");
+        let seen = b.slot(0).bell.seen();
+        let ringer = {
+            let b = b.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(2));
+                b.slot(0).bell.ring();
+            })
+        };
+        let t = Instant::now();
+        assert!(spin(&b, 0, seen, 5_000_000_000), "rung while spinning");
+        assert!(t.elapsed() < Duration::from_secs(4), "{:?}", t.elapsed());
+        ringer.join().unwrap();
+    }
+
+    #[test]
+    fn the_budget_counts_from_the_cycles_start() {
+        let b = board("budget");
+        let seen = b.slot(0).bell.seen();
+        let t = Instant::now();
+        assert!(!spin(&b, 0, seen, 3_000_000), "no ring: the budget ends it");
+        let spun = t.elapsed();
+        assert!(spun >= Duration::from_micros(2_500), "{spun:?}");
+        // Past the budget already: no spin at all.
+        let t = Instant::now();
+        assert!(!spin(&b, 0, seen, 1_000));
+        assert!(t.elapsed() < spun);
+    }
+
+    #[test]
+    fn a_unit_not_expected_or_done_does_not_spin() {
+        let b = board("idle");
+        let seen = b.slot(0).bell.seen();
+        let slot = b.slot(0);
+        slot.done_cycle.store(5, Ordering::Release);
+        assert!(!spin(&b, 0, seen, u64::MAX), "done in this cycle");
+        slot.done_cycle.store(4, Ordering::Release);
+        slot.cancelled_cycle.store(5, Ordering::Release);
+        assert!(!spin(&b, 0, seen, u64::MAX), "cancelled in this cycle");
+        slot.cancelled_cycle.store(0, Ordering::Release);
+        slot.expected_cycle.store(4, Ordering::Release);
+        assert!(!spin(&b, 0, seen, u64::MAX), "not expected in this cycle");
     }
 }

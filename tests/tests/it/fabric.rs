@@ -41,6 +41,32 @@ fn a_sync_chain_gives_exactly_the_expected_values() {
     assert_eq!(r["overruns"], 0, "{r}");
 }
 
+/// Spin mode changes how a skill waits, not what it computes: the same chain with every skill
+/// polling its doorbell for up to 2 ms after cycle start gives the same values in every cycle.
+#[test]
+fn a_sync_chain_in_spin_mode_gives_exactly_the_expected_values() {
+    let t = TestDomain::new("spinchain");
+    let launch = HELLO_CHECK.replacen(
+        "deadline_ms = 2000\n",
+        "deadline_ms = 2000\nspin_us = 2000\n",
+        1,
+    );
+    let r = t.up_json(&launch, &["--cycles", "150"]);
+    assert_eq!(r["cycles"], 150, "{r}");
+    for name in ["ticker", "scale", "check"] {
+        let s = skill(&r, name);
+        assert_eq!(s["runs"], 150, "{name}: {s}");
+        assert_eq!(s["failures"], 0, "{name} saw a wrong value: {s}");
+        assert_eq!(s["skips"], 0, "{name}: {s}");
+    }
+    assert_eq!(
+        skill(&r, "smooth")["runs"].as_u64().map(|n| n > 0),
+        Some(true),
+        "{r}"
+    );
+    assert_eq!(r["overruns"], 0, "{r}");
+}
+
 #[test]
 fn independent_sync_skills_run_in_parallel() {
     let t = TestDomain::new("parallel");

@@ -263,6 +263,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             period_ms: Some(period_ms),
             // (Lock-step: the manager's own, 10 s.)
             deadline_ms: (!opts.lockstep).then_some((period_ms * 5.0).max(20.0)),
+            ..ManagerSection::default()
         },
         process: vec![
             ProcessEntry {

@@ -406,7 +406,7 @@ fn launch_file(
         plan: None,
         manager: ManagerSection {
             period_ms: rec.period_ns.map(|ns| ns as f64 / 1e6),
-            deadline_ms: None,
+            ..ManagerSection::default()
         },
         process: vec![ProcessEntry {
             name: "player".into(),

@@ -311,11 +311,11 @@ pub fn scale_json(points: &[ScalePoint]) -> Json {
         .collect()
 }
 
-/// One point of the spin curve: a chain at 100 Hz with every skill's spin budget.
+/// One point of the spin curve: a case at 100 Hz with every skill's spin budget.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpinPoint {
-    /// Skill processes in the chain.
-    pub depth: usize,
+    /// The network.
+    pub case: Case,
     /// Spin budget of every skill (µs; 0: they sleep, the default).
     pub spin_us: u64,
     /// Cycle latency (start → last run done), µs, over every repeat.
@@ -324,24 +324,24 @@ pub struct SpinPoint {
     pub cpu_percent: f64,
 }
 
-/// Latency against CPU as the spin budget grows: chains of each depth at 100 Hz with every
-/// skill's budget in `budgets_us` (0: sleeping), next to the futex ring of the same depth
-/// (budget `None` in the result), `cycles` per run, the runs of one depth interleaved
+/// Latency against CPU as the spin budget grows: each case at 100 Hz with every skill's
+/// budget in `budgets_us` (0: sleeping), next to the futex ring of its shape (the second
+/// element of a case's first point), `cycles` per run, the runs of one case interleaved
 /// `repeats` times.
 pub fn spin_curve(
-    depths: &[usize],
+    cases: &[Case],
     budgets_us: &[u64],
     cycles: usize,
     repeats: usize,
 ) -> Vec<(SpinPoint, Option<SpinPoint>)> {
     let cpu = |pids: &[u32]| pids.iter().map(|&p| cpu_time(p)).sum::<Duration>();
     let mut out = Vec::new();
-    for &depth in depths {
+    for &case in cases {
         let mut lat: Vec<Vec<f64>> = vec![Vec::new(); budgets_us.len() + 1];
         let mut cpu_pct: Vec<f64> = vec![0.0; budgets_us.len() + 1];
         for _ in 0..repeats.max(1) {
             // The floor first, then every budget.
-            let mut ring = crate::futex::Futex::start(floors::Shape::Ring(depth));
+            let mut ring = crate::futex::Futex::start(case.floor());
             let nodes = ring.node_pids();
             let (n0, d0, t0) = (cpu(&nodes), thread_cpu(), Instant::now());
             let floor = ring.rounds_every(cycles, Some(crate::PACE));
@@ -351,7 +351,7 @@ pub fn spin_curve(
             lat[0].extend(floors::hops(&floor));
             drop(ring);
             for (i, &spin_us) in budgets_us.iter().enumerate() {
-                let mut f = Fabric::start_spinning(Case::Chain(depth), Some(crate::PACE), spin_us);
+                let mut f = Fabric::start_spinning(case, Some(crate::PACE), spin_us);
                 let (manager, skills) = f.pids();
                 let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
                 let (c0, t0) = (cpu(&all), Instant::now());
@@ -363,7 +363,7 @@ pub fn spin_curve(
         }
         let reps = repeats.max(1) as f64;
         let point = |i: usize, spin_us: u64| SpinPoint {
-            depth,
+            case,
             spin_us,
             latency: Summary::of(&lat[i]),
             cpu_percent: cpu_pct[i] / reps,
@@ -372,8 +372,12 @@ pub fn spin_curve(
         for (i, &b) in budgets_us.iter().enumerate() {
             let p = point(i + 1, b);
             eprintln!(
-                "spin: chain-{depth}@100Hz spin {b} µs: p50 {:.0} µs (futex floor {:.0}), CPU {:.1} % (floor {:.1} %)",
-                p.latency.p50, floor.latency.p50, p.cpu_percent, floor.cpu_percent
+                "spin: {}@100Hz spin {b} µs: p50 {:.0} µs (futex floor {:.0}), CPU {:.1} % (floor {:.1} %)",
+                case.name(),
+                p.latency.p50,
+                floor.latency.p50,
+                p.cpu_percent,
+                floor.cpu_percent
             );
             out.push((p, (i == 0).then_some(floor)));
         }
@@ -384,20 +388,20 @@ pub fn spin_curve(
 /// The spin curve as a table for people (the futex floor on the first line of each depth).
 pub fn spin_curve_text(points: &[(SpinPoint, Option<SpinPoint>)]) -> String {
     let mut s = String::from(
-        "spin: chain-D@100Hz, every skill spinning up to the budget after cycle start; cycle \
+        "spin: each case at 100 Hz, every skill spinning up to the budget after cycle start; cycle \
          latency (start → last run done) µs, CPU of all processes (% of one core)\n",
     );
     s.push_str(&format!(
-        "{:>5} {:>12} {:>18} {:>8} {:>8}\n",
-        "depth", "spin", "p50 / p99", "÷futex", "CPU"
+        "{:>9} {:>12} {:>18} {:>8} {:>8}\n",
+        "case", "spin", "p50 / p99", "÷futex", "CPU"
     ));
     let mut floor_p50 = f64::NAN;
     for (p, floor) in points {
         if let Some(f) = floor {
             floor_p50 = f.latency.p50;
             s.push_str(&format!(
-                "{:>5} {:>12} {:>18} {:>8} {:>7.1}%\n",
-                f.depth,
+                "{:>9} {:>12} {:>18} {:>8} {:>7.1}%\n",
+                f.case.name(),
                 "futex floor",
                 format!("{:.0} / {:.0}", f.latency.p50, f.latency.p99),
                 "1.00",
@@ -405,8 +409,8 @@ pub fn spin_curve_text(points: &[(SpinPoint, Option<SpinPoint>)]) -> String {
             ));
         }
         s.push_str(&format!(
-            "{:>5} {:>9} µs {:>18} {:>8.2} {:>7.1}%\n",
-            p.depth,
+            "{:>9} {:>9} µs {:>18} {:>8.2} {:>7.1}%\n",
+            p.case.name(),
             p.spin_us,
             format!("{:.0} / {:.0}", p.latency.p50, p.latency.p99),
             p.latency.p50 / floor_p50,
@@ -419,7 +423,7 @@ pub fn spin_curve_text(points: &[(SpinPoint, Option<SpinPoint>)]) -> String {
 /// The spin curve as JSON.
 pub fn spin_curve_json(points: &[(SpinPoint, Option<SpinPoint>)]) -> Json {
     let one = |p: &SpinPoint| {
-        json!({"depth": p.depth, "spin_us": p.spin_us, "latency": summary_json(&p.latency),
+        json!({"case": p.case.name(), "spin_us": p.spin_us, "latency": summary_json(&p.latency),
                "cpu_percent": (p.cpu_percent * 10.0).round() / 10.0})
     };
     points

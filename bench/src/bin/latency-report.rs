@@ -5,7 +5,7 @@
 //! trips, and the ratio skillfab ÷ iceoryx2 ring; then the idle cost against its floor.
 //! `--scale [SECS]`: the scale sweep instead (chains of 1…64 skills at 100 Hz and 1 kHz).
 //! `--peer dora`: skillfab against dora-rs 1.1 on the same chains instead.
-//! `--spin-curve`: chains of 1…8 skills at 100 Hz with every skill's spin budget from 0 to
+//! `--spin-curve`: chains of 1…8 skills and exit-lab at 100 Hz with every skill's spin budget from 0 to
 //! 1000 µs, latency and CPU next to the futex ring of the same depth.
 //! Build first: `cargo build --release --workspace && target/release/latency-report`.
 
@@ -83,8 +83,10 @@ fn main() -> ExitCode {
         }
     }
     if spin_curve {
+        let mut cases: Vec<Case> = [1, 2, 4, 8].into_iter().map(Case::Chain).collect();
+        cases.push(Case::ExitLab);
         let points = report::spin_curve(
-            &[1, 2, 4, 8],
+            &cases,
             &[0, 25, 50, 100, 200, 500, 1000],
             cycles / 2,
             repeats,

@@ -22,6 +22,8 @@
 //! - [`json`]: values, skills and events as JSON (`ctl --json`, the fabric log, the C ABI).
 //! - [`cdr`], [`ros2msg`]: samples as ROS 2's CDR and message schemas as ROS 2 message
 //!   definitions (what a recording's sample channels hold, for the ROS tools).
+//! - [`realtime`]: real-time mode of a thread (scheduling class, CPU affinity, locked
+//!   memory), applied by skills and the manager alike, and what the machine refused.
 
 #![warn(missing_docs)]
 
@@ -40,6 +42,7 @@ pub mod json;
 pub mod log;
 pub mod names;
 pub mod param;
+pub mod realtime;
 pub mod refs;
 pub mod registration;
 pub mod ros2msg;

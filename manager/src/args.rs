@@ -233,24 +233,31 @@ fn print_report(r: &Report, json: bool) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{} cycles, {} overruns, latency p50 {:.1} µs  p99 {:.1} µs  max {:.1} µs",
-        r.cycles, r.overruns, r.latency_us.p50, r.latency_us.p99, r.latency_us.max
+        "{} cycles, {} overruns, {} late starts, latency p50 {:.1} µs  p99 {:.1} µs  max {:.1} µs",
+        r.cycles, r.overruns, r.late_starts, r.latency_us.p50, r.latency_us.p99, r.latency_us.max
     );
     println!(
-        "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12}",
-        "skill", "kind", "mode", "runs", "skips", "fails", "compute µs"
+        "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12} {:>6} {:>6}",
+        "skill", "kind", "mode", "runs", "skips", "fails", "compute µs", "late", "allocs"
     );
     for s in &r.skills {
         println!(
-            "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12.1}",
+            "{:<16} {:<10} {:<6} {:>8} {:>6} {:>6} {:>12.1} {:>6} {:>6}",
             s.name,
             s.kind,
             s.mode,
             s.figures.runs,
             s.figures.skips,
             s.figures.failures,
-            s.figures.compute_us_mean
+            s.figures.compute_us_mean,
+            s.figures.deadline_misses,
+            allocs_text(s.figures.cycle_allocs)
         );
     }
     Ok(())
+}
+
+/// A unit's cycle-path allocations as shown in text: `-` when they are not counted.
+fn allocs_text(allocs: Option<u64>) -> String {
+    allocs.map_or_else(|| "-".to_string(), |n| n.to_string())
 }

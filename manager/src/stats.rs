@@ -13,6 +13,8 @@ pub struct CycleStats {
     pub cycles: u64,
     /// Cycles whose deadline passed before every expected run finished.
     pub overruns: u64,
+    /// Paced cycles that started more than a period after their scheduled start.
+    pub late_starts: u64,
     latencies_ns: VecDeque<u64>,
     max_ns: u64,
     /// Cycle start → the manager handling the cycle's completion (ns): the latency plus the
@@ -142,6 +144,8 @@ pub struct Report {
     pub skills: Vec<SkillReport>,
     /// Skills that died while the fabric ran.
     pub deaths: u64,
+    /// Paced cycles that started more than a period after their scheduled start.
+    pub late_starts: u64,
 }
 
 #[cfg(test)]

@@ -422,10 +422,11 @@ pub fn run(address: Address, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> 
         CtlCmd::Stats => {
             let s = c.stats()?;
             let mut human = format!(
-                "cycles {} ({}), overruns {}, latency p50 {:.1} µs p99 {:.1} µs max {:.1} µs, deaths {}, events {}",
+                "cycles {} ({}), overruns {}, late starts {}, latency p50 {:.1} µs p99 {:.1} µs max {:.1} µs, deaths {}, events {}",
                 s.cycles,
                 if s.running { "running" } else { "stopped" },
                 s.overruns,
+                s.late_starts,
                 s.latency_us.p50,
                 s.latency_us.p99,
                 s.latency_us.max,
@@ -441,8 +442,15 @@ pub fn run(address: Address, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> 
             for k in &s.skills {
                 let f = &k.figures;
                 human.push_str(&format!(
-                    "\n  {:<16} runs {:>8} skips {:>6} failures {:>6} compute {:.1} µs",
-                    k.name, f.runs, f.skips, f.failures, f.compute_us_mean
+                    "\n  {:<16} runs {:>8} skips {:>6} failures {:>6} compute {:.1} µs, deadline misses {}, cycle allocs {}",
+                    k.name,
+                    f.runs,
+                    f.skips,
+                    f.failures,
+                    f.compute_us_mean,
+                    f.deadline_misses,
+                    f.cycle_allocs
+                        .map_or_else(|| "not counted".to_string(), |n| n.to_string())
                 ));
             }
             for b in &s.bridges {

@@ -86,6 +86,7 @@ fn hello() -> Snapshot {
                 cycle: 1234,
             }],
             bridges: Vec::new(),
+            late_starts: 0,
         },
         latencies: (0..300)
             .map(|i| {
@@ -208,6 +209,47 @@ fn connected_with_skills() {
     }
     // Not verbose: the info line is hidden, the warning shown.
     assert!(!s.contains("parameter set param=gain"), "{s}");
+}
+
+#[test]
+fn deadline_misses_and_cycle_allocations_are_in_the_skills_table() {
+    let mut snap = hello();
+    snap.skills[0].figures.deadline_misses = 0;
+    snap.skills[0].figures.cycle_allocs = Some(0);
+    snap.skills[1].figures.deadline_misses = 7;
+    snap.skills[1].figures.cycle_allocs = Some(42);
+    snap.stats.late_starts = 3;
+    let mut app = App::new("default");
+    app.apply(Update::Snapshot(Box::new(snap)));
+    let s = screen(&app, 110, 34);
+    if std::env::var_os("SKILLFAB_PRINT_CONSOLE").is_some() {
+        println!("{s}");
+    }
+    let header = s.lines().find(|l| l.contains("skill ")).unwrap();
+    let row = |name: &str| -> Vec<String> {
+        let line = s
+            .lines()
+            .find(|l| l.split_whitespace().any(|w| w == name) && l.contains("sync"))
+            .unwrap_or_else(|| panic!("no row of {name} in\n{s}"));
+        line.split_whitespace().map(str::to_string).collect()
+    };
+    // The columns after compute (a number and its unit): late, allocs, last out.
+    let after_compute = |cells: Vec<String>| -> Vec<String> {
+        let at = cells.iter().position(|c| c == "µs").unwrap();
+        cells[at + 1..at + 3].to_vec()
+    };
+    assert!(
+        header.contains("late") && header.contains("allocs"),
+        "{header}"
+    );
+    assert_eq!(after_compute(row("ticker")), ["0", "0"]);
+    assert_eq!(after_compute(row("scale")), ["7", "42"]);
+    assert_eq!(
+        after_compute(row("sonar")),
+        ["0", "-"],
+        "not counted is not 0"
+    );
+    assert!(s.contains("overruns 1 · late starts 3"), "{s}");
 }
 
 #[test]

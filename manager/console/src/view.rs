@@ -179,8 +179,13 @@ fn manager_bar(app: &App, f: &mut Frame, area: Rect) {
             } else {
                 String::new()
             };
+            let late = if st.late_starts > 0 {
+                format!(" · late starts {}", st.late_starts)
+            } else {
+                String::new()
+            };
             spans.push(Span::raw(format!(
-                " · cycle {} · overruns {}{deaths} · latency p50 {} p99 {} max {}",
+                " · cycle {} · overruns {}{late}{deaths} · latency p50 {} p99 {} max {}",
                 st.cycles,
                 st.overruns,
                 micros(st.latency_us.p50),
@@ -246,11 +251,32 @@ fn age(s: &SkillInfo, cycle: u64) -> String {
     }
 }
 
+/// A skill's deadline misses; any is shown in red.
+fn late_cell(misses: u64) -> Cell<'static> {
+    let cell = Cell::from(misses.to_string());
+    if misses > 0 {
+        cell.style(Style::default().fg(Color::Red))
+    } else {
+        cell
+    }
+}
+
+/// A skill's allocations on the cycle's path after warm-up (`-`: not counted); any is shown
+/// in yellow.
+fn allocs_cell(allocs: Option<u64>) -> Cell<'static> {
+    match allocs {
+        None => Cell::from("-").style(dim()),
+        Some(0) => Cell::from("0"),
+        Some(n) => Cell::from(n.to_string()).style(Style::default().fg(Color::Yellow)),
+    }
+}
+
 fn skills_table(app: &App, f: &mut Frame, area: Rect) {
     let cycle = app.snap.as_ref().map_or(0, |s| s.stats.cycles);
     let header = Row::new(
         [
-            "skill", "kind", "mode", "state", "prio", "runs", "fails", "compute", "last out", "log",
+            "skill", "kind", "mode", "state", "prio", "runs", "fails", "compute", "late", "allocs",
+            "last out", "log",
         ]
         .map(|h| Cell::from(h).style(Style::default().add_modifier(Modifier::BOLD))),
     );
@@ -267,6 +293,8 @@ fn skills_table(app: &App, f: &mut Frame, area: Rect) {
                 Cell::from(s.figures.runs.to_string()),
                 Cell::from(s.figures.failures.to_string()),
                 Cell::from(micros(s.figures.compute_us_mean)),
+                late_cell(s.figures.deadline_misses),
+                allocs_cell(s.figures.cycle_allocs),
                 Cell::from(age(s, cycle)),
                 Cell::from(if app.io_logged(&s.name) { "io" } else { "" }),
             ])
@@ -281,6 +309,8 @@ fn skills_table(app: &App, f: &mut Frame, area: Rect) {
         Constraint::Length(8),
         Constraint::Length(5),
         Constraint::Length(10),
+        Constraint::Length(5),
+        Constraint::Length(6),
         Constraint::Length(9),
         Constraint::Length(3),
     ];

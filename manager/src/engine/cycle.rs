@@ -47,9 +47,11 @@ impl Manager {
                     .max_cycles
                     .is_some_and(|m| self.cycles.cycle >= m)
             {
+                self.cycles.on_schedule = false;
                 return Ok(());
             }
             if self.cycles.holds.blocks(self.cycles.cycle) {
+                self.cycles.on_schedule = false;
                 if let Some(cycle) = self.cycles.holds.reached(self.cycles.cycle) {
                     self.events.push(EventKind::Held { cycle });
                 }
@@ -83,8 +85,14 @@ impl Manager {
                     }
                     self.cycles.next_start += p;
                     if self.cycles.next_start < now {
+                        // More than a period after its scheduled start: a late start, unless
+                        // cycling was paused or held (its schedule starts again now).
+                        if self.cycles.on_schedule {
+                            self.cycles.stats.late_starts += 1;
+                        }
                         self.cycles.next_start = now;
                     }
+                    self.cycles.on_schedule = true;
                 }
                 Pace::FreeRun | Pace::LockStep(_) => {
                     if self.cycles.plan.expected.is_empty() && !self.cycles.dirty {
@@ -289,6 +297,7 @@ impl Manager {
             end.map_or(0, |e| e.saturating_sub(run.start_ns))
         };
         self.cycles.stats.record(latency, round_trip, overrun);
+        self.count_deadline_misses(&run);
         self.cycles.cycle = run.k;
         let seen = self.observers.end_of_cycle(
             run.k,
@@ -309,6 +318,52 @@ impl Manager {
             self.cycles.stop_at = None;
         }
         self.stamp_events();
+    }
+
+    /// Counts the deadline misses of the finished cycle `run` on the board, per unit. An
+    /// expected unit missed the cycle's deadline (cycle start + the configured deadline) when
+    /// - its run for the cycle ended after the deadline (even if the cycle was not closed as
+    ///   an overrun: the manager closes a cycle when it next looks), or
+    /// - it had not finished when the deadline closed the cycle, though it was running (its run
+    ///   started in the cycle) or could have run: every unit it waits for (the producers of its
+    ///   same-cycle inputs, a device's proposers) had finished.
+    ///
+    /// A unit cancelled because an upstream run failed did not miss (it could not run), nor one
+    /// that waited for a late upstream unit: the miss is that unit's.
+    fn count_deadline_misses(&self, run: &Running) {
+        let deadline_ns = run
+            .start_ns
+            .saturating_add(self.config.deadline().as_nanos() as u64);
+        let done = |s: usize| self.board.slot(s).done_cycle.load(Ordering::Acquire) == run.k;
+        for &s in &run.expected {
+            let slot = self.board.slot(s);
+            let missed = if done(s) {
+                slot.last_end_ns.load(Ordering::Acquire) > deadline_ns
+            } else if run.cancelled[s] {
+                false
+            } else {
+                let running = slot.last_start_ns.load(Ordering::Acquire) >= run.start_ns;
+                running || !self.waits_for_unfinished(run, s, &done)
+            };
+            if missed {
+                slot.deadline_misses.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Whether unit `s` waits, in cycle `run`, for an expected unit that has not finished: a
+    /// producer of one of its same-cycle inputs, or, for a device, a proposer on its channels.
+    fn waits_for_unfinished(&self, run: &Running, s: usize, done: &dyn Fn(usize) -> bool) -> bool {
+        let plan = &self.cycles.plan;
+        let producer_late = plan.consumers.iter().any(|(&p, per_output)| {
+            p != s && per_output.iter().any(|c| c.contains(&s)) && !done(p) && !run.cancelled[p]
+        });
+        let proposer_late = plan.channels.iter().filter(|c| c.device == s).any(|c| {
+            run.expected
+                .iter()
+                .any(|&p| c.proposers & (1 << p) != 0 && !done(p) && !run.cancelled[p])
+        });
+        producer_late || proposer_late
     }
 
     /// Numbers the events queued so far, stamps them with the cycle they belong to (the last

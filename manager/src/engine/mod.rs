@@ -252,6 +252,9 @@ struct Cycles {
     stats: CycleStats,
     last_liveness: Instant,
     last_node_sweep: Instant,
+    /// The previous cycle started on the period's schedule (not after a pause or a hold):
+    /// a start more than a period late counts as a late start.
+    on_schedule: bool,
 }
 
 /// Events on their way to clients: queued as they happen, then numbered and stamped between
@@ -326,6 +329,8 @@ pub(crate) fn figures(board: &Board, s: usize) -> SkillFigures {
         last_cycle: slot.done_cycle.load(Ordering::Acquire),
         last_start_ns: slot.last_start_ns.load(Ordering::Acquire),
         last_end_ns: slot.last_end_ns.load(Ordering::Acquire),
+        deadline_misses: slot.deadline_misses.load(Ordering::Acquire),
+        cycle_allocs: slot.cycle_allocs.load(Ordering::Acquire),
     }
 }
 
@@ -382,6 +387,7 @@ impl Manager {
             stats: CycleStats::default(),
             last_liveness: now,
             last_node_sweep: now,
+            on_schedule: false,
         };
         let mut manager = Manager {
             config,
@@ -620,6 +626,7 @@ impl Manager {
             manager_work_us: stats.work_us(),
             skills,
             deaths: self.skills.deaths,
+            late_starts: stats.late_starts,
         }
     }
 }

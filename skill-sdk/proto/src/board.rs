@@ -33,7 +33,9 @@ pub const MAX_CHANNELS: usize = 4;
 pub const PARAM_BYTES: usize = 4096;
 /// Most outputs of one skill (the published mask is a `u64`).
 pub const MAX_OUTPUTS: usize = 64;
-const MAGIC: u64 = 0x5346_424f_4152_4406; // "SFBOARD" + layout version 6 (5: a refusal is encoded; 6: a unit's spin budget)
+// "SFBOARD" + layout version 6 (5: a refusal is encoded; 6: a unit's spin budget, deadline
+// misses and cycle-path allocations per slot)
+const MAGIC: u64 = 0x5346_424f_4152_4406;
 
 /// Life of a slot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -220,6 +222,13 @@ pub struct Slot {
     msg_len: AtomicU32,
     decl: UnsafeCell<[u8; DECL_BYTES]>,
     msg: UnsafeCell<[u8; MSG_BYTES]>,
+    /// Runs of this skill that missed their cycle's deadline (written by the manager when it
+    /// finishes a cycle: a run that ended after the deadline, or one still in progress when
+    /// an overrun closed the cycle).
+    pub deadline_misses: AtomicU64,
+    /// Allocations the unit's thread made on the cycle's path after its warm-up (written by
+    /// the unit; none: its runtime does not count them).
+    pub cycle_allocs: AtomicMaybeCount,
 }
 
 #[repr(C)]
@@ -556,6 +565,7 @@ impl Slot {
             &self.expected_cycle,
             &self.param_gen,
             &self.cancelled_cycle,
+            &self.deadline_misses,
         ] {
             a.store(0, Ordering::Relaxed);
         }
@@ -566,6 +576,35 @@ impl Slot {
             self.channel_winner[c].store(None, Ordering::Relaxed);
             self.channel_mask[c].store(0, Ordering::Relaxed);
         }
+        self.cycle_allocs.clear(Ordering::Relaxed);
+    }
+}
+
+/// A count that may not be kept, in one atomic word of the board: a zeroed board (a new one, a
+/// reset slot) reads as "not counted"; the counter stores `n + 1`.
+#[repr(transparent)]
+#[derive(Default)]
+pub struct AtomicMaybeCount(AtomicU64);
+
+impl AtomicMaybeCount {
+    /// The count, if it is kept.
+    pub fn load(&self, order: Ordering) -> Option<u64> {
+        self.0.load(order).checked_sub(1)
+    }
+
+    /// Starts counting from 0.
+    pub fn start(&self, order: Ordering) {
+        self.0.store(1, order);
+    }
+
+    /// Adds `n` to a count that is kept (the writer started it).
+    pub fn add(&self, n: u64, order: Ordering) {
+        self.0.fetch_add(n, order);
+    }
+
+    /// Back to "not counted".
+    pub fn clear(&self, order: Ordering) {
+        self.0.store(0, order);
     }
 }
 
@@ -627,6 +666,18 @@ mod tests {
         assert_eq!(w.load(Ordering::Relaxed), Some(63));
         w.store(None, Ordering::Relaxed);
         assert_eq!(w.load(Ordering::Relaxed), None);
+    }
+
+    #[test]
+    fn a_zeroed_count_is_not_kept_and_a_started_one_counts_from_zero() {
+        let c = AtomicMaybeCount::default();
+        assert_eq!(c.load(Ordering::Relaxed), None);
+        c.start(Ordering::Relaxed);
+        assert_eq!(c.load(Ordering::Relaxed), Some(0));
+        c.add(3, Ordering::Relaxed);
+        assert_eq!(c.load(Ordering::Relaxed), Some(3));
+        c.clear(Ordering::Relaxed);
+        assert_eq!(c.load(Ordering::Relaxed), None);
     }
 
     #[test]

@@ -220,17 +220,21 @@ pub fn skill_json(s: &SkillInfo) -> Json {
            "priority": s.priority, "pid": s.pid, "params": params, "inputs": ports(&s.inputs),
            "outputs": ports(&s.outputs), "runs": f.runs, "skips": f.skips, "failures": f.failures,
            "last_cycle": f.last_cycle, "compute_us_last": f.compute_us_last,
-           "compute_us_mean": f.compute_us_mean})
+           "compute_us_mean": f.compute_us_mean, "deadline_misses": f.deadline_misses,
+           "cycle_allocs": f.cycle_allocs})
 }
 
 /// Cycle statistics as JSON (what `skillfab ctl --json stats` prints).
 pub fn stats_json(s: &Stats) -> Json {
     let l = &s.latency_us;
     json!({"cycles": s.cycles, "running": s.running, "overruns": s.overruns,
+           "late_starts": s.late_starts,
            "latency_us": {"p50": l.p50, "p99": l.p99, "max": l.max},
            "skills": s.skills.iter().map(|k| json!({"name": k.name, "runs": k.figures.runs,
                "skips": k.figures.skips, "failures": k.figures.failures,
-               "compute_us_mean": k.figures.compute_us_mean})).collect::<Vec<_>>(),
+               "compute_us_mean": k.figures.compute_us_mean,
+               "deadline_misses": k.figures.deadline_misses,
+               "cycle_allocs": k.figures.cycle_allocs})).collect::<Vec<_>>(),
            "deaths": s.deaths, "events": s.events,
            "channels": s.channels.iter().map(|c| json!({"channel": c.channel, "winner": c.winner,
                "cycle": c.cycle})).collect::<Vec<_>>(),

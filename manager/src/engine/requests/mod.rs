@@ -324,6 +324,7 @@ impl Manager {
                 .filter(|(_, at)| at.elapsed() < BRIDGE_FRESH)
                 .map(|(b, _)| b.clone())
                 .collect(),
+            late_starts: self.cycles.stats.late_starts,
         }
     }
 

@@ -27,6 +27,14 @@ pub struct SkillFigures {
     pub last_start_ns: u64,
     /// Monotonic clock (ns) at the end of the last run.
     pub last_end_ns: u64,
+    /// Runs that missed their cycle's deadline: ended after it, or were still in progress when
+    /// the deadline closed the cycle (see docs/realtime.md).
+    #[serde(default)]
+    pub deadline_misses: u64,
+    /// Allocations its thread made on the cycle's path after its warm-up runs (`None`: its
+    /// runtime does not count them; see docs/realtime.md).
+    #[serde(default)]
+    pub cycle_allocs: Option<u64>,
 }
 
 /// Where a registered skill stands.
@@ -164,6 +172,10 @@ pub struct Stats {
     pub channels: Vec<ChannelStat>,
     /// The domain's bridges (their last report, if fresh).
     pub bridges: Vec<crate::bridge::BridgeStats>,
+    /// Paced cycles that started more than a period after their scheduled start (a cycle's
+    /// slot lost: the manager's thread woke that late).
+    #[serde(default)]
+    pub late_starts: u64,
 }
 
 /// What the manager answers.

@@ -20,7 +20,7 @@ pub use plan::*;
 use crate::schema::MessageSchema;
 
 /// Version of this protocol; bumped on any incompatible change.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// The declared type names of a skill's schema, for lists.
 pub fn type_name(schema: &MessageSchema) -> String {

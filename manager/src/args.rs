@@ -10,6 +10,7 @@ use crate::up::{UpOptions, up};
 use anyhow::Context;
 use clap::Args;
 use skillfab_proto::domain::{DOMAIN_ENV, Domain};
+use skillfab_proto::realtime::{CpuList, RealTime, Sched};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -143,6 +144,17 @@ pub struct ManagerArgs {
     /// Seconds to wait for them before giving up.
     #[arg(long, default_value_t = 30.0)]
     pub wait_timeout_s: f64,
+    /// Real-time mode of the manager's cycle thread: a scheduling policy and priority,
+    /// `fifo:81` or `rr:81` (docs/realtime.md). What the machine refuses is logged as a
+    /// warning and the manager runs on without it.
+    #[arg(long, value_name = "POLICY:PRIORITY")]
+    pub realtime: Option<Sched>,
+    /// With --realtime: pin the cycle thread to these CPUs (`1`, `0,1`, `0-3`).
+    #[arg(long, value_name = "CPUS", requires = "realtime")]
+    pub cpus: Option<CpuList>,
+    /// With --realtime: lock the process's memory (mlockall) and pre-fault some stack.
+    #[arg(long, requires = "realtime")]
+    pub lock_memory: bool,
 }
 
 /// `up`: start a manager and the processes of a launch file; supervise them.
@@ -176,6 +188,9 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
         held,
         wait_for,
         wait_timeout_s,
+        realtime,
+        cpus,
+        lock_memory,
     } = args;
     let mut config = ManagerConfig::new(domain);
     if let Some(p) = pace.pace()? {
@@ -195,6 +210,16 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
         encoding: pace.record_encoding,
     });
     let mut manager = Manager::new(config).context("starting the manager")?;
+    // The cycles run on this thread: real-time from here on (the control plane's thread,
+    // started by `Manager::new`, stays an ordinary one).
+    if let Some(sched) = realtime {
+        let rt = RealTime {
+            cpus,
+            lock_memory,
+            ..RealTime::new(sched)
+        };
+        rt.apply().log("the manager's cycle thread");
+    }
     let report = manager.run(&|_| false);
     manager.shutdown();
     print_report(&report?, pace.json)

@@ -382,6 +382,9 @@ fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
     if let Some(d) = opts.launch.deadline {
         a.extend(["--deadline-ms".into(), ms(d)]);
     }
+    if let Some(rt) = &opts.launch.manager_realtime {
+        a.extend(rt.flags());
+    }
     if let Some(n) = opts.cycles {
         a.extend(["--cycles".into(), n.to_string()]);
     }

@@ -4,7 +4,9 @@
 //!
 //! The life of a skill process:
 //! 1. parse `--name/--domain/--param/--priority/--inactive/--remap` (devices also
-//!    `--port/--baud/--policy`), validate parameters;
+//!    `--port/--baud/--policy`), validate parameters; in real-time mode (`--realtime`,
+//!    `--cpus`, `--lock-memory`) set the thread's scheduling, affinity and locked memory,
+//!    saying what the machine refused;
 //! 2. wait for the domain's manager (launch order does not matter);
 //! 3. register: claim a board slot, write the declaration, wake the manager, wait for its
 //!    answer (a refusal, e.g. a type mismatch, ends the process with that error);
@@ -56,6 +58,7 @@ use serve::{End, Registration, register, serve, wait_for_board};
 use skill_unit::SkillUnit;
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
+use skillfab_proto::realtime::{CpuList, RealTime, Sched};
 use std::time::Duration;
 
 /// How often a skill checks that its manager is still there: a manager that stops wakes its
@@ -101,6 +104,28 @@ pub struct SkillArgs {
     pub describe: bool,
 }
 
+    /// Real-time mode of the skill's thread: a scheduling policy and priority, `fifo:80` or
+    /// `rr:80` (docs/realtime.md). What the machine refuses is logged as a warning and the
+    /// skill runs on without it.
+    #[arg(long, value_name = "POLICY:PRIORITY")]
+    pub realtime: Option<Sched>,
+    /// With --realtime: pin the skill's thread to these CPUs (`1`, `0,1`, `0-3`).
+    #[arg(long, value_name = "CPUS", requires = "realtime")]
+    pub cpus: Option<CpuList>,
+    /// With --realtime: lock the process's memory (mlockall) and pre-fault some stack.
+    #[arg(long, requires = "realtime")]
+    pub lock_memory: bool,
+}
+
+impl SkillArgs {
+    /// The real-time mode the flags ask for, if any.
+    pub fn real_time(&self) -> Option<RealTime> {
+        self.realtime.map(|sched| RealTime {
+            cpus: self.cpus.clone(),
+            lock_memory: self.lock_memory,
+            ..RealTime::new(sched)
+        })
+    }
 /// Options every device binary accepts: a skill's, and where its hardware is and how its
 /// channels are arbitrated.
 #[derive(Parser, Debug, Clone)]
@@ -378,6 +403,12 @@ fn run<U: Unit>(
     let mut io: Option<Io> = None;
     unit.init()?;
     let kept = unit
+    // Once, on the thread that serves cycles, before it registers (the log forwarder's thread
+    // started earlier and stays an ordinary one).
+    let realtime = args.real_time();
+    if let Some(rt) = &realtime {
+        rt.apply().log("the skill's thread");
+    }
         .state_fingerprint()
         .and_then(|fp| take_back(&mut unit, &names::state(&domain.prefix(), &decl.name), fp));
     let mut common = Common {

@@ -259,6 +259,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
     let mut launch = LaunchFile {
         bridge: None,
         plan: None,
+        realtime: None,
         manager: ManagerSection {
             period_ms: Some(period_ms),
             // (Lock-step: the manager's own, 10 s.)

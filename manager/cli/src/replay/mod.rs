@@ -404,6 +404,7 @@ fn launch_file(
     let mut launch = LaunchFile {
         bridge: None,
         plan: None,
+        realtime: None,
         manager: ManagerSection {
             period_ms: rec.period_ns.map(|ns| ns as f64 / 1e6),
             ..ManagerSection::default()

@@ -260,9 +260,7 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
         (&self.command, self.decision)
     }
     fn publish(&mut self, header: SampleHeader) -> Result<(), crate::SdkError> {
-        let mut s = self
-            .publisher
-            .loan_uninit()
+        let mut s = crate::allocs::in_loan(|| self.publisher.loan_uninit())
             .map_err(|e| crate::SdkError::transport("loan command", e))?
             .write_payload(self.command);
         // A command's header names the winning proposer, not the device.

@@ -14,6 +14,8 @@
 //! - `runtime`: turns a `Skill` into a process (registration, cycles, shutdown); [`main`]
 //!   is a skill binary's whole `main`, [`device_main`] a device's.
 //! - [`logs`]: each skill's tracing lines, forwarded over the domain's log stream.
+//! - [`allocs`]: the program's global allocator, counting allocations per thread (the check
+//!   that a cycle's path does not allocate; feature `count-allocs`, on by default).
 //! - [`harness`]: runs a skill body in-process on scripted inputs, for unit tests.
 //! - [`refs`]: typed references to parameters, ports and message fields. The derives make
 //!   one per field (`P::GAIN`, `In::TICK`, `Out::SCALED`, `Tick::VALUE`): the harness takes
@@ -48,6 +50,7 @@
 extern crate self as skill_sdk;
 
 pub mod actuation;
+pub mod allocs;
 pub mod device;
 pub mod foreign;
 pub mod harness;

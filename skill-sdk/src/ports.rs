@@ -254,7 +254,9 @@ impl<T: Message> OutputCell<T> {
             let initialised = &mut self.initialised;
             let ahead = self.ahead.take();
             let publisher = self.publisher.as_ref();
-            let loan = ahead.map(Ok).or_else(|| publisher.map(|p| p.loan_uninit()));
+            let loan = ahead
+                .map(Ok)
+                .or_else(|| publisher.map(|p| crate::allocs::in_loan(|| p.loan_uninit())));
             let loaned = loan.and_then(|loan| match loan {
                 Ok(mut s) => {
                     let p = s.payload_mut().as_mut_ptr();
@@ -336,8 +338,7 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
             }
             Some(Pending::Heap(b)) => match &self.publisher {
                 Some(p) => {
-                    let mut s = p
-                        .loan_uninit()
+                    let mut s = crate::allocs::in_loan(|| p.loan_uninit())
                         .map_err(|e| send_err(T::TYPE_NAME, e))?
                         .write_payload(*b);
                     *s.user_header_mut() = header;
@@ -369,7 +370,7 @@ impl<T: Message> ErasedOutputCell for OutputCell<T> {
             && let Some(p) = &self.publisher
         {
             // A failed loan is tried again by the run (which says why).
-            self.ahead = p.loan_uninit().ok();
+            self.ahead = crate::allocs::in_loan(|| p.loan_uninit()).ok();
         }
     }
     fn bytes_mut(&mut self, clear: bool) -> &mut [u8] {

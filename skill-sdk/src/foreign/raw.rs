@@ -155,8 +155,10 @@ impl ErasedOutputCell for RawOutput {
     }
     fn bytes_mut(&mut self, clear: bool) -> &mut [u8] {
         if self.pending.is_none() {
+            let publisher = &self.publisher;
             // SAFETY: the type variant is fixed-size, so one element is loaned.
-            match unsafe { self.publisher.loan_custom_payload(1) } {
+            let loan = || unsafe { publisher.loan_custom_payload(1) };
+            match crate::allocs::in_loan(loan) {
                 Ok(s) => self.pending = Some(s),
                 Err(e) => {
                     tracing::error!(type_name = %self.type_name, error = ?e, "no sample to loan");

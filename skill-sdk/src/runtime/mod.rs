@@ -27,6 +27,7 @@
 //! - `device_unit`: a device's cycle: sample at once, then arbitrate and command;
 //!   `arbiter`: which proposers have settled, and each channel's command from them.
 
+mod alloc_watch;
 mod arbiter;
 mod device_unit;
 mod kept;
@@ -50,15 +51,16 @@ use crate::ports::{ErasedInput, ErasedOutput, PortMaker};
 use crate::services;
 use crate::skill::Skill;
 use crate::state::StateError;
+use alloc_watch::AllocWatch;
 use clap::Parser;
 use device_unit::DeviceUnit;
 use kept::{Found, Kept};
 pub(crate) use serve::Link;
 use serve::{End, Registration, register, serve, wait_for_board};
 use skill_unit::SkillUnit;
+use skillfab_proto::realtime::{CpuList, RealTime, Sched};
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
-use skillfab_proto::realtime::{CpuList, RealTime, Sched};
 use std::time::Duration;
 
 /// How often a skill checks that its manager is still there: a manager that stops wakes its
@@ -102,8 +104,6 @@ pub struct SkillArgs {
     /// sequence --check --launch` reads it).
     #[arg(long)]
     pub describe: bool,
-}
-
     /// Real-time mode of the skill's thread: a scheduling policy and priority, `fifo:80` or
     /// `rr:80` (docs/realtime.md). What the machine refuses is logged as a warning and the
     /// skill runs on without it.
@@ -126,6 +126,8 @@ impl SkillArgs {
             ..RealTime::new(sched)
         })
     }
+}
+
 /// Options every device binary accepts: a skill's, and where its hardware is and how its
 /// channels are arbitrated.
 #[derive(Parser, Debug, Clone)]
@@ -295,6 +297,8 @@ pub(crate) struct Common<P> {
     waker: Option<Waker>,
     /// Spin budget after a cycle's start (ns; 0: sleep on the doorbell).
     spin_ns: u64,
+    /// The cycle path's allocations, counted.
+    allocs: AllocWatch,
 }
 
 /// A unit's runtime ports.
@@ -399,16 +403,16 @@ fn run<U: Unit>(
     let domain = Domain::new(&args.domain)?;
     let span = tracing::info_span!("skill", name = %decl.name, domain = %domain);
     let _enter = span.enter();
-    let node = services::node(&domain, &decl.name)?;
-    let mut io: Option<Io> = None;
-    unit.init()?;
-    let kept = unit
     // Once, on the thread that serves cycles, before it registers (the log forwarder's thread
     // started earlier and stays an ordinary one).
     let realtime = args.real_time();
     if let Some(rt) = &realtime {
         rt.apply().log("the skill's thread");
     }
+    let node = services::node(&domain, &decl.name)?;
+    let mut io: Option<Io> = None;
+    unit.init()?;
+    let kept = unit
         .state_fingerprint()
         .and_then(|fp| take_back(&mut unit, &names::state(&domain.prefix(), &decl.name), fp));
     let mut common = Common {
@@ -421,6 +425,7 @@ fn run<U: Unit>(
         state_warned: false,
         waker: unit.waker(),
         spin_ns: args.spin_us.saturating_mul(1000),
+        allocs: AllocWatch::new(realtime.is_some()),
     };
     let mut decl = decl;
     loop {
@@ -474,6 +479,7 @@ fn run<U: Unit>(
         board.ring_manager();
         common.last_cycle = 0;
         common.param_gen = 0;
+        common.allocs.restart(board.slot(idx));
         if let Some(w) = &common.waker {
             w.attach(Some((board.clone(), idx)));
         }

@@ -123,6 +123,7 @@ pub(super) fn serve<U: Unit>(
     loop {
         // Read before looking for work: a ring from here on ends the wait below at once.
         let seen = slot.bell.seen();
+        common.allocs.begin();
         for i in io.inputs.iter_mut() {
             i.poll()?;
         }
@@ -133,6 +134,7 @@ pub(super) fn serve<U: Unit>(
         // A closed board is checked at once: its manager left, or died and was replaced.
         if now >= next_tick || !board.is_open() {
             next_tick = now + LIVENESS_TICK;
+            common.allocs.skip();
             if !board.manager_alive()
                 || slot.state() != SlotState::Ready
                 || slot.pid.load(Ordering::Acquire) != me
@@ -142,6 +144,7 @@ pub(super) fn serve<U: Unit>(
         }
         if let Some((generation, bytes)) = slot.read_params(common.param_gen) {
             common.param_gen = generation;
+            common.allocs.skip();
             apply_params(&mut common.params, &bytes);
         }
         if slot.active.load(Ordering::Acquire) != 0 {
@@ -151,6 +154,7 @@ pub(super) fn serve<U: Unit>(
         for o in io.outputs.iter_mut() {
             o.prepare();
         }
+        common.allocs.end(slot);
         // A signal during the wait ends it (EINTR) and the next check sees it; one that lands
         // in the few instructions between this check and the wait is seen within a tick.
         if services::termination_requested() {

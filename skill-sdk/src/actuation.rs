@@ -57,14 +57,23 @@ fn bytes_of<T>(v: &T) -> &[u8] {
 
 /// The weighted average of `items`, field by field (`leaves` from [`float_leaves`]).
 pub fn blend<T: Message>(leaves: &[(usize, Prim)], items: &[(f64, &T)]) -> T {
-    let total: f64 = items.iter().map(|(w, _)| *w).sum();
+    blend_by(leaves, items.iter().map(|(w, v)| (*w, *v)))
+}
+
+/// [`blend`] of the items an iterator yields (walked once per leaf): a device's cycle blends
+/// without collecting them.
+fn blend_by<'t, T: Message>(
+    leaves: &[(usize, Prim)],
+    items: impl Iterator<Item = (f64, &'t T)> + Clone,
+) -> T {
+    let total: f64 = items.clone().map(|(w, _)| w).sum();
     // SAFETY: every Message is valid when all bytes are zero.
     let mut out: T = unsafe { std::mem::zeroed() };
     let dst = (&mut out as *mut T).cast::<u8>();
     for &(off, prim) in leaves {
         let mut acc = 0.0f64;
-        for (w, v) in items {
-            let b = bytes_of(*v);
+        for (w, v) in items.clone() {
+            let b = bytes_of(v);
             let x = match prim {
                 Prim::F32 => f64::from(f32::from_ne_bytes(
                     b[off..off + 4].try_into().unwrap_or([0; 4]),
@@ -120,52 +129,65 @@ pub fn arbitrate<T: Message + Actuation>(
     candidates: &[Candidate],
     proposal: &dyn Fn(u32) -> Option<T>,
 ) -> (T, Arbitration) {
-    let live: Vec<(&Candidate, T)> = candidates
-        .iter()
-        .filter_map(|c| proposal(c.slot).map(|v| (c, v)))
-        .collect();
-    if live.is_empty() {
-        return (T::safe(), Arbitration::default());
-    }
+    let mut arb = Arbitration::default();
+    let cmd = arbitrate_into(policy, leaves, candidates, proposal, &mut arb);
+    (cmd, arb)
+}
+
+/// [`arbitrate`] into `arb`, whose weights' room is reused: a device's cycle arbitrates
+/// without allocating.
+pub fn arbitrate_into<T: Message + Actuation>(
+    policy: Policy,
+    leaves: Option<&[(usize, Prim)]>,
+    candidates: &[Candidate],
+    proposal: &dyn Fn(u32) -> Option<T>,
+    arb: &mut Arbitration,
+) -> T {
+    arb.winner = None;
+    arb.weights.clear();
     match (policy, leaves) {
         (Policy::Blend, Some(leaves)) => {
-            let priorities: Vec<i32> = live.iter().map(|(c, _)| c.priority).collect();
-            let w = blend_weights(&priorities);
-            let items: Vec<(f64, &T)> =
-                w.iter().copied().zip(live.iter().map(|(_, v)| v)).collect();
-            let cmd = blend(leaves, &items);
-            let weights = live
+            // Priority-weighted (negative priorities weigh nothing; all nothing: equal).
+            for c in candidates.iter().filter(|c| proposal(c.slot).is_some()) {
+                arb.weights.push((c.slot, f64::from(c.priority.max(0))));
+            }
+            if arb.weights.is_empty() {
+                return T::safe();
+            }
+            if arb.weights.iter().all(|(_, w)| *w == 0.0) {
+                arb.weights.iter_mut().for_each(|(_, w)| *w = 1.0);
+            }
+            let total: f64 = arb.weights.iter().map(|(_, w)| w).sum();
+            arb.weights.iter_mut().for_each(|(_, w)| *w /= total);
+            // Each proposal once, in the weights' order.
+            let mut values = [None::<T>; crate::board::MAX_SLOTS];
+            for (i, (slot, _)) in arb.weights.iter().enumerate().take(values.len()) {
+                values[i] = proposal(*slot);
+            }
+            let items = arb
+                .weights
                 .iter()
-                .zip(&w)
-                .map(|((c, _), x)| (c.slot, *x))
-                .collect();
-            (
-                cmd,
-                Arbitration {
-                    winner: None,
-                    weights,
-                },
-            )
+                .zip(values.iter())
+                .filter_map(|((_, w), v)| v.as_ref().map(|v| (*w, v)));
+            blend_by(leaves, items)
         }
         _ => {
             // Highest priority; among equals the name that sorts first (stable across runs,
             // unlike slots or pids).
-            let (best, cmd) = live
+            let best = candidates
                 .iter()
+                .filter_map(|c| proposal(c.slot).map(|v| (c, v)))
                 .min_by(|(a, _), (b, _)| {
                     b.priority
                         .cmp(&a.priority)
                         .then_with(|| a.name.cmp(&b.name))
-                })
-                .map(|(c, v)| (*c, *v))
-                .unwrap_or((live[0].0, live[0].1));
-            (
-                cmd,
-                Arbitration {
-                    winner: Some(best.slot),
-                    weights: vec![(best.slot, 1.0)],
-                },
-            )
+                });
+            let Some((best, cmd)) = best else {
+                return T::safe();
+            };
+            arb.winner = Some(best.slot);
+            arb.weights.push((best.slot, 1.0));
+            cmd
         }
     }
 }
@@ -188,8 +210,9 @@ pub trait ErasedChannel {
     fn poll(&mut self) -> Result<(), crate::SdkError>;
     /// Whether the proposer in `slot` has proposed for `cycle`.
     fn has_proposal(&self, slot: u32, cycle: u64) -> bool;
-    /// Turns the proposals of `cycle` from `candidates` into the cycle's command.
-    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate]) -> Arbitration;
+    /// Turns the proposals of `cycle` from `candidates` into the cycle's command; the
+    /// arbitration is the port's until the next cycle.
+    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate]) -> &Arbitration;
     /// The command of the last arbitration (a `&T` of the channel's type) and its decision.
     fn command(&self) -> (&dyn Any, Decision);
     /// Publishes the cycle's command on the channel's command topic.
@@ -208,6 +231,8 @@ pub struct ChannelPort<T: Actuation> {
     latest: HashMap<u32, (SampleHeader, T)>,
     command: T,
     decision: Decision,
+    /// The last arbitration (its weights' room reused from cycle to cycle).
+    arbitration: Arbitration,
 }
 
 impl<T: Actuation> ErasedChannel for ChannelPort<T> {
@@ -236,7 +261,7 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
             .get(&slot)
             .is_some_and(|(h, _)| h.cycle == cycle)
     }
-    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate]) -> Arbitration {
+    fn arbitrate(&mut self, cycle: u64, candidates: &[Candidate]) -> &Arbitration {
         let latest = &self.latest;
         let proposal = |slot: u32| {
             latest
@@ -244,8 +269,14 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
                 .filter(|(h, _)| h.cycle == cycle)
                 .map(|(_, p)| *p)
         };
-        let (cmd, arb) = arbitrate(self.policy, self.leaves.as_deref(), candidates, &proposal);
-        self.command = cmd;
+        let arb = &mut self.arbitration;
+        self.command = arbitrate_into(
+            self.policy,
+            self.leaves.as_deref(),
+            candidates,
+            &proposal,
+            arb,
+        );
         self.decision = Decision {
             cycle,
             winner: arb.winner,
@@ -254,7 +285,7 @@ impl<T: Actuation> ErasedChannel for ChannelPort<T> {
         // Forget proposers that left the candidates (dead, deactivated, gone).
         self.latest
             .retain(|slot, _| candidates.iter().any(|c| c.slot == *slot));
-        arb
+        &self.arbitration
     }
     fn command(&self) -> (&dyn Any, Decision) {
         (&self.command, self.decision)
@@ -354,6 +385,7 @@ impl<'a, T: Actuation> ChannelField<'a> for Command<'a, T> {
                 winner: None,
                 safe: true,
             },
+            arbitration: Arbitration::default(),
         }))
     }
 }

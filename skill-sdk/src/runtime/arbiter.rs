@@ -15,6 +15,9 @@ pub(super) struct Arbiter {
     /// Proposer names by slot, with the slot generation they belong to: a name is decoded
     /// from the board's declaration once per registration, not once per cycle.
     names: HashMap<u32, (u32, Arc<str>)>,
+    /// The settled candidates of each channel, refilled every cycle (their room is kept: a
+    /// cycle allocates nothing).
+    channels: Vec<Vec<Candidate>>,
 }
 
 impl Arbiter {
@@ -27,11 +30,13 @@ impl Arbiter {
         me: &Slot,
         io: &Io,
         k: u64,
-    ) -> Option<Vec<Vec<Candidate>>> {
-        let mut channels = Vec::new();
-        for (c, channel) in io.channels.iter().enumerate().take(MAX_CHANNELS) {
+    ) -> Option<&[Vec<Candidate>]> {
+        let n = io.channels.len().min(MAX_CHANNELS);
+        self.channels.resize_with(n, Vec::new);
+        for (c, channel) in io.channels.iter().enumerate().take(n) {
             let mask = me.channel_proposers[c].load(Ordering::Acquire);
-            let mut settled = Vec::new();
+            let mut settled = std::mem::take(&mut self.channels[c]);
+            settled.clear();
             for s in (0..MAX_SLOTS).filter(|s| mask & (1 << s) != 0) {
                 let p = board.slot(s);
                 if p.expected_cycle.load(Ordering::Acquire) != k {
@@ -41,6 +46,7 @@ impl Arbiter {
                     || p.done_cycle.load(Ordering::Acquire) == k
                     || p.cancelled_cycle.load(Ordering::Acquire) == k;
                 if !done {
+                    self.channels[c] = settled;
                     return None;
                 }
                 settled.push(Candidate {
@@ -49,9 +55,9 @@ impl Arbiter {
                     name: self.name_of(p, s as u32),
                 });
             }
-            channels.push(settled);
+            self.channels[c] = settled;
         }
-        Some(channels)
+        Some(&self.channels)
     }
 
     /// The instance name of the skill in slot `s` (cached per registration).

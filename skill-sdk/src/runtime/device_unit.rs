@@ -162,7 +162,7 @@ impl<D: Device> Unit for DeviceUnit<D> {
             }
         }
         let start = now_ns();
-        Arbiter::arbitrate(me, io, &channels, k);
+        Arbiter::arbitrate(me, io, channels, k);
         let status = self.command(link, io, common, k);
         let end = now_ns();
         common.last_cycle = k;

@@ -226,22 +226,44 @@ impl TestDomain {
     /// Starts the program at `path` (a system tool: `ip netns exec …`) with `args` in its own
     /// process group; returns its index.
     pub fn spawn_at(&mut self, path: &Path, args: &[&str]) -> usize {
-        use std::os::unix::process::CommandExt;
         let mut c = self.command_at(path);
-        let program = path
+        c.args(args);
+        self.spawn_command(c)
+    }
+
+    /// Starts `c` (from [`TestDomain::command`], set up further: a `pre_exec`) in its own
+    /// process group, its stderr in the scratch directory (`<index>-<program>.log`, read by
+    /// [`TestDomain::log`]); returns its index.
+    pub fn spawn_command(&mut self, mut c: Command) -> usize {
+        use std::os::unix::process::CommandExt;
+        let program = Path::new(c.get_program())
             .file_name()
             .map_or("program".into(), |n| n.to_string_lossy().into_owned());
         let log = self
             .dir
             .join(format!("{}-{program}.log", self.children.len()));
         let log = std::fs::File::create(&log).expect("child log file");
-        c.args(args)
-            .process_group(0)
-            .stdout(Stdio::null())
-            .stderr(log);
+        c.process_group(0).stdout(Stdio::null()).stderr(log);
         let child = c.spawn().unwrap_or_else(|e| panic!("spawn {program}: {e}"));
         self.children.push(child);
         self.children.len() - 1
+    }
+
+    /// What child `i` has written to its stderr so far.
+    pub fn log(&self, i: usize) -> String {
+        assert!(i < self.children.len(), "no child {i}");
+        std::fs::read_dir(&self.dir)
+            .ok()
+            .into_iter()
+            .flatten()
+            .flatten()
+            .find(|e| {
+                e.file_name()
+                    .to_string_lossy()
+                    .starts_with(&format!("{i}-"))
+            })
+            .and_then(|e| std::fs::read_to_string(e.path()).ok())
+            .unwrap_or_default()
     }
 
     /// Process id of child `i`.

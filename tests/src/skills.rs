@@ -19,6 +19,10 @@ pub struct WorkParams {
     /// Panic in every cycle divisible by this; 0: never.
     #[param(default = 0, min = 0)]
     pub panic_every: u64,
+    /// Allocate a buffer of this many bytes in every run (0: none): a body that allocates
+    /// on the cycle's path (the allocation count's test).
+    #[param(default = 0, min = 0, max = 1048576)]
+    pub allocate_bytes: u64,
 }
 
 /// Input of the work skills.
@@ -49,6 +53,10 @@ fn work(ctx: &Ctx<WorkParams>, i: &WorkIn, o: &mut WorkOut) -> SkillResult {
     }
     if p.panic_every > 0 && ctx.cycle.is_multiple_of(p.panic_every) {
         panic!("panicking on purpose in cycle {}", ctx.cycle);
+    }
+    if p.allocate_bytes > 0 {
+        let buffer: Vec<u8> = Vec::with_capacity(p.allocate_bytes as usize);
+        std::hint::black_box(buffer);
     }
     o.out.set(Scalar {
         value: p.factor * i.tick.value as f64,

@@ -16,6 +16,7 @@ mod fabric_log;
 mod faults;
 mod newcomer;
 mod polyglot;
+mod realtime;
 mod replay;
 mod ros_tools;
 mod sequence;

@@ -24,6 +24,7 @@ pub mod soak;
 
 use skillfab_client::Client;
 use skillfab_proto::board::Board;
+use skillfab_proto::realtime::RealTime;
 use skillfab_tests::TestDomain;
 use std::time::Duration;
 
@@ -112,6 +113,22 @@ impl Case {
                 .to_vec(),
             Case::Lang(_) => vec!["ticker".into(), "scale".into()],
         }
+    }
+
+    /// [`Case::launch`] in real-time mode `rt` (its `[realtime]` section: the skills at its
+    /// priority, the manager one above, both pinned to its CPUs).
+    pub fn launch_realtime(&self, period_ms: u64, rt: &RealTime) -> String {
+        let mut s = self.launch(period_ms);
+        s.push_str(&format!(
+            "[realtime]\npolicy = \"{}\"\npriority = {}\nlock_memory = {}\n",
+            rt.policy.short_name(),
+            rt.priority,
+            rt.lock_memory
+        ));
+        if let Some(cpus) = &rt.cpus {
+            s.push_str(&format!("cpus = {:?}\n", cpus.cpus()));
+        }
+        s
     }
 
     /// The launch file (with `{bin:x}` placeholders) at `period_ms` (0: back to back).
@@ -228,19 +245,27 @@ impl Fabric {
     /// Starts `case` with a cycle every `period` (whole milliseconds; `None`: back to back);
     /// returns once every skill runs.
     pub fn start_every(case: Case, period: Option<Duration>) -> Fabric {
-        Fabric::start_spinning(case, period, 0)
+        Fabric::start_with(case, period, None, 0)
     }
 
-    /// [`Fabric::start_every`] with every skill in spin mode (`[manager] spin_us`; 0: none).
-    pub fn start_spinning(case: Case, period: Option<Duration>, spin_us: u64) -> Fabric {
+    /// [`Fabric::start_every`], in real-time mode `rt` if given, with every skill in spin
+    /// mode if `spin_us` > 0 (`[manager] spin_us`).
+    pub fn start_with(
+        case: Case,
+        period: Option<Duration>,
+        rt: Option<&RealTime>,
+        spin_us: u64,
+    ) -> Fabric {
         if matches!(case, Case::Lang(_)) {
             skillfab_tests::build_foreign_examples();
         }
         let mut t = TestDomain::new(&case.name());
         let period = period.map_or(0, |p| p.as_millis().max(1) as u64);
-        let mut text = case
-            .launch(period)
-            .replace("{dir}", t.dir.to_str().unwrap());
+        let text = match rt {
+            Some(rt) => case.launch_realtime(period, rt),
+            None => case.launch(period),
+        };
+        let mut text = text.replace("{dir}", t.dir.to_str().unwrap());
         if spin_us > 0 {
             text = text.replacen(
                 "[manager]\n",
@@ -313,6 +338,11 @@ impl Fabric {
     /// The cycle in progress (read from the board).
     pub fn cycle(&self) -> u64 {
         skillfab_tests::cycle(&self.board)
+    }
+
+    /// The manager's statistics now.
+    pub fn stats(&self) -> skillfab_proto::control::Stats {
+        self.client.stats().unwrap()
     }
 
     /// Failed runs of each skill so far (a payload sink fails when it reads another cycle's

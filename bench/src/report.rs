@@ -215,23 +215,36 @@ pub struct ScalePoint {
     pub late: usize,
     /// Cycles measured.
     pub cycles: usize,
+    /// The 99.9th percentile of the cycle latency, µs.
+    pub p999: f64,
+    /// Cycles the manager started more than a period late (over the whole run). (Deadline
+    /// misses are not reported: the cases' deadline is 1 s, so a cycle is not closed early;
+    /// `late` is what ran past the period.)
+    pub late_starts: u64,
 }
 
 /// Cost against the number of skills and the rate: a chain of each size in `sizes` at each
-/// rate in `rates` for `secs` seconds, then its futex floor for as many rounds.
-pub fn scale(sizes: &[usize], rates: &[u32], secs: f64) -> Vec<ScalePoint> {
+/// rate in `rates` for `secs` seconds (in real-time mode `rt` if given), then its futex floor
+/// for as many rounds.
+pub fn scale(
+    sizes: &[usize],
+    rates: &[u32],
+    secs: f64,
+    rt: Option<&skillfab_proto::realtime::RealTime>,
+) -> Vec<ScalePoint> {
     let cpu = |pids: &[u32]| pids.iter().map(|&p| cpu_time(p)).sum::<Duration>();
     let mut out = Vec::new();
     for &rate_hz in rates {
         let period = Duration::from_secs(1) / rate_hz.max(1);
         for &n in sizes {
             let cycles = ((secs * f64::from(rate_hz)) as usize).max(50);
-            let mut f = Fabric::start_every(Case::Chain(n), Some(period));
+            let mut f = Fabric::start_with(Case::Chain(n), Some(period), rt, 0);
             let (manager, skills) = f.pids();
             let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
             let (c0, t0) = (cpu(&all), Instant::now());
             let times = f.times(cycles);
             let cpu_percent = (cpu(&all) - c0).as_secs_f64() / t0.elapsed().as_secs_f64() * 100.0;
+            let stats = f.stats();
             drop(f);
             let period_us = period.as_secs_f64() * 1e6;
             let late = times.iter().filter(|t| t.round_trip_us > period_us).count();
@@ -252,10 +265,19 @@ pub fn scale(sizes: &[usize], rates: &[u32], secs: f64) -> Vec<ScalePoint> {
                 floor_cpu_percent,
                 late,
                 cycles: times.len(),
+                p999: percentile(&floors::hops(&times), 0.999),
+                late_starts: stats.late_starts,
             };
             eprintln!(
-                "scale: chain-{n}@{rate_hz}Hz p50 {:.0} µs (futex {:.0}), CPU {:.1} % (floor {:.1} %), {late} late",
-                point.skillfab.p50, point.futex.p50, cpu_percent, floor_cpu_percent
+                "scale: chain-{n}@{rate_hz}Hz{} p50 {:.0} µs p99.9 {:.0} max {:.0} (futex p50 {:.0}), CPU {:.1} % (floor {:.1} %), {late} late, {} late starts",
+                rt.map_or(String::new(), |rt| format!(" {rt}")),
+                point.skillfab.p50,
+                point.p999,
+                point.skillfab.max,
+                point.futex.p50,
+                cpu_percent,
+                floor_cpu_percent,
+                point.late_starts
             );
             out.push(point);
         }
@@ -266,29 +288,41 @@ pub fn scale(sizes: &[usize], rates: &[u32], secs: f64) -> Vec<ScalePoint> {
 /// The scale sweep as a table for people.
 pub fn scale_text(points: &[ScalePoint]) -> String {
     let mut s = String::from(
-        "scale: a chain of N sync skills; cycle latency (start → last run done) µs p50/p99, \
-         its futex ring floor (same endpoints), CPU of all processes (% of one core), cycles \
-         whose round trip ran past the period\n",
+        "scale: a chain of N sync skills; cycle latency (start → last run done) µs \
+         p50/p99/p99.9/max, its futex ring floor (same endpoints) p50/p99, CPU of all \
+         processes (% of one core), cycles whose round trip ran past the period, cycles started \
+         more than a period late\n",
     );
     s.push_str(&format!(
-        "{:>6} {:>7} {:>18} {:>18} {:>7} {:>10} {:>10} {:>12}\n",
-        "skills", "rate", "skillfab", "futex ring", "÷futex", "CPU", "floor CPU", "late"
+        "{:>6} {:>7} {:>26} {:>14} {:>7} {:>10} {:>10} {:>14} {:>6}\n",
+        "skills", "rate", "skillfab", "futex ring", "÷futex", "CPU", "floor CPU", "late", "starts"
     ));
     for p in points {
         s.push_str(&format!(
-            "{:>6} {:>5}Hz {:>18} {:>18} {:>7.2} {:>9.1}% {:>9.1}% {:>6}/{:<6}\n",
+            "{:>6} {:>5}Hz {:>26} {:>14} {:>7.2} {:>9.1}% {:>9.1}% {:>6}/{:<7} {:>6}\n",
             p.skills,
             p.rate_hz,
-            format!("{:.0} / {:.0}", p.skillfab.p50, p.skillfab.p99),
+            format!(
+                "{:.0} / {:.0} / {:.0} / {:.0}",
+                p.skillfab.p50, p.skillfab.p99, p.p999, p.skillfab.max
+            ),
             format!("{:.0} / {:.0}", p.futex.p50, p.futex.p99),
             p.skillfab.p50 / p.futex.p50,
             p.cpu_percent,
             p.floor_cpu_percent,
             p.late,
-            p.cycles
+            p.cycles,
+            p.late_starts
         ));
     }
     s
+}
+
+/// The `q` quantile of `us` (not empty), as [`Summary::of`] takes its percentiles.
+fn percentile(us: &[f64], q: f64) -> f64 {
+    let mut v = us.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
 /// The scale sweep as JSON.
@@ -306,6 +340,8 @@ pub fn scale_json(points: &[ScalePoint]) -> Json {
                 "floor_cpu_percent": (p.floor_cpu_percent * 10.0).round() / 10.0,
                 "late": p.late,
                 "cycles": p.cycles,
+                "p99_9": (p.p999 * 10.0).round() / 10.0,
+                "late_starts": p.late_starts,
             })
         })
         .collect()
@@ -351,7 +387,7 @@ pub fn spin_curve(
             lat[0].extend(floors::hops(&floor));
             drop(ring);
             for (i, &spin_us) in budgets_us.iter().enumerate() {
-                let mut f = Fabric::start_spinning(case, Some(crate::PACE), spin_us);
+                let mut f = Fabric::start_with(case, Some(crate::PACE), None, spin_us);
                 let (manager, skills) = f.pids();
                 let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
                 let (c0, t0) = (cpu(&all), Instant::now());

@@ -3,7 +3,9 @@
 //! run, over the same wake-ups (see `report`), repeated R times (default 3) with fabric and
 //! floors interleaved; p50 / p99 / max in µs, the spread of the repeats' p50s, the round
 //! trips, and the ratio skillfab ÷ iceoryx2 ring; then the idle cost against its floor.
-//! `--scale [SECS]`: the scale sweep instead (chains of 1…64 skills at 100 Hz and 1 kHz).
+//! `--scale [SECS]`: the scale sweep instead (chains of 1…64 skills at 100 Hz and 1 kHz;
+//! `--sizes 6` and `--rates 1000` pick some, `--realtime fifo:80[@CPUS][+mlock]` runs them in
+//! real-time mode, docs/realtime.md).
 //! `--peer dora`: skillfab against dora-rs 1.1 on the same chains instead.
 //! `--spin-curve`: chains of 1…8 skills and exit-lab at 100 Hz with every skill's spin budget from 0 to
 //! 1000 µs, latency and CPU next to the futex ring of the same depth.
@@ -11,6 +13,7 @@
 
 use skillfab_bench::Case;
 use skillfab_bench::report::{self, Row};
+use skillfab_proto::realtime::RealTime;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -18,6 +21,8 @@ fn main() -> ExitCode {
     let (mut json, mut cycles, mut svg, mut only, mut repeats) =
         (false, 400usize, None, None, 3usize);
     let (mut scale, mut peer, mut spin_curve) = (None, None, false);
+    let (mut sizes, mut rates): (Option<Vec<usize>>, Option<Vec<u32>>) = (None, None);
+    let mut realtime: Option<RealTime> = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--json" => json = true,
@@ -65,6 +70,19 @@ fn main() -> ExitCode {
             }
             "--scale" => scale = Some(args.next().and_then(|s| s.parse().ok()).unwrap_or(3.0)),
             "--spin-curve" => spin_curve = true,
+            "--sizes" => match args.next().and_then(|s| list(&s)) {
+                Some(v) => sizes = Some(v),
+                None => return usage("--sizes needs chain lengths, e.g. 6 or 1,6,16"),
+            },
+            "--rates" => match args.next().and_then(|s| list(&s)) {
+                Some(v) => rates = Some(v),
+                None => return usage("--rates needs rates in Hz, e.g. 1000 or 100,1000"),
+            },
+            "--realtime" => match args.next().map(|s| s.parse::<RealTime>()) {
+                Some(Ok(rt)) => realtime = Some(rt),
+                Some(Err(e)) => return usage(&format!("--realtime: {e}")),
+                None => return usage("--realtime needs POLICY:PRIORITY[@CPUS][+mlock]"),
+            },
             "--peer" => match args.next().as_deref() {
                 Some("dora") => peer = Some("dora"),
                 _ => return usage("--peer takes 'dora'"),
@@ -75,7 +93,7 @@ fn main() -> ExitCode {
             },
             "-h" | "--help" => {
                 println!(
-                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--json] | --spin-curve [--cycles N] [--repeats R] [--json] | --peer dora [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
+                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--sizes N,..] [--rates HZ,..] [--realtime fifo:80[@CPUS][+mlock]] [--json] | --spin-curve [--cycles N] [--repeats R] [--json] | --peer dora [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
                 );
                 return ExitCode::SUCCESS;
             }
@@ -85,12 +103,7 @@ fn main() -> ExitCode {
     if spin_curve {
         let mut cases: Vec<Case> = [1, 2, 4, 8].into_iter().map(Case::Chain).collect();
         cases.push(Case::ExitLab);
-        let points = report::spin_curve(
-            &cases,
-            &[0, 25, 50, 100, 200, 500, 1000],
-            cycles / 2,
-            repeats,
-        );
+        let points = report::spin_curve(&cases, &[0, 25, 100, 300, 1000], cycles / 2, repeats);
         if json {
             println!("{}", report::spin_curve_json(&points));
         } else {
@@ -98,8 +111,13 @@ fn main() -> ExitCode {
         }
         return ExitCode::SUCCESS;
     }
+    if scale.is_none() && (realtime.is_some() || sizes.is_some() || rates.is_some()) {
+        return usage("--sizes, --rates and --realtime go with --scale");
+    }
     if let Some(secs) = scale {
-        let points = report::scale(&[1, 2, 4, 6, 8, 16, 32, 64], &[100, 1000], secs);
+        let sizes = sizes.unwrap_or_else(|| vec![1, 2, 4, 6, 8, 16, 32, 64]);
+        let rates = rates.unwrap_or_else(|| vec![100, 1000]);
+        let points = report::scale(&sizes, &rates, secs, realtime.as_ref());
         if json {
             println!("{}", report::scale_json(&points));
         } else {
@@ -178,7 +196,14 @@ fn main() -> ExitCode {
 
 fn usage(why: &str) -> ExitCode {
     eprintln!(
-        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --svg FILE --svg-from REPORT.json"
+        "latency-report: {why}\nusage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--sizes N,..] [--rates HZ,..] [--realtime fifo:80[@CPUS][+mlock]] [--json] | --svg FILE --svg-from REPORT.json"
     );
     ExitCode::from(2)
+}
+
+/// A comma-separated list of positive numbers.
+fn list<T: std::str::FromStr + PartialOrd + Default>(s: &str) -> Option<Vec<T>> {
+    s.split(',')
+        .map(|x| x.trim().parse::<T>().ok().filter(|v| *v > T::default()))
+        .collect()
 }

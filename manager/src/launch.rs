@@ -894,6 +894,10 @@ mod tests {
                 "CPU list is empty",
             ),
             (
+                "[realtime]\npriority = 10\ncpus = [1, 5000]\n",
+                "CPU 5000 is past",
+            ),
+            (
                 "[realtime]\npriority = 10\nmanager_priority = 0\n",
                 "1..=99",
             ),

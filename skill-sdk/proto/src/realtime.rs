@@ -119,10 +119,17 @@ impl fmt::Display for Priority {
 pub struct CpuList(Vec<usize>);
 
 impl CpuList {
-    /// The CPUs of `cpus` (sorted, each once); an empty list is refused.
+    /// The CPUs of `cpus` (sorted, each once); an empty list, or a CPU past what a CPU set
+    /// holds, is refused.
     pub fn new(mut cpus: Vec<usize>) -> Result<CpuList, SpecError> {
         if cpus.is_empty() {
             return Err(SpecError::NoCpus);
+        }
+        if let Some(&cpu) = cpus.iter().find(|&&c| c >= CPU_SETSIZE) {
+            return Err(SpecError::CpuBeyondSet {
+                cpu,
+                max: CPU_SETSIZE - 1,
+            });
         }
         cpus.sort_unstable();
         cpus.dedup();
@@ -174,8 +181,14 @@ impl FromStr for CpuList {
             let lo: usize = lo.parse().map_err(|_| bad())?;
             let hi: usize = hi.parse().map_err(|_| bad())?;
             // More CPUs than a cpu_set_t holds is a typing mistake, not a machine.
-            if lo > hi || hi >= CPU_SETSIZE {
+            if lo > hi {
                 return Err(bad());
+            }
+            if hi >= CPU_SETSIZE {
+                return Err(SpecError::CpuBeyondSet {
+                    cpu: hi,
+                    max: CPU_SETSIZE - 1,
+                });
             }
             cpus.extend(lo..=hi);
         }
@@ -260,6 +273,14 @@ pub enum SpecError {
     /// An empty CPU list.
     #[error("the CPU list is empty (leave it out not to pin)")]
     NoCpus,
+    /// A CPU number past what a CPU set holds.
+    #[error("CPU {cpu} is past the last a CPU set holds ({max})")]
+    CpuBeyondSet {
+        /// As given.
+        cpu: usize,
+        /// The last CPU a set holds.
+        max: usize,
+    },
     /// Compact-form text of another shape.
     #[error("'{given}' is not a real-time spec: POLICY:PRIORITY[@CPUS][+mlock], e.g. fifo:80@1")]
     Form {
@@ -673,11 +694,8 @@ fn pin(cpus: &CpuList) -> Result<(), NotGranted> {
     // SAFETY: an all-zero cpu_set_t is an empty set.
     let mut set: nix::libc::cpu_set_t = unsafe { std::mem::zeroed() };
     for &c in cpus.cpus() {
-        // SAFETY: CpuList's CPUs are below CPU_SETSIZE (checked when parsed; a list built
-        // from numbers is checked here).
-        if c < CPU_SETSIZE {
-            unsafe { nix::libc::CPU_SET(c, &mut set) };
-        }
+        // SAFETY: a CpuList's CPUs are below CPU_SETSIZE (CpuList::new), in the set's bounds.
+        unsafe { nix::libc::CPU_SET(c, &mut set) };
     }
     // SAFETY: pid 0 is the calling thread; `set` is a cpu_set_t of the size passed.
     let r = unsafe {
@@ -776,6 +794,10 @@ mod tests {
             assert!(bad.parse::<CpuList>().is_err(), "'{bad}' was taken");
         }
         assert_eq!(CpuList::new(Vec::new()), Err(SpecError::NoCpus));
+        assert_eq!(
+            CpuList::new(vec![1, 4096]).unwrap_err().to_string(),
+            "CPU 4096 is past the last a CPU set holds (1023)"
+        );
     }
 
     #[test]

@@ -10,39 +10,10 @@
 //! dora routes each message through its daemon, as it does for every message of a dataflow on
 //! one machine; that is part of what is measured.
 
-use crate::{Case, Fabric, Summary, floors};
-use std::path::{Path, PathBuf};
+use crate::peer::{self, Compared};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
-
-/// One depth measured both ways.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Compared {
-    /// Nodes after the driver (skills after the manager).
-    pub depth: usize,
-    /// skillfab `chain-D@100Hz`, µs.
-    pub skillfab: Summary,
-    /// dora, same graph and pacing, µs.
-    pub dora: Summary,
-}
-
-fn peer_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("dora")
-}
-
-/// Builds the peer node; returns its binary.
-fn build_peer() -> Result<PathBuf, String> {
-    let dir = peer_dir();
-    let status = Command::new(env!("CARGO"))
-        .args(["build", "--release", "--manifest-path"])
-        .arg(dir.join("Cargo.toml"))
-        .status()
-        .map_err(|e| format!("cargo: {e}"))?;
-    if !status.success() {
-        return Err("building bench/dora failed".into());
-    }
-    Ok(dir.join("target/release/skillfab-dora-peer"))
-}
 
 /// The dataflow of depth `depth`, sending `cycles` stamps, the sink writing to `out`.
 fn dataflow(peer: &Path, depth: usize, cycles: usize, out: &Path) -> String {
@@ -88,16 +59,9 @@ fn run_dora(peer: &Path, depth: usize, cycles: usize) -> Result<Vec<f64>, String
     }
     let text = std::fs::read_to_string(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let _ = std::fs::remove_dir_all(&dir);
-    let v: Vec<f64> = text
-        .lines()
-        .filter_map(|l| l.trim().parse::<u64>().ok())
-        .skip(10)
-        .map(|ns| ns as f64 / 1000.0)
-        .collect();
-    if v.is_empty() {
-        return Err(format!("dora depth {depth}: the sink recorded nothing"));
-    }
-    Ok(v)
+    // Let dora's daemon and coordinator go before the next fabric starts.
+    std::thread::sleep(Duration::from_millis(200));
+    Ok(peer::ns_lines(&text, 10))
 }
 
 /// skillfab's `chain-D@100Hz` and dora's chain of the same depth, `repeats` times each,
@@ -108,53 +72,20 @@ pub fn compare(depths: &[usize], cycles: usize, repeats: usize) -> Result<Vec<Co
         .output()
         .map_err(|e| format!("no dora CLI ({e}): pip install dora-rs-cli==1.1.0"))?;
     eprintln!("peer: {}", String::from_utf8_lossy(&version.stdout).trim());
-    let peer = build_peer()?;
-    let mut out = Vec::new();
-    for &depth in depths {
-        let (mut sf, mut dora) = (Vec::new(), Vec::new());
-        for _ in 0..repeats.max(1) {
-            let mut f = Fabric::start(Case::Chain(depth), true);
-            sf.extend(floors::hops(&f.times(cycles)));
-            drop(f);
-            dora.extend(run_dora(&peer, depth, cycles)?);
-            // Let dora's daemon and coordinator go before the next fabric starts.
-            std::thread::sleep(Duration::from_millis(200));
-        }
-        let c = Compared {
-            depth,
-            skillfab: Summary::of(&sf),
-            dora: Summary::of(&dora),
-        };
-        eprintln!(
-            "chain-{depth}@100Hz: skillfab p50 {:.0} µs, dora p50 {:.0} µs",
-            c.skillfab.p50, c.dora.p50
-        );
-        out.push(c);
-    }
-    Ok(out)
+    let node = peer::build("dora", "skillfab-dora-peer")?;
+    peer::compare("dora", depths, cycles, repeats, |depth, cycles| {
+        run_dora(&node, depth, cycles)
+    })
 }
 
 /// The comparison as a table for people.
 pub fn to_text(rows: &[Compared]) -> String {
-    let mut s = String::from(
+    peer::to_text(
         "skillfab against dora-rs 1.1, same chain, same 100 Hz pacing, one run: driver's start \
-         stamp → last node's stamp (D wake-ups), µs p50 / p99 / max\n",
-    );
-    s.push_str(&format!(
-        "{:<14} {:>24} {:>24} {:>12}\n",
-        "case", "skillfab", "dora", "dora÷sf p50"
-    ));
-    for r in rows {
-        let cell = |x: &Summary| format!("{:.0} / {:.0} / {:.0}", x.p50, x.p99, x.max);
-        s.push_str(&format!(
-            "{:<14} {:>24} {:>24} {:>12.1}\n",
-            format!("chain-{}@100Hz", r.depth),
-            cell(&r.skillfab),
-            cell(&r.dora),
-            r.dora.p50 / r.skillfab.p50
-        ));
-    }
-    s
+         stamp → last node's stamp (D wake-ups), µs",
+        "dora",
+        rows,
+    )
 }
 
 #[cfg(test)]

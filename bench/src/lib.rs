@@ -14,11 +14,13 @@
 // Benchmark set-up: a failed step should stop the run right there, with its message.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+pub mod copper;
 pub mod crowd;
 pub mod dora;
 pub mod floors;
 pub mod futex;
 pub mod network;
+pub mod peer;
 pub mod report;
 pub mod soak;
 

@@ -6,7 +6,8 @@
 //! `--scale [SECS]`: the scale sweep instead (chains of 1…64 skills at 100 Hz and 1 kHz;
 //! `--sizes 6` and `--rates 1000` pick some, `--realtime fifo:80[@CPUS][+mlock]` runs them in
 //! real-time mode, docs/realtime.md).
-//! `--peer dora`: skillfab against dora-rs 1.1 on the same chains instead.
+//! `--peer dora` / `--peer copper`: skillfab against dora-rs 1.1 (chains of 1…8) or Copper 1.2
+//! (1…16) on the same chains instead.
 //! `--spin-curve`: chains of 1…8 skills and exit-lab at 100 Hz with every skill's spin budget from 0 to
 //! 1000 µs, latency and CPU next to the futex ring of the same depth.
 //! Build first: `cargo build --release --workspace && target/release/latency-report`.
@@ -84,8 +85,8 @@ fn main() -> ExitCode {
                 None => return usage("--realtime needs POLICY:PRIORITY[@CPUS][+mlock]"),
             },
             "--peer" => match args.next().as_deref() {
-                Some("dora") => peer = Some("dora"),
-                _ => return usage("--peer takes 'dora'"),
+                Some(p @ ("dora" | "copper")) => peer = Some(p.to_string()),
+                _ => return usage("--peer takes 'dora' or 'copper'"),
             },
             "--only" => match args.next() {
                 Some(s) => only = Some(s),
@@ -93,7 +94,7 @@ fn main() -> ExitCode {
             },
             "-h" | "--help" => {
                 println!(
-                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--sizes N,..] [--rates HZ,..] [--realtime fifo:80[@CPUS][+mlock]] [--json] | --spin-curve [--cycles N] [--repeats R] [--json] | --peer dora [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
+                    "usage: latency-report [--json] [--cycles N] [--repeats R] [--svg FILE] [--only SUBSTRING] | --scale [SECS] [--sizes N,..] [--rates HZ,..] [--realtime fifo:80[@CPUS][+mlock]] [--json] | --spin-curve [--cycles N] [--repeats R] [--json] | --peer dora|copper [--cycles N] [--repeats R] [--json] | --svg FILE --svg-from REPORT.json"
                 );
                 return ExitCode::SUCCESS;
             }
@@ -125,26 +126,31 @@ fn main() -> ExitCode {
         }
         return ExitCode::SUCCESS;
     }
-    if peer.is_some() {
-        return match skillfab_bench::dora::compare(&[1, 2, 4, 8], cycles / 2, repeats) {
+    if let Some(peer) = peer {
+        // Paced runs take a period per cycle: half the cycles, as the paced cases below.
+        let rows = match peer.as_str() {
+            "dora" => skillfab_bench::dora::compare(&[1, 2, 4, 8], cycles / 2, repeats),
+            _ => skillfab_bench::copper::compare(
+                &skillfab_bench::copper::DEPTHS,
+                cycles / 2,
+                repeats,
+            ),
+        };
+        return match rows {
             Ok(rows) if json => {
-                let v: Vec<_> = rows
-                    .iter()
-                    .map(|r| {
-                        serde_json::json!({"depth": r.depth,
-                            "skillfab_p50": r.skillfab.p50, "skillfab_p99": r.skillfab.p99,
-                            "dora_p50": r.dora.p50, "dora_p99": r.dora.p99})
-                    })
-                    .collect();
-                println!("{}", serde_json::Value::from(v));
+                println!("{}", skillfab_bench::peer::to_json(&peer, &rows));
                 ExitCode::SUCCESS
             }
-            Ok(rows) => {
+            Ok(rows) if peer == "dora" => {
                 print!("{}", skillfab_bench::dora::to_text(&rows));
                 ExitCode::SUCCESS
             }
+            Ok(rows) => {
+                print!("{}", skillfab_bench::copper::to_text(&rows));
+                ExitCode::SUCCESS
+            }
             Err(e) => {
-                eprintln!("latency-report --peer dora: {e}");
+                eprintln!("latency-report --peer {peer}: {e}");
                 ExitCode::FAILURE
             }
         };

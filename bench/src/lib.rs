@@ -369,14 +369,31 @@ impl Fabric {
             .collect()
     }
 
-    /// Processes of the network: the manager (`skillfab up`) and every skill.
+    /// Processes of the network: the manager (the process that created the board: `skillfab
+    /// up` runs it as a child of its own) and every skill.
     pub fn pids(&self) -> (u32, Vec<u32>) {
+        let manager = self
+            .board
+            .header()
+            .manager_pid
+            .load(std::sync::atomic::Ordering::Acquire);
         let skills = (0..skillfab_proto::board::MAX_SLOTS)
             .map(|i| self.board.slot(i))
             .filter(|s| s.state() == skillfab_proto::board::SlotState::Ready)
             .map(|s| s.pid.load(std::sync::atomic::Ordering::Acquire))
             .collect();
-        (self.t.pid(self.up), skills)
+        (manager, skills)
+    }
+
+    /// Every process of the network whose CPU is the fabric's cost: the manager, the skills
+    /// and `skillfab up`, the supervisor.
+    pub fn all_pids(&self) -> Vec<u32> {
+        let (manager, skills) = self.pids();
+        let up = self.t.pid(self.up);
+        std::iter::once(manager)
+            .chain(skills)
+            .chain((up != manager).then_some(up))
+            .collect()
     }
 }
 

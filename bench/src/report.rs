@@ -158,9 +158,7 @@ pub fn idle(secs: f64, repeats: usize) -> Idle {
     for _ in 0..repeats.max(1) {
         let f = Fabric::start(Case::Chain(6), true);
         let (manager, skills) = f.pids();
-        let all: Vec<u32> = std::iter::once(manager)
-            .chain(skills.iter().copied())
-            .collect();
+        let all = f.all_pids();
         let (c0, m0, k0, t0) = (cpu(&all), cpu_time(manager), f.cycle(), Instant::now());
         std::thread::sleep(Duration::from_secs_f64(secs));
         let (c1, m1, k1, t1) = (cpu(&all), cpu_time(manager), f.cycle(), Instant::now());
@@ -239,8 +237,7 @@ pub fn scale(
         for &n in sizes {
             let cycles = ((secs * f64::from(rate_hz)) as usize).max(50);
             let mut f = Fabric::start_with(Case::Chain(n), Some(period), rt, 0);
-            let (manager, skills) = f.pids();
-            let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
+            let all = f.all_pids();
             let (c0, t0) = (cpu(&all), Instant::now());
             let times = f.times(cycles);
             let cpu_percent = (cpu(&all) - c0).as_secs_f64() / t0.elapsed().as_secs_f64() * 100.0;
@@ -388,8 +385,7 @@ pub fn spin_curve(
             drop(ring);
             for (i, &spin_us) in budgets_us.iter().enumerate() {
                 let mut f = Fabric::start_with(case, Some(crate::PACE), None, spin_us);
-                let (manager, skills) = f.pids();
-                let all: Vec<u32> = std::iter::once(manager).chain(skills).collect();
+                let all = f.all_pids();
                 let (c0, t0) = (cpu(&all), Instant::now());
                 let times = f.times(cycles);
                 cpu_pct[i + 1] +=

@@ -117,18 +117,28 @@ impl Case {
         }
     }
 
-    /// [`Case::launch`] in real-time mode `rt` (its `[realtime]` section: the skills at its
-    /// priority, the manager one above, both pinned to its CPUs).
-    pub fn launch_realtime(&self, period_ms: u64, rt: &RealTime) -> String {
+    /// [`Case::launch`], tuned: every registering process with a spin budget (`[manager]
+    /// spin_us`, 0: none) and, with `rt`, in real-time mode (its `[realtime]` section: the
+    /// skills at its priority, the manager one above, all pinned to its CPUs).
+    pub fn launch_tuned(&self, period_ms: u64, rt: Option<&RealTime>, spin_us: u64) -> String {
         let mut s = self.launch(period_ms);
-        s.push_str(&format!(
-            "[realtime]\npolicy = \"{}\"\npriority = {}\nlock_memory = {}\n",
-            rt.policy.short_name(),
-            rt.priority,
-            rt.lock_memory
-        ));
-        if let Some(cpus) = &rt.cpus {
-            s.push_str(&format!("cpus = {:?}\n", cpus.cpus()));
+        if spin_us > 0 {
+            s = s.replacen(
+                "[manager]\n",
+                &format!("[manager]\nspin_us = {spin_us}\n"),
+                1,
+            );
+        }
+        if let Some(rt) = rt {
+            s.push_str(&format!(
+                "[realtime]\npolicy = \"{}\"\npriority = {}\nlock_memory = {}\n",
+                rt.policy.short_name(),
+                rt.priority,
+                rt.lock_memory
+            ));
+            if let Some(cpus) = &rt.cpus {
+                s.push_str(&format!("cpus = {:?}\n", cpus.cpus()));
+            }
         }
         s
     }
@@ -263,18 +273,9 @@ impl Fabric {
         }
         let mut t = TestDomain::new(&case.name());
         let period = period.map_or(0, |p| p.as_millis().max(1) as u64);
-        let text = match rt {
-            Some(rt) => case.launch_realtime(period, rt),
-            None => case.launch(period),
-        };
-        let mut text = text.replace("{dir}", t.dir.to_str().unwrap());
-        if spin_us > 0 {
-            text = text.replacen(
-                "[manager]\n",
-                &format!("[manager]\nspin_us = {spin_us}\n"),
-                1,
-            );
-        }
+        let text = case
+            .launch_tuned(period, rt, spin_us)
+            .replace("{dir}", t.dir.to_str().unwrap());
         let launch = t.launch_file(&text);
         let up = t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
         let board = t.board();

@@ -120,6 +120,16 @@ impl Manager {
             })
             .collect();
         self.cycles.plan = graph::plan(&nodes);
+        let plan = &self.cycles.plan;
+        self.cycles.spinners = plan
+            .expected
+            .iter()
+            .copied()
+            .filter(|&s| {
+                self.board.slot(s).spin_ns.load(Ordering::Acquire) != 0
+                    && !plan.sources.contains(&s)
+            })
+            .collect();
         for &(slot, mask) in &self.cycles.plan.fresh_masks {
             self.board
                 .slot(slot)
@@ -204,11 +214,8 @@ impl Manager {
         }
         // Units in spin mode are woken now too, after the sources: their wake-up overlaps
         // their producers' runs, and the rings that carry their inputs find them polling.
-        for &s in &self.cycles.plan.expected {
-            let slot = self.board.slot(s);
-            if slot.spin_ns.load(Ordering::Relaxed) != 0 && !self.cycles.plan.sources.contains(&s) {
-                slot.bell.ring();
-            }
+        for &s in &self.cycles.spinners {
+            self.board.slot(s).bell.ring();
         }
         self.cycles.running = Some(run);
     }

@@ -235,6 +235,10 @@ struct Running {
 /// holds them, and their figures.
 struct Cycles {
     plan: Plan,
+    /// The expected units in spin mode that are not sources (their budget is on their slot,
+    /// written before they were ready): rung at cycle start after the sources. Made with the
+    /// plan.
+    spinners: Vec<usize>,
     /// The plan must be made again before the next cycle.
     dirty: bool,
     /// Cycles completed.
@@ -375,6 +379,7 @@ impl Manager {
         };
         let cycles = Cycles {
             plan: Plan::default(),
+            spinners: Vec::new(),
             dirty: true,
             cycle: previous_cycle.unwrap_or(config.first_cycle.saturating_sub(1)),
             running: None,

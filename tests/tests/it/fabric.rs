@@ -25,16 +25,25 @@ name = "smooth"
 bin = "{bin:smooth}"
 "#;
 
+/// `HELLO_CHECK`'s report after `cycles` cycles: every cycle ran, and every run of the sync
+/// chain ran on its cycle's values (`check` fails a run on a wrong one).
+fn every_sync_run_exact(r: &serde_json::Value, cycles: u64) {
+    assert_eq!(r["cycles"], cycles, "{r}");
+    for name in ["ticker", "scale", "check"] {
+        let s = skill(r, name);
+        assert_eq!(s["runs"], cycles, "{name}: {s}");
+        assert_eq!(s["failures"], 0, "{name} saw a wrong value: {s}");
+        assert_eq!(s["skips"], 0, "{name}: {s}");
+    }
+}
+
 #[test]
 fn a_sync_chain_gives_exactly_the_expected_values() {
     let t = TestDomain::new("chain");
     let r = t.up_json(HELLO_CHECK, &["--cycles", "150"]);
-    assert_eq!(r["cycles"], 150, "{r}");
+    every_sync_run_exact(&r, 150);
     for name in ["ticker", "scale", "check"] {
         let s = skill(&r, name);
-        assert_eq!(s["runs"], 150, "{name}: {s}");
-        assert_eq!(s["failures"], 0, "{name} saw a wrong value: {s}");
-        assert_eq!(s["skips"], 0, "{name}: {s}");
         assert_eq!(s["last_cycle"], 150, "{name}: {s}");
     }
     assert_eq!(skill(&r, "smooth")["mode"], "async");
@@ -52,13 +61,7 @@ fn a_sync_chain_in_spin_mode_gives_exactly_the_expected_values() {
         1,
     );
     let r = t.up_json(&launch, &["--cycles", "150"]);
-    assert_eq!(r["cycles"], 150, "{r}");
-    for name in ["ticker", "scale", "check"] {
-        let s = skill(&r, name);
-        assert_eq!(s["runs"], 150, "{name}: {s}");
-        assert_eq!(s["failures"], 0, "{name} saw a wrong value: {s}");
-        assert_eq!(s["skips"], 0, "{name}: {s}");
-    }
+    every_sync_run_exact(&r, 150);
     assert_eq!(
         skill(&r, "smooth")["runs"].as_u64().map(|n| n > 0),
         Some(true),

@@ -193,7 +193,12 @@ impl Manager {
             k,
             start_ns: 0,
             deadline: Instant::now() + self.config.deadline(),
-            expected: self.cycles.plan.expected.clone(),
+            expected: self
+                .cycles
+                .plan
+                .expected
+                .iter()
+                .fold(0, |m, &s| m | 1 << s),
             processed: [false; MAX_SLOTS],
             cancelled: [false; MAX_SLOTS],
         };
@@ -227,7 +232,7 @@ impl Manager {
             return;
         };
         let mut cancel = Vec::new();
-        for &s in &run.expected {
+        for &s in &self.cycles.plan.expected {
             let slot = self.board.slot(s);
             if run.processed[s] || slot.done_cycle.load(Ordering::Acquire) != run.k {
                 continue;
@@ -256,7 +261,7 @@ impl Manager {
         let mut n = 0;
         while let Some(s) = todo.pop() {
             if run.cancelled[s]
-                || !run.expected.contains(&s)
+                || run.expected & 1 << s == 0
                 || self.board.slot(s).done_cycle.load(Ordering::Acquire) == run.k
             {
                 continue;
@@ -288,7 +293,9 @@ impl Manager {
         let Some(run) = self.cycles.running.take() else {
             return;
         };
-        let end = run
+        let end = self
+            .cycles
+            .plan
             .expected
             .iter()
             .map(|&s| self.board.slot(s))
@@ -342,7 +349,7 @@ impl Manager {
             .start_ns
             .saturating_add(self.config.deadline().as_nanos() as u64);
         let done = |s: usize| self.board.slot(s).done_cycle.load(Ordering::Acquire) == run.k;
-        for &s in &run.expected {
+        for &s in &self.cycles.plan.expected {
             let slot = self.board.slot(s);
             let missed = if done(s) {
                 slot.last_end_ns.load(Ordering::Acquire) > deadline_ns
@@ -366,7 +373,7 @@ impl Manager {
             p != s && per_output.iter().any(|c| c.contains(&s)) && !done(p) && !run.cancelled[p]
         });
         let proposer_late = plan.channels.iter().filter(|c| c.device == s).any(|c| {
-            run.expected
+            plan.expected
                 .iter()
                 .any(|&p| c.proposers & (1 << p) != 0 && !done(p) && !run.cancelled[p])
         });

@@ -224,7 +224,9 @@ struct Running {
     k: u64,
     start_ns: u64,
     deadline: Instant,
-    expected: Vec<usize>,
+    /// The plan's expected units, a bit per slot (the plan is not made again while a cycle
+    /// runs: its list is the cycle's order; this mask answers membership without allocating).
+    expected: u64,
     /// Slots whose completion the manager has looked at.
     processed: [bool; MAX_SLOTS],
     /// Slots taken off the counter because they cannot run this cycle.

@@ -422,6 +422,7 @@ mod tests {
             "building-b.toml",
             "heldout/building-c.toml",
             "heldout/building-d.toml",
+            "heldout/building-e.toml",
         ]
         .iter()
         .map(|f| {
@@ -534,6 +535,10 @@ mod tests {
                     [3.9, 4.2],
                 ],
                 vec![[4.0, 5.1], [3.4, 6.5], [3.4, 21.3]],
+            ),
+            "heldout/building-e.toml" => (
+                vec![[0.4, 5.4], [-1.2, 5.4], [-1.2, -6.0], [-18.8, -6.0]],
+                vec![[-18.9, -6.9], [-16.0, -6.0], [-7.2, -6.0], [-7.2, 3.9]],
             ),
             _ => panic!("{file}: no route"),
         }

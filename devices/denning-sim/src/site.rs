@@ -362,6 +362,7 @@ mod tests {
             "building-b.toml",
             "heldout/building-c.toml",
             "heldout/building-d.toml",
+            "heldout/building-e.toml",
         ] {
             let b = building(file);
             let segs = b.segments(b.start_floor);

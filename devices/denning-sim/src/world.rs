@@ -200,7 +200,15 @@ mod tests {
 
     #[test]
     fn shipped_worlds_parse() {
-        for w in ["exit-lab", "exit-lab-north", "exit-lab-clutter"] {
+        for w in [
+            "exit-lab",
+            "exit-lab-north",
+            "exit-lab-clutter",
+            "heldout/partition",
+            "heldout/south-tall",
+            "heldout/west-long",
+            "heldout/row-gaps",
+        ] {
             let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("worlds/{w}.toml"));
             let world = World::load(&path).unwrap();
             assert!(!world.segments().is_empty());

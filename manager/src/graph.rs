@@ -352,6 +352,86 @@ pub fn plan(nodes: &[PlanNode<'_>]) -> Plan {
     plan
 }
 
+/// Why wanted skills cannot run: one of them, or a skill one of them needs, reads a topic
+/// nobody produces, or the producers loop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DemandError {
+    /// `skill`'s data input `port` reads `topic`, which nobody produces; `wanted_by` is the
+    /// wanted skill that needs it, when it is not `skill` itself.
+    NoProducer {
+        /// The skill.
+        skill: String,
+        /// Its input.
+        port: String,
+        /// The input's topic.
+        topic: String,
+        /// The wanted skill it was reached from, if another.
+        wanted_by: Option<String>,
+    },
+    /// Producers that read each other: each reads the next, the first again at the end.
+    Loop(Vec<String>),
+}
+
+/// What running `wanted` needs: the wanted skills and, transitively, the producers of their
+/// data inputs (proposals and channels close no loop and need no producer), each once,
+/// producers before the skills that read them. `decls` are every skill
+/// and device known (registered or away); a name in `wanted` that is not among them is left
+/// to the caller (it answers an unknown skill).
+pub fn demand<'a>(decls: &[&'a SkillDecl], wanted: &[String]) -> Result<Vec<&'a str>, DemandError> {
+    let producer: HashMap<&str, &SkillDecl> = decls
+        .iter()
+        .flat_map(|d| {
+            d.outputs
+                .iter()
+                .filter(|o| is_data(o))
+                .map(move |o| (o.topic.as_str(), *d))
+        })
+        .collect();
+    let mut needed: Vec<&'a str> = Vec::new();
+    for w in wanted {
+        let Some(d) = decls.iter().find(|d| &d.name == w) else {
+            continue;
+        };
+        // Depth first, with the path from the wanted skill: a skill met again on it closes a
+        // loop.
+        let mut path: Vec<&'a SkillDecl> = Vec::new();
+        visit(d, w, &producer, &mut path, &mut needed)?;
+    }
+    Ok(needed)
+}
+
+fn visit<'a>(
+    d: &'a SkillDecl,
+    wanted: &str,
+    producer: &HashMap<&str, &'a SkillDecl>,
+    path: &mut Vec<&'a SkillDecl>,
+    needed: &mut Vec<&'a str>,
+) -> Result<(), DemandError> {
+    if let Some(at) = path.iter().position(|p| p.name == d.name) {
+        let mut names: Vec<String> = path[at..].iter().map(|p| p.name.clone()).collect();
+        names.push(d.name.clone());
+        return Err(DemandError::Loop(names));
+    }
+    if needed.contains(&d.name.as_str()) {
+        return Ok(());
+    }
+    path.push(d);
+    for inp in d.inputs.iter().filter(|p| is_data(p)) {
+        let Some(p) = producer.get(inp.topic.as_str()) else {
+            return Err(DemandError::NoProducer {
+                skill: d.name.clone(),
+                port: inp.port.clone(),
+                topic: inp.topic.clone(),
+                wanted_by: (d.name != wanted).then(|| wanted.to_string()),
+            });
+        };
+        visit(p, wanted, producer, path, needed)?;
+    }
+    path.pop();
+    needed.push(&d.name);
+    Ok(())
+}
+
 /// A channel served by a device, and who proposes on it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelPlan {
@@ -493,5 +573,91 @@ mod tests {
             ..b
         };
         assert!(check_join([a].iter(), &b_async).is_ok());
+    }
+
+    fn names(d: &[SkillDecl]) -> Vec<&SkillDecl> {
+        d.iter().collect()
+    }
+
+    #[test]
+    fn wanting_a_skill_needs_its_producers_first_each_once() {
+        let h = hello();
+        let needed = demand(&names(&h), &["smooth".into(), "scale".into()]).unwrap();
+        assert_eq!(needed, ["ticker", "scale", "smooth"]);
+        let needed = demand(&names(&h), &["ticker".into()]).unwrap();
+        assert_eq!(needed, ["ticker"], "a source needs nothing more");
+    }
+
+    #[test]
+    fn wanting_a_skill_whose_input_nobody_produces_names_the_input() {
+        let h = hello();
+        let without_ticker = &h[1..];
+        assert_eq!(
+            demand(&names(without_ticker), &["scale".into()]),
+            Err(DemandError::NoProducer {
+                skill: "scale".into(),
+                port: "tick".into(),
+                topic: "tick".into(),
+                wanted_by: None,
+            })
+        );
+        assert_eq!(
+            demand(&names(without_ticker), &["smooth".into()]),
+            Err(DemandError::NoProducer {
+                skill: "scale".into(),
+                port: "tick".into(),
+                topic: "tick".into(),
+                wanted_by: Some("smooth".into()),
+            }),
+            "the wanted skill that needs it is named"
+        );
+    }
+
+    #[test]
+    fn producers_that_read_each_other_are_a_loop() {
+        // Registration lets an async skill close a loop; wanting one of them is refused.
+        let a = skill(
+            "a",
+            Mode::Sync,
+            vec![port::<Tick>("y")],
+            vec![port::<Tick>("x")],
+        );
+        let b = skill(
+            "b",
+            Mode::Async,
+            vec![port::<Tick>("x")],
+            vec![port::<Tick>("y")],
+        );
+        let both = [a, b];
+        assert_eq!(
+            demand(&names(&both), &["a".into()]),
+            Err(DemandError::Loop(vec!["a".into(), "b".into(), "a".into()]))
+        );
+    }
+
+    #[test]
+    fn proposals_and_channels_need_no_producer() {
+        use skillfab_proto::decl::Policy;
+        let proposer = skill(
+            "proposer",
+            Mode::Sync,
+            vec![],
+            vec![PortDecl::channel::<Tick>("drive", PortKind::Proposal)],
+        );
+        let device = skill(
+            "device",
+            Mode::Sync,
+            vec![PortDecl::channel::<Tick>(
+                "drive",
+                PortKind::Channel(Policy::Priority),
+            )],
+            vec![port::<Scaled>("sonar")],
+        );
+        let d = [proposer, device];
+        assert_eq!(demand(&names(&d), &["device".into()]).unwrap(), ["device"]);
+        assert_eq!(
+            demand(&names(&d), &["proposer".into()]).unwrap(),
+            ["proposer"]
+        );
     }
 }

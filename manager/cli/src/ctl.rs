@@ -31,6 +31,19 @@ pub enum CtlCmd {
         #[arg(required = true)]
         skills: Vec<String>,
     },
+    /// Want skills (all or none): each runs with every skill it reads from, activated on
+    /// demand; refused when one reads a topic nobody produces.
+    Want {
+        /// Skill names.
+        #[arg(required = true)]
+        skills: Vec<String>,
+    },
+    /// Release wanted skills (all or none), and what was activated only for them.
+    Release {
+        /// Skill names.
+        #[arg(required = true)]
+        skills: Vec<String>,
+    },
     /// Set a parameter: SKILL.PARAM=VALUE (applied from the next cycle).
     Set {
         /// SKILL.PARAM=VALUE
@@ -315,6 +328,16 @@ pub fn run(address: Address, json_out: bool, cmd: CtlCmd) -> anyhow::Result<()> 
         CtlCmd::Deactivate { skills } => {
             let names: Vec<&str> = skills.iter().map(String::as_str).collect();
             c.deactivate(&names)?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Want { skills } => {
+            let names: Vec<&str> = skills.iter().map(String::as_str).collect();
+            c.want(&names)?;
+            print(String::new(), json!({"ok": true}));
+        }
+        CtlCmd::Release { skills } => {
+            let names: Vec<&str> = skills.iter().map(String::as_str).collect();
+            c.release(&names)?;
             print(String::new(), json!({"ok": true}));
         }
         CtlCmd::Set { assignment } => {

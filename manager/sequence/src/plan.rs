@@ -99,6 +99,10 @@ pub enum Kind {
     Activate(Vec<String>),
     /// Deactivate skills (all or none).
     Deactivate(Vec<String>),
+    /// Want skills (all or none): each is activated with the skills it reads from.
+    Want(Vec<String>),
+    /// Release wanted skills (all or none), and what was activated only for them.
+    Release(Vec<String>),
     /// Set a parameter (not restored).
     SetParam {
         /// Skill.
@@ -168,9 +172,10 @@ impl Spec {
     /// The names of the fabric this node itself uses.
     fn own_references(&self) -> Vec<Reference<'_>> {
         match &self.kind {
-            Kind::Activate(skills) | Kind::Deactivate(skills) => {
-                skills.iter().map(|s| Reference::Skill(s)).collect()
-            }
+            Kind::Activate(skills)
+            | Kind::Deactivate(skills)
+            | Kind::Want(skills)
+            | Kind::Release(skills) => skills.iter().map(|s| Reference::Skill(s)).collect(),
             Kind::SetParam {
                 skill,
                 param,
@@ -393,7 +398,7 @@ impl Reader<'_> {
             "RetryUntilSuccessful" => &["num_attempts"],
             "Timeout" | "Sleep" => &["msec"],
             "WithParam" | "SetParam" => &["skill", "param", "value"],
-            "Activate" | "Deactivate" => &["skills"],
+            "Activate" | "Deactivate" | "Want" | "Release" => &["skills"],
             "WaitFor" => &["condition", "hold"],
             "Log" => &["message"],
             "WaitGaveUp" => &["process"],
@@ -489,6 +494,14 @@ impl Reader<'_> {
                 self.leaf(node)?;
                 Kind::Deactivate(self.skills(node)?)
             }
+            "Want" => {
+                self.leaf(node)?;
+                Kind::Want(self.skills(node)?)
+            }
+            "Release" => {
+                self.leaf(node)?;
+                Kind::Release(self.skills(node)?)
+            }
             "SetParam" => {
                 self.leaf(node)?;
                 Kind::SetParam {
@@ -537,7 +550,7 @@ impl Reader<'_> {
                         "unknown node <{other}> (control: Sequence, Fallback, Parallel; \
                          decorators: RetryUntilSuccessful, Timeout, Inverter, ForceSuccess, \
                          ForceFailure, KeepRunningUntilFailure, WithParam; actions: Activate, \
-                         Deactivate, SetParam, WaitFor, WaitGaveUp, Sleep, Log, \
+                         Deactivate, Want, Release, SetParam, WaitFor, WaitGaveUp, Sleep, Log, \
                          AlwaysSuccess, AlwaysFailure, SubTree)"
                     ),
                 ));
@@ -751,6 +764,8 @@ impl Kind {
             Kind::WithParam { .. } => "WithParam",
             Kind::Activate(_) => "Activate",
             Kind::Deactivate(_) => "Deactivate",
+            Kind::Want(_) => "Want",
+            Kind::Release(_) => "Release",
             Kind::SetParam { .. } => "SetParam",
             Kind::WaitFor { .. } => "WaitFor",
             Kind::Sleep(_) => "Sleep",
@@ -790,7 +805,9 @@ impl Kind {
                 param,
                 value,
             } => format!("{skill}.{param} = {value}"),
-            Kind::Activate(s) | Kind::Deactivate(s) => s.join(", "),
+            Kind::Activate(s) | Kind::Deactivate(s) | Kind::Want(s) | Kind::Release(s) => {
+                s.join(", ")
+            }
             Kind::WaitFor { condition, hold } if *hold > 0 => {
                 format!("{condition} (held {hold} cycles)")
             }

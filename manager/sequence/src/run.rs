@@ -44,6 +44,16 @@ impl Fabric for ClientFabric<'_> {
         self.client.deactivate(&s).map_err(fabric_error)
     }
 
+    fn want(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        let s: Vec<&str> = skills.iter().map(String::as_str).collect();
+        self.client.want(&s).map_err(fabric_error)
+    }
+
+    fn release(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        let s: Vec<&str> = skills.iter().map(String::as_str).collect();
+        self.client.release(&s).map_err(fabric_error)
+    }
+
     fn get_param(&mut self, skill: &str, param: &str) -> Result<ParamValue, FabricError> {
         self.client.get_param(skill, param).map_err(fabric_error)
     }

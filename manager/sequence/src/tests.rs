@@ -116,6 +116,14 @@ impl Fabric for Mock {
         Ok(())
     }
 
+    fn want(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        self.activate(skills)
+    }
+
+    fn release(&mut self, skills: &[String]) -> Result<(), FabricError> {
+        self.deactivate(skills)
+    }
+
     fn get_param(&mut self, skill: &str, param: &str) -> Result<ParamValue, FabricError> {
         self.request()?;
         self.params
@@ -300,6 +308,23 @@ fn wait_gave_up_knows_a_give_up_from_before_the_runner_and_hears_one_after() {
     assert!(seq.on_event("me", &ev));
     assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
     assert_eq!(f.on(), ["avoid"]);
+}
+
+#[test]
+fn want_and_release_are_actions_on_the_skills_they_name() {
+    let p = plan(
+        r#"<Sequence>
+             <Want skills="wander, avoid"/>
+             <Release skills="wander"/>
+           </Sequence>"#,
+    );
+    let mut f = Mock::new(&["wander", "avoid"]);
+    let mut seq = Sequencer::new(&p, None).unwrap();
+    assert_eq!(seq.tick(&mut f).unwrap(), Status::Success);
+    assert_eq!(f.on(), ["avoid"]);
+    let text = r#"<root BTCPP_format="4"><BehaviorTree ID="Main"><Want skill="wander"/></BehaviorTree></root>"#;
+    let err = Plan::parse(text, "test.xml").unwrap_err();
+    assert!(err.reason.contains("skills"), "{err}");
 }
 
 #[test]

@@ -56,6 +56,10 @@ pub trait Fabric {
     fn activate(&mut self, skills: &[String]) -> Result<(), FabricError>;
     /// Deactivates skills (all or none).
     fn deactivate(&mut self, skills: &[String]) -> Result<(), FabricError>;
+    /// Wants skills (all or none): each is activated with the skills it reads from.
+    fn want(&mut self, skills: &[String]) -> Result<(), FabricError>;
+    /// Releases wanted skills (all or none), and what was activated only for them.
+    fn release(&mut self, skills: &[String]) -> Result<(), FabricError>;
     /// A parameter's value.
     fn get_param(&mut self, skill: &str, param: &str) -> Result<ParamValue, FabricError>;
     /// Sets a parameter from text (as `ctl set` takes it).
@@ -359,6 +363,8 @@ impl Node {
             },
             Kind::Activate(_)
             | Kind::Deactivate(_)
+            | Kind::Want(_)
+            | Kind::Release(_)
             | Kind::SetParam { .. }
             | Kind::Log(_)
             | Kind::AlwaysSuccess
@@ -728,6 +734,14 @@ fn act(kind: &Kind, cx: &mut Cx<'_>) -> Result<Status, SeqError> {
         Kind::Deactivate(skills) => {
             let r = cx.fabric.deactivate(skills);
             cx.done(format!("deactivate {}", skills.join(", ")), r)
+        }
+        Kind::Want(skills) => {
+            let r = cx.fabric.want(skills);
+            cx.done(format!("want {}", skills.join(", ")), r)
+        }
+        Kind::Release(skills) => {
+            let r = cx.fabric.release(skills);
+            cx.done(format!("release {}", skills.join(", ")), r)
         }
         Kind::SetParam {
             skill,

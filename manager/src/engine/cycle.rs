@@ -193,12 +193,7 @@ impl Manager {
             k,
             start_ns: 0,
             deadline: Instant::now() + self.config.deadline(),
-            expected: self
-                .cycles
-                .plan
-                .expected
-                .iter()
-                .fold(0, |m, &s| m | 1 << s),
+            expected: self.cycles.plan.expected.iter().fold(0, |m, &s| m | 1 << s),
             processed: [false; MAX_SLOTS],
             cancelled: [false; MAX_SLOTS],
         };

@@ -21,6 +21,10 @@ pub(crate) struct Kept {
     /// Activations by clients so far: the activation number on the board is one more (the
     /// first, from the launch, is 1). A restarted process of the name gets the same number.
     pub(crate) activations: u32,
+    /// A client wants it (`Request::Want`): it runs with everything it reads from.
+    pub(crate) wanted: bool,
+    /// Activated on demand: a wanted skill reads from it; released when none does.
+    pub(crate) demanded: bool,
 }
 
 /// The manager's registry of skills.
@@ -117,6 +121,37 @@ impl Skills {
         } else {
             0
         }
+    }
+
+    /// Whether `name` is active: registered and active, or away and kept active.
+    pub(crate) fn is_active(&self, name: &str) -> bool {
+        match self.slot_of(name).and_then(|s| self.get(s)) {
+            Some(e) => e.active,
+            None => self.kept(name).and_then(|k| k.active) == Some(true),
+        }
+    }
+
+    /// The declarations of every skill and device known: the registered ones and the ones
+    /// away.
+    pub(crate) fn known(&self) -> Vec<&SkillDecl> {
+        let live = self.all().map(|e| &e.decl);
+        let away = self
+            .last
+            .values()
+            .filter(|d| self.slot_of(&d.name).is_none());
+        live.chain(away).collect()
+    }
+
+    /// The names clients set a mark on (`wanted`, `demanded`), sorted.
+    pub(crate) fn marked(&self, mark: impl Fn(&Kept) -> bool) -> Vec<String> {
+        let mut names: Vec<String> = self
+            .kept
+            .iter()
+            .filter(|(_, k)| mark(k))
+            .map(|(n, _)| n.clone())
+            .collect();
+        names.sort();
+        names
     }
 
     /// What clients set for `name`, if anything.

@@ -23,7 +23,7 @@ use std::path::PathBuf;
 
 /// First bytes of the file, with its layout's version: a file of another layout is ignored
 /// (with a warning), never misread.
-const MAGIC: &[u8; 8] = b"sfstate3";
+const MAGIC: &[u8; 8] = b"sfstate4";
 
 /// A monitor as its client installed it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -219,6 +219,8 @@ mod tests {
                 params: vec![("gain".into(), ParamValue::Float(2.5))],
                 priority: Some(4),
                 activations: 3,
+                wanted: true,
+                demanded: false,
             },
         );
         saved.io_logged.insert("scale".into());

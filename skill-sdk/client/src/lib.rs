@@ -571,6 +571,22 @@ impl Client {
         ))
     }
 
+    /// Wants skills, all or none: each is activated with every skill it reads from
+    /// (transitively); refused when one of them reads a topic nobody produces.
+    pub fn want(&self, skills: &[&str]) -> Result<(), ClientError> {
+        self.done(Request::Want(
+            skills.iter().map(|s| s.to_string()).collect(),
+        ))
+    }
+
+    /// Releases wanted skills, all or none, and the skills activated for them that nothing
+    /// wanted reads from any more.
+    pub fn release(&self, skills: &[&str]) -> Result<(), ClientError> {
+        self.done(Request::Release(
+            skills.iter().map(|s| s.to_string()).collect(),
+        ))
+    }
+
     /// Sets a parameter from text (parsed by its declared type); applied from the next cycle.
     pub fn set_param(&self, skill: &str, param: &str, value: &str) -> Result<(), ClientError> {
         self.done(Request::SetParam {

@@ -192,6 +192,85 @@ fn deactivate_stops_runs_activate_resumes_and_step_counts_exactly() {
     });
 }
 
+/// Whether `skill` is active, as `ctl ls` says.
+fn active(t: &TestDomain, skill: &str) -> bool {
+    let ls = json(t, &["ls"]);
+    let s = ls
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["name"] == skill)
+        .unwrap_or_else(|| panic!("{skill} not listed: {ls}"));
+    s["state"] != "inactive"
+}
+
+#[test]
+fn a_wanted_skill_runs_with_its_producers_and_releasing_it_releases_them() {
+    let mut t = hello("want");
+    t.ctl(&["deactivate", "ticker", "scale", "smooth"]);
+    // smooth reads scale, which reads ticker: wanting smooth activates all three.
+    t.ctl(&["want", "smooth"]);
+    assert!(["ticker", "scale", "smooth"].iter().all(|s| active(&t, s)));
+    let a = json(&t, &["stats"]);
+    t.wait_until("smooth to run on demand", || {
+        runs_of(&json(&t, &["stats"]), "smooth") > runs_of(&a, "smooth") + 5
+    });
+    t.ctl(&["release", "smooth"]);
+    assert!(["ticker", "scale", "smooth"].iter().all(|s| !active(&t, s)));
+
+    // A skill a client activated itself is not released with what wanted it.
+    t.ctl(&["activate", "ticker"]);
+    t.ctl(&["want", "smooth"]);
+    t.ctl(&["release", "smooth"]);
+    assert!(active(&t, "ticker"), "activated by a client, kept");
+    assert!(!active(&t, "scale") && !active(&t, "smooth"));
+
+    // Two wanted skills share a producer: it stays while one of them is wanted.
+    t.ctl(&["want", "smooth", "scale"]);
+    t.ctl(&["release", "smooth"]);
+    assert!(active(&t, "scale"), "still wanted");
+    assert!(!active(&t, "smooth"));
+    // Deactivating a wanted skill is a client's choice too: it is not wanted any more.
+    t.ctl(&["deactivate", "scale"]);
+    assert!(!active(&t, "scale"));
+
+    // A skill reading a topic nobody produces: refused, nothing changed.
+    let lonely = t.spawn(
+        "scale",
+        &[
+            "--name",
+            "lonely",
+            "--remap",
+            "tick=silence",
+            "--remap",
+            "scaled=unheard",
+        ],
+    );
+    let board = t.board();
+    t.wait_until("lonely to register", || {
+        skillfab_tests::registered(&board, "lonely").is_some()
+    });
+    t.ctl(&["deactivate", "lonely"]);
+    let (ok, _, err) = ctl(&t, &["want", "lonely", "smooth"]);
+    assert!(!ok);
+    assert!(
+        err.contains(
+            "'lonely' reads 'silence' (its input 'tick'), which no skill or device produces"
+        ),
+        "{err}"
+    );
+    assert!(
+        !active(&t, "lonely") && !active(&t, "smooth"),
+        "all or none"
+    );
+    let c = Client::connect(&t.domain).unwrap();
+    assert!(matches!(
+        c.want(&["lonely"]),
+        Err(ClientError::Refused(ControlError::NoProducer { .. }))
+    ));
+    t.signal(lonely, Signal::SIGTERM);
+}
+
 #[test]
 fn the_client_library_sees_events_in_order_with_typed_errors() {
     let mut t = hello("client");

@@ -113,6 +113,8 @@ impl Manager {
             Request::Deactivate(names) => {
                 split(params::set_active(&mut self.skills, &names, false))
             }
+            Request::Want(names) => split(params::want(&mut self.skills, &names)),
+            Request::Release(names) => split(params::release(&mut self.skills, &names)),
             Request::SetParam {
                 skill,
                 param,

@@ -2,17 +2,116 @@
 
 use super::{Change, Effects, param_err, unknown};
 use crate::engine::skills::Skills;
+use crate::graph::DemandError;
 use skillfab_proto::board::Board;
 use skillfab_proto::control::{ControlError, EventKind, ParamArg, Reply, Response};
 use skillfab_proto::param::ParamError;
 
-/// Activates or deactivates every named skill, or none (an unknown name refuses all).
-/// A skill that is away (its process died and may be restarted) gets it when it is back.
+/// Activates or deactivates every named skill, or none (an unknown name refuses all), as a
+/// client asks. A skill activated on demand that a client activates is the client's from then
+/// on (a release leaves it); one a client deactivates is neither wanted nor demanded any more,
+/// and what it alone needed on demand is released with it.
 pub(super) fn set_active(
     skills: &mut Skills,
     names: &[String],
     active: bool,
 ) -> Result<Effects, ControlError> {
+    let mut effects = switch(skills, names, active)?;
+    for n in names {
+        let kept = skills.keep(n);
+        kept.demanded = false;
+        if !active {
+            kept.wanted = false;
+        }
+    }
+    if !active {
+        release_unneeded(skills, &mut effects)?;
+    }
+    Ok(effects)
+}
+
+/// Wants every named skill, or none: each is activated with the producers of what it reads,
+/// transitively; those not active yet are activated on demand. Refused, with nothing changed,
+/// when a needed input has no producer or producers loop.
+pub(super) fn want(skills: &mut Skills, names: &[String]) -> Result<Effects, ControlError> {
+    if let Some(n) = names.iter().find(|n| skills.decl(n).is_none()) {
+        return Err(unknown(n));
+    }
+    let needed = needed_by(skills, names)?;
+    let off: Vec<String> = needed
+        .into_iter()
+        .filter(|n| !skills.is_active(n))
+        .collect();
+    for n in &off {
+        skills.keep(n).demanded = !names.contains(n);
+    }
+    for n in names {
+        skills.keep(n).wanted = true;
+    }
+    tracing::info!(wanted = ?names, activated = ?off, "skills wanted");
+    switch(skills, &off, true)
+}
+
+/// Releases every named skill, or none: it is not wanted any more and is deactivated unless a
+/// skill still wanted reads from it (then it stays, on demand); every skill activated on demand
+/// that no wanted skill needs now is deactivated too.
+pub(super) fn release(skills: &mut Skills, names: &[String]) -> Result<Effects, ControlError> {
+    if let Some(n) = names.iter().find(|n| skills.decl(n).is_none()) {
+        return Err(unknown(n));
+    }
+    for n in names {
+        let kept = skills.keep(n);
+        kept.wanted = false;
+        kept.demanded = true;
+    }
+    let mut effects = Effects::default();
+    release_unneeded(skills, &mut effects)?;
+    Ok(effects)
+}
+
+/// What the wanted skills `names` need running (themselves first among the ones they read).
+fn needed_by(skills: &Skills, names: &[String]) -> Result<Vec<String>, ControlError> {
+    let known = skills.known();
+    match crate::graph::demand(&known, names) {
+        Ok(needed) => Ok(needed.into_iter().map(str::to_string).collect()),
+        Err(DemandError::NoProducer {
+            skill,
+            port,
+            topic,
+            wanted_by,
+        }) => Err(ControlError::NoProducer {
+            skill,
+            port,
+            topic,
+            wanted_by,
+        }),
+        Err(DemandError::Loop(loop_)) => Err(ControlError::DemandLoop { loop_ }),
+    }
+}
+
+/// Deactivates the skills activated on demand that no wanted skill needs any more.
+fn release_unneeded(skills: &mut Skills, effects: &mut Effects) -> Result<(), ControlError> {
+    let needed = needed_by(skills, &skills.marked(|k| k.wanted))?;
+    let unneeded: Vec<String> = skills
+        .marked(|k| k.demanded)
+        .into_iter()
+        .filter(|n| !needed.contains(n))
+        .collect();
+    for n in &unneeded {
+        skills.keep(n).demanded = false;
+    }
+    if !unneeded.is_empty() {
+        tracing::info!(released = ?unneeded, "skills no longer needed");
+    }
+    let more = switch(skills, &unneeded, false)?;
+    effects.changes.extend(more.changes);
+    effects.replan |= more.replan;
+    Ok(())
+}
+
+/// Activates or deactivates every named skill, or none (an unknown name refuses all).
+/// A skill that is away (its process died and may be restarted) gets it when it is back.
+fn switch(skills: &mut Skills, names: &[String], active: bool) -> Result<Effects, ControlError> {
     let mut effects = Effects::default();
     let slots = names
         .iter()

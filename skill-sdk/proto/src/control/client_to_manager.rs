@@ -155,6 +155,14 @@ pub enum Request {
     Plan(crate::control::PlanReport),
     /// The plan running now, with each node's status ([`crate::control::Reply::Plan`]).
     CurrentPlan,
+    /// Want skills (all or none): each is activated with every skill it reads from, the
+    /// producers of its data inputs, transitively (the ones not active yet are activated *on
+    /// demand*). Refused, with nothing changed, when one reads a topic nobody produces or the
+    /// producers loop.
+    Want(Vec<String>),
+    /// Release wanted skills (all or none): each is deactivated, and with it every skill
+    /// activated on demand that no skill still wanted reads from.
+    Release(Vec<String>),
 }
 
 /// Encodes a request.

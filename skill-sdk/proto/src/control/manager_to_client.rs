@@ -395,6 +395,27 @@ pub enum ControlError {
         /// Nodes in the tree.
         nodes: u32,
     },
+    /// A skill wanted (or needed by one) reads a topic nobody produces: it could never run.
+    #[error(
+        "'{skill}' reads '{topic}' (its input '{port}'), which no skill or device produces{}",
+        wanted_by.as_ref().map(|w| format!(" ('{skill}' is needed by '{w}')")).unwrap_or_default()
+    )]
+    NoProducer {
+        /// The skill whose input has no producer.
+        skill: String,
+        /// The input.
+        port: String,
+        /// Its topic.
+        topic: String,
+        /// The wanted skill that needs it, when it is not itself the one asked for.
+        wanted_by: Option<String>,
+    },
+    /// The skills wanted read each other's outputs in a loop: none could run first.
+    #[error("a loop of producers: {}", loop_.join(" reads "))]
+    DemandLoop {
+        /// The skills around the loop, each reading the next, the first again at the end.
+        loop_: Vec<String>,
+    },
 }
 
 /// `text` cut to at most `max` characters for an error message (a client's 1 MB string is

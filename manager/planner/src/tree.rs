@@ -1,0 +1,418 @@
+//! A [`Route`] as a plan: a BehaviorTree.CPP v4 tree of the delivery library's subtrees
+//! (`skills/plans/deliver.xml`), with the route's own steps — the turn `hall_follow` takes
+//! at each junction and the junction count `intersection` must reach — written between them.
+//! The plan language has no blackboard, so a subtree cannot take a count or a room number:
+//! those are written into the route's tree, the rest is the library's.
+//!
+//! How the steps are written (the rules the hand-written routes followed, kept so the same
+//! route gives the same run):
+//! - `hall_follow.turn` is set before a junction to what the robot does there, only when it
+//!   is not that already, and set back to straight on once the last junction of a floor is
+//!   passed (before the lobby, before the office's sign is looked for).
+//! - `intersection` counts the junctions since it was activated: out of a lab door in a
+//!   corridor's side the turn into the corridor is the first; a lobby entered through its
+//!   side, or left through it, counts as one. Leaving a lobby the counter is started again
+//!   once the robot is between a corridor's walls (`InTheCorridor`), when there are junctions
+//!   to count on that floor.
+//! - The corridor skills are activated with the first junction (or the lobby) after the lab,
+//!   with `sign_read` on the room's floor.
+
+use crate::map::{Side, Turn};
+use crate::route::{Route, Step};
+use std::collections::BTreeSet;
+use std::fmt::Write;
+
+/// Out of a car the robot stands this far in front of the bank wall (m): `leave_car` stops
+/// 1.8 m from the cabin's centre, which is 0.85 m inside the doorway.
+const OUT_OF_A_CAR_M: f64 = 0.95;
+/// A corridor's width (m, the buildings' convention).
+const CORRIDOR_M: f64 = 2.4;
+
+/// Why a route could not be written as a plan.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TreeError {
+    /// The library is not a plan file.
+    #[error("{file}: {reason}")]
+    Library {
+        /// The library file.
+        file: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A subtree the route needs is not in the library.
+    #[error("{file} has no tree '{id}', which the plan needs")]
+    Missing {
+        /// The library file.
+        file: String,
+        /// The tree.
+        id: String,
+    },
+    /// The library already has a tree with the plan's ID.
+    #[error("{file} already has a tree '{id}': the route's tree is called so")]
+    Taken {
+        /// The library file.
+        file: String,
+        /// The tree.
+        id: String,
+    },
+    /// No subtree rides to that floor.
+    #[error(
+        "the route rides from floor {from} to floor {to}: the library's only ride is RideToTheFourthFloor (from the basement)"
+    )]
+    NoRide {
+        /// From.
+        from: i32,
+        /// To.
+        to: i32,
+    },
+}
+
+/// The library of subtrees a route's tree is built from: a plan file's `<BehaviorTree>`s.
+#[derive(Debug, Clone)]
+pub struct Library {
+    file: String,
+    /// The file's `<root>`'s content, as written (trees and comments).
+    body: String,
+    /// Its trees' IDs.
+    trees: BTreeSet<String>,
+}
+
+impl Library {
+    /// Reads a library (`file` names it in errors). Its trees are read as the sequencer reads
+    /// them when the plan runs; here only their IDs matter.
+    pub fn parse(text: &str, file: &str) -> Result<Library, TreeError> {
+        let bad = |reason: String| TreeError::Library {
+            file: file.to_string(),
+            reason,
+        };
+        let doc = roxmltree::Document::parse(text).map_err(|e| bad(format!("not XML: {e}")))?;
+        let root = doc.root_element();
+        if root.tag_name().name() != "root" {
+            return Err(bad(
+                "the document element must be <root BTCPP_format=\"4\">".into(),
+            ));
+        }
+        let trees = root
+            .children()
+            .filter(|c| c.has_tag_name("BehaviorTree"))
+            .filter_map(|c| c.attribute("ID").map(str::to_string))
+            .collect();
+        let body = match (root.first_child(), root.last_child()) {
+            (Some(first), Some(last)) => text[first.range().start..last.range().end].to_string(),
+            _ => String::new(),
+        };
+        Ok(Library {
+            file: file.to_string(),
+            body,
+            trees,
+        })
+    }
+}
+
+/// A node of the route's tree.
+#[derive(Debug, Clone, PartialEq)]
+enum X {
+    SubTree(&'static str),
+    SetParam {
+        skill: &'static str,
+        param: &'static str,
+        value: String,
+    },
+    Activate(Vec<&'static str>),
+    WaitFor {
+        name: String,
+        condition: String,
+    },
+    WithParam {
+        skill: &'static str,
+        param: &'static str,
+        value: String,
+        children: Vec<X>,
+    },
+}
+
+/// Writes the steps, keeping what the plan has set so far.
+struct Writer {
+    out: Vec<X>,
+    /// Steps inside a `WithParam` being written.
+    group: Option<(&'static str, &'static str, String, Vec<X>)>,
+    /// The corridor skills are active (since the last activation, or the lobby's deactivation).
+    active: bool,
+    /// `hall_follow.turn` as the plan last set it (`None`: not yet).
+    turn: Option<Turn>,
+    /// The junction count `intersection` is at.
+    count: u32,
+    /// The floor the robot is on, and the room's.
+    floor: i32,
+    room_floor: i32,
+}
+
+impl Writer {
+    fn push(&mut self, x: X) {
+        match &mut self.group {
+            Some((.., children)) => children.push(x),
+            None => self.out.push(x),
+        }
+    }
+
+    fn set_turn(&mut self, turn: Turn) {
+        if self.turn != Some(turn) {
+            self.push(X::SetParam {
+                skill: "hall_follow",
+                param: "turn",
+                value: turn.hall_follow().to_string(),
+            });
+            self.turn = Some(turn);
+        }
+    }
+
+    /// The corridor skills; on the room's floor `sign_read` too (the office's sign).
+    fn corridor_skills(&self) -> Vec<&'static str> {
+        let mut s = vec!["intersection", "door_detect", "hall_follow"];
+        if self.floor == self.room_floor {
+            s.push("sign_read");
+        }
+        s
+    }
+
+    /// A junction (or a lobby's side) where the robot does `turn`: counted.
+    fn junction(&mut self, name: &str, turn: Turn) {
+        self.set_turn(turn);
+        if !self.active {
+            self.push(X::Activate(self.corridor_skills()));
+            (self.active, self.count) = (true, 0);
+        }
+        self.count += 1;
+        self.push(X::WaitFor {
+            name: format!("{name}: {turn}"),
+            condition: format!("intersection.junction.count >= {}", self.count),
+        });
+    }
+}
+
+impl Route {
+    /// The ID of the route's tree in its plan.
+    pub fn tree_id(&self) -> String {
+        format!("deliver-to-{}", self.room)
+    }
+
+    /// The plan: the route's tree, then the library's trees; a whole BehaviorTree.CPP v4
+    /// file that runs as it is. `source` names the map in the file's comment.
+    pub fn plan_xml(&self, library: &Library, source: &str) -> Result<String, TreeError> {
+        let id = self.tree_id();
+        if library.trees.contains(&id) {
+            return Err(TreeError::Taken {
+                file: library.file.clone(),
+                id,
+            });
+        }
+        let body = self.nodes()?;
+        let mut used = BTreeSet::new();
+        subtrees(&body, &mut used);
+        for t in used {
+            if !library.trees.contains(t) {
+                return Err(TreeError::Missing {
+                    file: library.file.clone(),
+                    id: t.to_string(),
+                });
+            }
+        }
+        let mut xml = String::from("<?xml version=\"1.0\"?>\n<!-- ");
+        // (A comment may not hold "--".)
+        let words = format!(
+            "Planned by `skillfab plan` from {source}, with the subtrees of {} (after the \
+             route's tree).\n     The route in words:\n     {}",
+            library.file,
+            self.to_string().replace('\n', "\n     ")
+        )
+        .replace("--", "- -");
+        xml.push_str(&words);
+        let _ = write!(
+            xml,
+            " -->\n<root BTCPP_format=\"4\" main_tree_to_execute=\"{id}\">\n\n  <BehaviorTree ID=\"{id}\">\n    <Sequence>\n"
+        );
+        for x in &body {
+            write_node(&mut xml, x, 3);
+        }
+        xml.push_str("    </Sequence>\n  </BehaviorTree>\n\n  ");
+        xml.push_str(&library.body);
+        xml.push_str("\n</root>\n");
+        Ok(xml)
+    }
+
+    /// The route's tree: the children of its `Sequence`.
+    fn nodes(&self) -> Result<Vec<X>, TreeError> {
+        let mut w = Writer {
+            out: Vec::new(),
+            group: None,
+            active: false,
+            turn: None,
+            count: 0,
+            floor: self
+                .steps
+                .iter()
+                .find_map(|s| match s {
+                    Step::Ride { from, .. } => Some(*from),
+                    _ => None,
+                })
+                .unwrap_or(self.floor),
+            room_floor: self.floor,
+        };
+        for (i, step) in self.steps.iter().enumerate() {
+            // Junctions still to count on this floor after this step.
+            let junctions_follow = self.steps[i + 1..]
+                .iter()
+                .take_while(|s| !matches!(s, Step::Ride { .. }))
+                .any(|s| matches!(s, Step::Junction { .. }));
+            match step {
+                Step::LeaveTheLab => w.push(X::SubTree("LeaveTheLab")),
+                Step::IntoTheCorridor { turn } => {
+                    w.push(X::SubTree(match turn {
+                        Turn::Right => "IntoTheCorridorRight",
+                        _ => "IntoTheCorridorLeft",
+                    }));
+                    (w.active, w.turn, w.count) = (true, Some(*turn), 1);
+                    if w.floor == w.room_floor {
+                        w.push(X::Activate(vec!["sign_read"]));
+                    }
+                }
+                Step::Along { .. } => {}
+                Step::Junction { name, turn } => w.junction(name, *turn),
+                Step::IntoTheLobby { turn, .. } => {
+                    if *turn != Turn::Straight {
+                        w.junction("the lobby", *turn);
+                    } else if !w.active {
+                        w.set_turn(Turn::Straight);
+                        w.push(X::Activate(w.corridor_skills()));
+                        w.active = true;
+                    }
+                    w.set_turn(Turn::Straight);
+                    w.push(X::SubTree("IntoTheLobby"));
+                    w.active = false;
+                }
+                Step::Ride { from, to } => {
+                    if *to != 4 || *from != 0 {
+                        return Err(TreeError::NoRide {
+                            from: *from,
+                            to: *to,
+                        });
+                    }
+                    w.push(X::SubTree("RideToTheFourthFloor"));
+                    w.floor = *to;
+                }
+                Step::OutOfTheLobby {
+                    turn, beside_bank, ..
+                } => {
+                    if *turn == Turn::Straight {
+                        // Lined up on the call button, away from the bank: turn 0, the
+                        // corridor skills active.
+                        w.push(X::SubTree("OutOfTheLobby"));
+                        (w.active, w.turn, w.count) = (true, Some(Turn::Straight), 0);
+                    } else {
+                        if *beside_bank {
+                            // Turned where the car left it, on the corridor's centre line.
+                            let after = CORRIDOR_M / 2.0 - OUT_OF_A_CAR_M;
+                            w.group =
+                                Some(("hall_follow", "after", format!("{after:.2}"), Vec::new()));
+                        } else {
+                            w.push(X::SubTree("LineUpOnTheCallButton"));
+                        }
+                        w.junction("the lobby's side", *turn);
+                        w.set_turn(Turn::Straight);
+                    }
+                    if junctions_follow {
+                        w.set_turn(Turn::Straight);
+                        w.push(X::SubTree("InTheCorridor"));
+                        w.count = 0;
+                    }
+                    if let Some((skill, param, value, children)) = w.group.take() {
+                        w.push(X::WithParam {
+                            skill,
+                            param,
+                            value,
+                            children,
+                        });
+                    }
+                }
+                Step::AtTheRoom { room, side } => {
+                    w.set_turn(Turn::Straight);
+                    for skill in ["barcode_track", "deliver"] {
+                        w.push(X::SetParam {
+                            skill,
+                            param: if skill == "deliver" { "room" } else { "id" },
+                            value: room.to_string(),
+                        });
+                    }
+                    w.push(X::SubTree(match side {
+                        Some(Side::Left) => "ToTheOfficeOnTheLeft",
+                        Some(Side::Right) => "ToTheOfficeOnTheRight",
+                        None => "ToTheOfficeAhead",
+                    }));
+                    w.push(X::SubTree("DeliverTheMessage"));
+                }
+            }
+        }
+        Ok(w.out)
+    }
+}
+
+/// The subtrees `nodes` use.
+fn subtrees(nodes: &[X], out: &mut BTreeSet<&'static str>) {
+    for x in nodes {
+        match x {
+            X::SubTree(id) => {
+                out.insert(id);
+            }
+            X::WithParam { children, .. } => subtrees(children, out),
+            _ => {}
+        }
+    }
+}
+
+/// XML's escapes for an attribute's value.
+fn attr(v: &str) -> String {
+    v.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn write_node(xml: &mut String, x: &X, depth: usize) {
+    let pad = "  ".repeat(depth);
+    let _ = match x {
+        X::SubTree(id) => writeln!(xml, "{pad}<SubTree ID=\"{id}\"/>"),
+        X::SetParam {
+            skill,
+            param,
+            value,
+        } => writeln!(
+            xml,
+            "{pad}<SetParam skill=\"{skill}\" param=\"{param}\" value=\"{}\"/>",
+            attr(value)
+        ),
+        X::Activate(skills) => writeln!(xml, "{pad}<Activate skills=\"{}\"/>", skills.join(", ")),
+        X::WaitFor { name, condition } => writeln!(
+            xml,
+            "{pad}<WaitFor name=\"{}\" condition=\"{}\"/>",
+            attr(name),
+            attr(condition)
+        ),
+        X::WithParam {
+            skill,
+            param,
+            value,
+            children,
+        } => {
+            let _ = writeln!(
+                xml,
+                "{pad}<WithParam skill=\"{skill}\" param=\"{param}\" value=\"{}\">\n{pad}  <Sequence>",
+                attr(value)
+            );
+            for c in children {
+                write_node(xml, c, depth + 2);
+            }
+            writeln!(xml, "{pad}  </Sequence>\n{pad}</WithParam>")
+        }
+    };
+}

@@ -1,0 +1,375 @@
+//! The checker's refusals, one per way a map can contradict itself, and the planner's routes
+//! on a small map and on the shipped ones.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use skillfab_planner::map::{Heading, Side, Turn};
+use skillfab_planner::{From, Library, Map, PlanError, Step, map_beside, plan};
+use std::path::Path;
+
+/// A small building: the lab's door on the left of a corridor running north to a T; right at
+/// the T the lobby (bank ahead); left at the T, room 9 at the corridor's end. Floor 1: out of
+/// the lobby's left side beside the bank, north to a crossing; rooms on both sides after it.
+const SMALL: &str = r#"
+building = "small"
+office = 105
+floors = [0, 1]
+
+[[lobby]]
+floor = 0
+openings = [{ leg = "to the lobby", wall = "opposite" }]
+
+[[lobby]]
+floor = 1
+openings = [{ leg = "up", wall = "left", beside_bank = true }]
+
+[[leg]]
+name = "the lab's corridor"
+floor = 0
+from = "end"
+to = "the T"
+heading = "north"
+left = ["door", "lab", 2]
+right = [1]
+
+[[junction]]
+name = "the T"
+floor = 0
+arriving = "the lab's corridor"
+left = "west"
+right = "to the lobby"
+
+[[leg]]
+name = "west"
+floor = 0
+from = "the T"
+to = "room 9"
+heading = "west"
+
+[[leg]]
+name = "to the lobby"
+floor = 0
+from = "the T"
+to = "lobby"
+heading = "east"
+
+[[leg]]
+name = "up"
+floor = 1
+from = "lobby"
+to = "the crossing"
+heading = "north"
+
+[[junction]]
+name = "the crossing"
+floor = 1
+arriving = "up"
+straight = "on"
+left = "west arm"
+right = "east arm"
+
+[[leg]]
+name = "on"
+floor = 1
+from = "the crossing"
+to = "end"
+heading = "north"
+left = [101, 103]
+right = [105]
+
+[[leg]]
+name = "west arm"
+floor = 1
+from = "the crossing"
+to = "end"
+heading = "west"
+
+[[leg]]
+name = "east arm"
+floor = 1
+from = "end"
+to = "the crossing"
+heading = "west"
+right = [102]
+"#;
+
+/// The problems of SMALL with `from` replaced by `to` (which must occur in it).
+fn problems(from: &str, to: &str) -> Vec<String> {
+    problems_of(&[(from, to)])
+}
+
+/// The problems of SMALL with each (from, to) replaced, in turn.
+fn problems_of(edits: &[(&str, &str)]) -> Vec<String> {
+    let mut text = SMALL.to_string();
+    for (from, to) in edits {
+        assert!(text.contains(from), "{from}");
+        text = text.replacen(from, to, 1);
+    }
+    match Map::parse(&text, "small.map.toml") {
+        Ok(_) => Vec::new(),
+        Err(e) => e.problems.iter().map(ToString::to_string).collect(),
+    }
+}
+
+fn refused(from: &str, to: &str, expected: &str) {
+    let p = problems(from, to);
+    assert!(
+        p.iter().any(|s| s == expected),
+        "expected «{expected}», got {p:#?}"
+    );
+}
+
+#[test]
+fn the_small_map_is_sound() {
+    let map = Map::parse(SMALL, "small.map.toml").unwrap();
+    assert_eq!(map.rooms(), vec![2, 1, 101, 103, 105, 102, 9]);
+}
+
+#[test]
+fn a_junction_whose_sides_disagree_with_its_legs_is_refused() {
+    refused(
+        "left = \"west\"\nright = \"to the lobby\"",
+        "left = \"to the lobby\"\nright = \"west\"",
+        "junction 'the T': its left, seen arriving along 'the lab's corridor' (heading north), \
+         is west, but leg 'to the lobby' leaves it heading east",
+    );
+    // An arm that leaves the way the robot came is no side at all.
+    refused(
+        "heading = \"west\"\nright = [102]",
+        "heading = \"east\"\nright = [102]",
+        "junction 'the crossing': its right, seen arriving along 'up' (heading north), is east, \
+         but leg 'east arm' leaves it heading west",
+    );
+}
+
+#[test]
+fn a_junction_must_name_every_leg_that_ends_there_and_only_those() {
+    refused(
+        "straight = \"on\"\n",
+        "",
+        "junction 'the crossing': leg 'on' ends there but the junction does not say on which side",
+    );
+    refused(
+        "left = \"west arm\"",
+        "left = \"up\"",
+        "junction 'the crossing' lists leg 'up' twice",
+    );
+    refused(
+        "right = \"to the lobby\"",
+        "right = \"west arm\"",
+        "junction 'the T' (floor 0): there is no leg 'west arm' on its floor",
+    );
+    // A bend: the T's west arm starts elsewhere.
+    let p = problems_of(&[
+        ("left = \"west\"\n", ""),
+        (
+            "from = \"the T\"\nto = \"room 9\"",
+            "from = \"end\"\nto = \"room 9\"",
+        ),
+    ]);
+    let bend = "junction 'the T' joins 2 legs: a junction joins 3 or 4 (a bend is part of a leg)";
+    assert!(p.iter().any(|s| s == bend), "{p:#?}");
+}
+
+#[test]
+fn a_room_on_two_doors_or_on_the_wrong_floor_is_refused() {
+    refused(
+        "right = [105]",
+        "right = [105, 103]",
+        "room 103 is listed on two doors: the left of leg 'on' (door 2) and the right of leg 'on' (door 2)",
+    );
+    refused(
+        "right = [105]",
+        "right = [205]",
+        "room 205 is on the right of leg 'on' (door 1) (floor 1), but its number says floor 2",
+    );
+    refused(
+        "right = [105]",
+        "right = [\"office\"]",
+        "leg 'on': 'office' on its right is not a door (a room number, \"door\" or \"lab\")",
+    );
+    refused(
+        "office = 105",
+        "office = 107",
+        "the office, room 107, is on no door of the map",
+    );
+}
+
+#[test]
+fn a_leg_that_leads_nowhere_is_refused() {
+    refused(
+        "to = \"room 9\"",
+        "to = \"the west wing\"",
+        "leg 'west' leads to 'the west wing', which is no place of the map (a junction's name, \
+         lab, lobby, room N or end)",
+    );
+    refused(
+        "to = \"room 9\"",
+        "to = \"the crossing\"",
+        "leg 'west' (floor 0) leads to junction 'the crossing' on floor 1",
+    );
+}
+
+#[test]
+fn unreachable_places_floors_without_a_lobby_and_a_missing_lab_are_refused() {
+    // The crossing's legs cut off from the lobby: everything past it is out of reach.
+    let p = problems_of(&[
+        (
+            "from = \"lobby\"\nto = \"the crossing\"",
+            "from = \"end\"\nto = \"the crossing\"",
+        ),
+        (
+            "openings = [{ leg = \"up\", wall = \"left\", beside_bank = true }]",
+            "",
+        ),
+    ]);
+    for expected in [
+        "junction 'the crossing' cannot be reached from the lab",
+        "leg 'on' cannot be reached from the lab",
+    ] {
+        assert!(p.iter().any(|s| s == expected), "{expected}: {p:#?}");
+    }
+    refused(
+        "floors = [0, 1]",
+        "floors = [0, 1, 2]",
+        "floor 2 has no lobby: the elevator bank serves every floor the map lists",
+    );
+    refused(
+        "left = [\"door\", \"lab\", 2]",
+        "left = [\"door\", 2]",
+        "the map has no lab: name it on a leg's side (\"lab\") or at a leg's end (lab)",
+    );
+    refused(
+        "from = \"lobby\"\nto = \"the crossing\"",
+        "from = \"end\"\nto = \"the crossing\"",
+        "the lobby of floor 1: leg 'up' does not lead to the lobby",
+    );
+    refused(
+        "openings = [{ leg = \"to the lobby\", wall = \"opposite\" }]",
+        "",
+        "leg 'to the lobby' leads to the lobby of floor 0, but the lobby does not say in which wall it opens",
+    );
+    refused(
+        "wall = \"left\", beside_bank = true",
+        "wall = \"opposite\", beside_bank = true",
+        "the lobby of floor 1: the opening of 'up' is in the opposite wall, so it cannot be beside the bank wall",
+    );
+    // A key the format does not have is refused, not ignored.
+    let p = problems("heading = \"west\"\n", "heading = \"west\"\nlenght = 4\n");
+    assert!(p[0].contains("unknown field `lenght`"), "{p:?}");
+}
+
+fn junctions(steps: &[Step]) -> Vec<(String, Turn)> {
+    steps
+        .iter()
+        .filter_map(|s| match s {
+            Step::Junction { name, turn } => Some((name.clone(), *turn)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn routes_turn_the_way_the_map_says_on_each_floor() {
+    let map = Map::parse(SMALL, "small.map.toml").unwrap();
+    // The office: out of the lab left (north), right at the T, straight in; out of the lobby's
+    // left side (turning right with the bank wall behind), straight over the crossing.
+    let r = plan(&map, None, From::Lab).unwrap();
+    assert_eq!(r.steps[1], Step::IntoTheCorridor { turn: Turn::Left });
+    assert!(r.steps.contains(&Step::OutOfTheLobby {
+        floor: 1,
+        turn: Turn::Right,
+        beside_bank: true
+    }));
+    assert_eq!(
+        junctions(&r.steps),
+        [
+            ("the T".into(), Turn::Right),
+            ("the crossing".into(), Turn::Straight)
+        ]
+    );
+    assert_eq!(
+        r.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 105,
+            side: Some(Side::Right)
+        })
+    );
+    // A room on a leg walked against its way: its side is the other one.
+    let r = plan(&map, Some(102), From::Lab).unwrap();
+    assert_eq!(junctions(&r.steps)[1], ("the crossing".into(), Turn::Right));
+    assert!(r.steps.contains(&Step::Along {
+        leg: "east arm".into(),
+        heading: Heading::East
+    }));
+    assert_eq!(
+        r.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 102,
+            side: Some(Side::Left)
+        })
+    );
+    // On the lab's floor: no elevator. Room 2 is after the lab's door on its side (north):
+    // left out of the door, on the left. Room 9 is at the end of the T's west arm.
+    let r = plan(&map, Some(2), From::Lab).unwrap();
+    assert_eq!(
+        r.steps[1..],
+        [
+            Step::IntoTheCorridor { turn: Turn::Left },
+            Step::Along {
+                leg: "the lab's corridor".into(),
+                heading: Heading::North
+            },
+            Step::AtTheRoom {
+                room: 2,
+                side: Some(Side::Left)
+            },
+        ]
+    );
+    let r = plan(&map, Some(9), From::Lab).unwrap();
+    assert!(!r.steps.iter().any(|s| matches!(s, Step::Ride { .. })));
+    assert_eq!(
+        r.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 9,
+            side: None
+        })
+    );
+    // Room 1 is across the corridor from the lab's door: whether it is north or south of it
+    // the map cannot say (each side's doors are in order, not the two sides together).
+    assert!(matches!(
+        plan(&map, Some(1), From::Lab),
+        Err(PlanError::NoWay { .. })
+    ));
+    assert!(matches!(
+        plan(&map, Some(404), From::Lab),
+        Err(PlanError::UnknownRoom { .. })
+    ));
+    assert!("room 405".parse::<From>().is_err());
+}
+
+#[test]
+fn every_numbered_room_of_the_shipped_maps_has_a_plan_that_reads() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    for building in [
+        "devices/denning-sim/buildings/building-a.toml",
+        "devices/denning-sim/buildings/building-b.toml",
+        "devices/denning-sim/buildings/heldout/building-c.toml",
+        "devices/denning-sim/buildings/heldout/building-d.toml",
+    ] {
+        let map = Map::load(&map_beside(&root.join(building))).unwrap();
+        assert!(!map.rooms().is_empty(), "{building}");
+        for room in map.rooms() {
+            let route = plan(&map, Some(room), From::Lab).unwrap();
+            let xml = route.plan_xml(&library, building).unwrap();
+            let plan = skillfab_sequence::Plan::parse(&xml, "planned").unwrap();
+            assert_eq!(plan.main, format!("deliver-to-{room}"), "{building}");
+            assert!(
+                xml.contains(&format!("value=\"{room}\"")),
+                "{building} {room}"
+            );
+        }
+    }
+}

@@ -3,7 +3,8 @@
 //! binary.
 //!
 //! Layout: this file parses the command line and hands each command to its module — [`ctl`],
-//! `sequence` (plans), `demo` (the missions on the simulator, with `faults`), `replay`,
+//! `sequence` (plans), `plan` (the planner: a route map to a plan), `demo` (the missions on
+//! the simulator, with `faults`), `replay`,
 //! `new` (skill and message templates). `bridge` and `--remote` are compiled in with the
 //! `bridge` feature (Zenoh, through `skillfab-bridge`); without it they say how to build them.
 
@@ -14,6 +15,7 @@ pub mod ctl;
 mod demo;
 mod faults;
 mod new;
+mod plan;
 mod replay;
 mod sequence;
 
@@ -193,6 +195,34 @@ enum Cmd {
         #[command(flatten)]
         remote: RemoteArg,
     },
+    /// The planner: the route from the lab to a room on a building's route map (docs/maps.md),
+    /// printed as a plan (BehaviorTree.CPP v4 XML) built from the delivery mission's subtrees,
+    /// ready for `skillfab sequence`. The map is checked first: one that contradicts itself
+    /// is refused, each problem one sentence naming the place.
+    Plan {
+        /// The route map (TOML; a building's is beside it: NAME.map.toml).
+        #[arg(long, value_name = "FILE.map.toml")]
+        map: PathBuf,
+        /// The room (default: the map's office).
+        #[arg(long, value_name = "ROOM")]
+        to: Option<u32>,
+        /// Where the route starts: only `lab` (the way back from a room is not planned yet).
+        #[arg(long, value_name = "PLACE", default_value = "lab")]
+        from: String,
+        /// The subtrees the plan is built from.
+        #[arg(
+            long,
+            value_name = "FILE.xml",
+            default_value = "skills/plans/deliver.xml"
+        )]
+        library: PathBuf,
+        /// Print the route in words instead of the plan.
+        #[arg(long)]
+        words: bool,
+        /// Only check the map.
+        #[arg(long, conflicts_with_all = ["to", "words"])]
+        check: bool,
+    },
     /// Talk to a running manager: the sequencer's link, from the shell.
     Ctl {
         /// Print JSON instead of text.
@@ -299,15 +329,24 @@ enum DemoCmd {
         /// Building file.
         #[arg(long, default_value = "devices/denning-sim/buildings/building-a.toml")]
         building: PathBuf,
-        /// The plan (docs/sequence.md).
+        /// The building's route map the planner plans on (default: beside the building
+        /// file, NAME.map.toml; docs/maps.md).
+        #[arg(long, value_name = "FILE.map.toml")]
+        map: Option<PathBuf>,
+        /// The room to take the message to (default: the map's office). The judge's goal
+        /// moves to that room's door.
+        #[arg(long, value_name = "ROOM")]
+        to: Option<u32>,
+        /// The subtrees the planner builds the plan from (docs/sequence.md); with --tree, the
+        /// plan to run.
         #[arg(
             long,
             value_name = "FILE.xml",
             default_value = "skills/plans/deliver.xml"
         )]
         plan: PathBuf,
-        /// The plan's tree to run (default: the one named as the building file, e.g.
-        /// `building-a`: the route through that building).
+        /// Run this tree of --plan as it is written, not the planner's (e.g. the routes
+        /// written by hand before the planner: manager/planner/tests/fixtures/hand-written.xml).
         #[arg(long)]
         tree: Option<String>,
         #[command(flatten)]
@@ -498,6 +537,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             exec_manager()
         }
         Cmd::Ctl { json, remote, cmd } => ctl::run(remote.address(&domain)?, json, cmd),
+        Cmd::Plan {
+            map,
+            to,
+            from,
+            library,
+            words,
+            check,
+        } => plan::run(&map, to, &from, &library, words, check),
         Cmd::Sequence {
             file,
             tree,
@@ -591,6 +638,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             which:
                 DemoCmd::Deliver {
                     building,
+                    map,
+                    to,
                     plan,
                     tree,
                     run,
@@ -598,23 +647,65 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     faults,
                 },
         } => {
-            let stem = building
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let json = run.json;
-            sequence::read_plan(&plan)?;
-            let mut opts = run.options(demo::Site::Building(building), plan, limit_s)?;
-            opts.faults = faults.faults(opts.lockstep, opts.seed)?;
-            opts.tree = Some(tree.unwrap_or(stem));
-            let summary = demo::demo(&opts)?;
-            report(&summary, json, "delivered the message")?;
-            if summary.successes == 0 {
-                anyhow::bail!("the robot did not deliver the message");
-            }
-            Ok(())
+            // The planner's plan and a building whose goal is another room live here while
+            // the runs last (each run copies the plan into its own directory).
+            let work =
+                std::env::temp_dir().join(format!("skillfab-deliver-{}", std::process::id()));
+            std::fs::create_dir_all(&work)?;
+            let delivered = deliver(&building, map, to, plan, tree, run, limit_s, &faults, &work);
+            let _ = std::fs::remove_dir_all(&work);
+            delivered
         }
     }
+}
+
+/// `skillfab demo deliver`: the planner's plan to the room (or a tree of a plan file, as
+/// written), the judge's goal at that room; `work` holds the files this writes.
+#[allow(clippy::too_many_arguments)]
+fn deliver(
+    building: &std::path::Path,
+    map: Option<PathBuf>,
+    to: Option<u32>,
+    plan: PathBuf,
+    tree: Option<String>,
+    run: DemoRuns,
+    limit_s: f64,
+    faults: &FaultArgs,
+    work: &std::path::Path,
+) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let json = run.json;
+    let (plan, room) = match &tree {
+        Some(_) => {
+            sequence::read_plan(&plan)?;
+            (plan, to)
+        }
+        None => {
+            let map = map.unwrap_or_else(|| skillfab_planner::map_beside(building));
+            let p = plan::plan(&map, to, "lab", &plan)
+                .with_context(|| format!("planning on {}", map.display()))?;
+            if !json {
+                println!("{}", p.route);
+            }
+            let file = work.join(format!("{}.xml", p.route.tree_id()));
+            std::fs::write(&file, &p.xml)?;
+            (file, Some(p.route.room))
+        }
+    };
+    let site = match room {
+        Some(r) => plan::building_for_room(building, r, work)?,
+        None => None,
+    }
+    .unwrap_or_else(|| building.to_path_buf());
+    let mut opts = run.options(demo::Site::Building(site), plan, limit_s)?;
+    opts.faults = faults.faults(opts.lockstep, opts.seed)?;
+    opts.tree = tree;
+    let summary = demo::demo(&opts)?;
+    report(&summary, json, "delivered the message")?;
+    if summary.successes == 0 {
+        anyhow::bail!("the robot did not deliver the message");
+    }
+    Ok(())
 }
 
 /// Prints a demo's summary: one JSON object, or a line.

@@ -99,7 +99,9 @@ impl Library {
             .filter_map(|c| c.attribute("ID").map(str::to_string))
             .collect();
         let body = match (root.first_child(), root.last_child()) {
-            (Some(first), Some(last)) => text[first.range().start..last.range().end].to_string(),
+            (Some(first), Some(last)) => text[first.range().start..last.range().end]
+                .trim()
+                .to_string(),
             _ => String::new(),
         };
         Ok(Library {

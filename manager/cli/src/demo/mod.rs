@@ -7,7 +7,8 @@
 //! the lab (the paper's section 6): explore until the door's barcode is seen, home on it,
 //! follow its wall (one way, then the other) while door_locate gathers evidence, and once the
 //! door is located lower `avoid.safe_distance` for the tight passage and let go_through drive.
-//! In `deliver` a plan (`skills/plans/deliver.xml`) takes the robot from the lab through a
+//! In `deliver` a plan — the planner's (`crate::plan`), built on the building's route map from
+//! the subtrees of `skills/plans/deliver.xml` — takes the robot from the lab through a
 //! simulated building — corridors, an elevator lobby with four cars, the fourth floor — to an
 //! office, where it says its message.
 //!

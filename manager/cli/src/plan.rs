@@ -1,0 +1,177 @@
+//! `skillfab plan`: a route on a building's route map (docs/maps.md) written as a plan of the
+//! delivery library's subtrees ([`skillfab_planner`]); `demo deliver` runs such a plan. The
+//! judge's side of a destination is here too: a building file's goal moved to another room.
+
+use anyhow::Context;
+use skillfab_planner::{From, Library, Map, Route};
+use std::path::{Path, PathBuf};
+
+/// A plan the planner wrote: its route and the file's text.
+pub struct Planned {
+    /// The route.
+    pub route: Route,
+    /// The plan (BehaviorTree.CPP v4 XML), read back as the sequencer reads it.
+    pub xml: String,
+}
+
+/// Plans the way to `to` (default: the map's office) from `from`, as a tree of `library`'s
+/// subtrees.
+pub fn plan(map: &Path, to: Option<u32>, from: &str, library: &Path) -> anyhow::Result<Planned> {
+    let m = Map::load(map)?;
+    let route = skillfab_planner::plan(&m, to, from.parse::<From>()?)?;
+    let text = std::fs::read_to_string(library)
+        .with_context(|| format!("reading {}", library.display()))?;
+    let lib = Library::parse(&text, &library.display().to_string())?;
+    let xml = route.plan_xml(&lib, &map.display().to_string())?;
+    // What the sequencer would refuse is refused here (a library it does not read).
+    skillfab_sequence::Plan::parse(&xml, &format!("the plan to room {}", route.room))?;
+    Ok(Planned { route, xml })
+}
+
+/// `skillfab plan`: the plan on stdout (or the route in words, or only the map's check).
+pub fn run(
+    map: &Path,
+    to: Option<u32>,
+    from: &str,
+    library: &Path,
+    words: bool,
+    check: bool,
+) -> anyhow::Result<()> {
+    if check {
+        let m = Map::load(map)?;
+        println!(
+            "{}: the map of {} is sound: {} legs, {} junctions, floors {:?}, rooms {:?}",
+            map.display(),
+            m.building,
+            m.legs.len(),
+            m.junctions.len(),
+            m.floors,
+            m.rooms()
+        );
+        return Ok(());
+    }
+    let p = plan(map, to, from, library)?;
+    if words {
+        println!("{}", p.route);
+    } else {
+        print!("{}", p.xml);
+    }
+    Ok(())
+}
+
+/// In front of a door the goal is this far into the corridor (m): its centre line (the
+/// buildings' corridors are 2.4 m wide), as the shipped goals are.
+const GOAL_INTO_THE_CORRIDOR_M: f64 = 1.2;
+
+/// The building file with its goal at room `room` (in front of the door beside its sign, as
+/// the shipped goals are), written into `dir` under the same name; `None` when the goal is
+/// that room already. The judge's ground truth: the robot is never told.
+pub fn building_for_room(
+    building: &Path,
+    room: u32,
+    dir: &Path,
+) -> anyhow::Result<Option<PathBuf>> {
+    use denning_sim::building::Building;
+    let b = Building::load(building)?;
+    if u32::from(b.goal.room) == room {
+        return Ok(None);
+    }
+    let floor = i32::try_from(room / 100)?;
+    let f = b
+        .floor(floor)
+        .with_context(|| format!("{}: no floor {floor} for room {room}", building.display()))?;
+    let sign = f
+        .barcode
+        .iter()
+        .find(|c| u32::from(c.id) == room)
+        .with_context(|| format!("{}: room {room} has no sign", building.display()))?;
+    // The sign is 0.3 m beside its door's edge, 0.05 m in front of the wall: the door whose
+    // nearest point is nearest, and the corridor on the sign's side of it.
+    let near = |d: &denning_sim::world::Segment| {
+        let (ax, ay) = (d.to[0] - d.from[0], d.to[1] - d.from[1]);
+        let len2 = ax * ax + ay * ay;
+        let t = (((sign.at[0] - d.from[0]) * ax + (sign.at[1] - d.from[1]) * ay) / len2)
+            .clamp(0.0, 1.0);
+        (sign.at[0] - d.from[0] - t * ax).hypot(sign.at[1] - d.from[1] - t * ay)
+    };
+    let door = f
+        .door
+        .iter()
+        .min_by(|a, b| near(a).total_cmp(&near(b)))
+        .with_context(|| format!("{}: no door on floor {floor}", building.display()))?;
+    let mid = [
+        (door.from[0] + door.to[0]) / 2.0,
+        (door.from[1] + door.to[1]) / 2.0,
+    ];
+    let (ax, ay) = (door.to[0] - door.from[0], door.to[1] - door.from[1]);
+    let len = ax.hypot(ay);
+    let (mut nx, mut ny) = (-ay / len, ax / len);
+    if (sign.at[0] - mid[0]) * nx + (sign.at[1] - mid[1]) * ny < 0.0 {
+        (nx, ny) = (-nx, -ny);
+    }
+    let at = [
+        mid[0] + nx * GOAL_INTO_THE_CORRIDOR_M,
+        mid[1] + ny * GOAL_INTO_THE_CORRIDOR_M,
+    ];
+    // The file as a TOML table with its goal replaced (the simulator reads it as ever).
+    let text = std::fs::read_to_string(building)?;
+    let mut doc: toml::Table = toml::from_str(&text)?;
+    let mut goal = toml::Table::new();
+    goal.insert("floor".into(), toml::Value::Integer(floor.into()));
+    goal.insert("room".into(), toml::Value::Integer(room.into()));
+    goal.insert(
+        "at".into(),
+        toml::Value::Array(vec![at[0].into(), at[1].into()]),
+    );
+    goal.insert("radius".into(), toml::Value::Float(b.goal.radius));
+    doc.insert("goal".into(), toml::Value::Table(goal));
+    let out = dir.join(
+        building
+            .file_name()
+            .context("the building file has no name")?,
+    );
+    std::fs::write(&out, toml::to_string(&doc)?)?;
+    Ok(Some(out))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    /// The goal a room's sign gives is the one the building file has for its office: in
+    /// front of the door, on the corridor's centre line.
+    #[test]
+    fn a_rooms_goal_is_where_the_buildings_own_goal_is_for_its_office() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let dir = std::env::temp_dir().join(format!("skillfab-goal-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for (file, other) in [
+            ("devices/denning-sim/buildings/building-a.toml", 404),
+            ("devices/denning-sim/buildings/building-b.toml", 405),
+            ("devices/denning-sim/buildings/heldout/building-c.toml", 403),
+            ("devices/denning-sim/buildings/heldout/building-d.toml", 404),
+        ] {
+            let path = root.join(file);
+            let b = denning_sim::building::Building::load(&path).unwrap();
+            // Moved to another room and back: the file's own goal.
+            let moved = building_for_room(&path, other, &dir).unwrap().unwrap();
+            let again = building_for_room(&moved, u32::from(b.goal.room), &dir)
+                .unwrap()
+                .unwrap();
+            let back = denning_sim::building::Building::load(&again).unwrap();
+            assert_eq!(back.goal.room, b.goal.room, "{file}");
+            let (g, h) = (back.goal.at, b.goal.at);
+            assert!(
+                (g[0] - h[0]).hypot(g[1] - h[1]) < 1e-9,
+                "{file}: {g:?} vs {h:?}"
+            );
+            assert!(
+                building_for_room(&path, u32::from(b.goal.room), &dir)
+                    .unwrap()
+                    .is_none()
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

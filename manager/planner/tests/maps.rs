@@ -348,6 +348,60 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
     assert!("room 405".parse::<From>().is_err());
 }
 
+/// SMALL's rooms as plans: each reads as the sequencer reads it; on the lab's floor no car
+/// and `sign_read` on with the corridor skills; a door at a corridor's end is approached ahead.
+#[test]
+fn plans_on_the_labs_floor_and_to_a_corridors_end_read_and_say_so() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    // On floor 4, the floor the library's ride goes to.
+    let small = SMALL
+        .replace("floors = [0, 1]", "floors = [0, 4]")
+        .replace("floor = 1\n", "floor = 4\n")
+        .replace("10", "40");
+    let map = Map::parse(&small, "small.map.toml").unwrap();
+    let xml = |room| {
+        let xml = plan(&map, Some(room), From::Lab)
+            .unwrap()
+            .plan_xml(&library, "small")
+            .unwrap();
+        skillfab_sequence::Plan::parse(&xml, "planned").unwrap();
+        // The route's own tree: up to the library's first.
+        xml[..xml.find("<BehaviorTree ID=\"LeaveTheLab\"").unwrap()].to_string()
+    };
+    let to_9 = xml(9);
+    assert!(!to_9.contains("RideToTheFourthFloor"), "{to_9}");
+    assert!(
+        to_9.contains("<SubTree ID=\"ToTheOfficeAhead\"/>"),
+        "{to_9}"
+    );
+    assert!(
+        to_9.contains("skills=\"intersection, door_detect, hall_follow, sign_read\"")
+            || to_9.contains("<Activate skills=\"sign_read\"/>"),
+        "{to_9}"
+    );
+    // Out of the lobby beside the bank wall, with a crossing to count: the turn from where
+    // the car left it, on the corridor's centre line, and counting started again after it.
+    let to_405 = xml(405);
+    for expected in [
+        "<WithParam skill=\"hall_follow\" param=\"after\" value=\"0.25\">",
+        "<SubTree ID=\"InTheCorridor\"/>",
+        "condition=\"intersection.junction.count &gt;= 1\"/>",
+        "<SubTree ID=\"ToTheOfficeOnTheRight\"/>",
+    ] {
+        assert!(to_405.contains(expected), "{expected}: {to_405}");
+    }
+    // A room on the fifth floor would need a ride the library does not have.
+    let mut steps = plan(&map, Some(405), From::Lab).unwrap();
+    for s in &mut steps.steps {
+        if let Step::Ride { to, .. } = s {
+            *to = 5;
+        }
+    }
+    assert!(steps.plan_xml(&library, "small").is_err());
+}
+
 #[test]
 fn every_numbered_room_of_the_shipped_maps_has_a_plan_that_reads() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");

@@ -323,40 +323,45 @@ enum DemoCmd {
         plan: PathBuf,
     },
     /// The paper's whole mission: a plan takes the simulated robot out of the basement lab,
-    /// through corridors to the elevators, up to the fourth floor and to the department
-    /// head's office, where it delivers a message.
-    Deliver {
-        /// Building file.
-        #[arg(long, default_value = "devices/denning-sim/buildings/building-a.toml")]
-        building: PathBuf,
-        /// The building's route map the planner plans on (default: beside the building
-        /// file, NAME.map.toml; docs/maps.md).
-        #[arg(long, value_name = "FILE.map.toml")]
-        map: Option<PathBuf>,
-        /// The room to take the message to (default: the map's office). The judge's goal
-        /// moves to that room's door.
-        #[arg(long, value_name = "ROOM")]
-        to: Option<u32>,
-        /// The subtrees the planner builds the plan from (docs/sequence.md); with --tree, the
-        /// plan to run.
-        #[arg(
-            long,
-            value_name = "FILE.xml",
-            default_value = "skills/plans/deliver.xml"
-        )]
-        plan: PathBuf,
-        /// Run this tree of --plan as it is written, not the planner's (e.g. the routes
-        /// written by hand before the planner: manager/planner/tests/fixtures/hand-written.xml).
-        #[arg(long)]
-        tree: Option<String>,
-        #[command(flatten)]
-        run: DemoRuns,
-        /// Simulated seconds before a run counts as failed (20 minutes).
-        #[arg(long, default_value_t = 1200.0)]
-        limit_s: f64,
-        #[command(flatten)]
-        faults: FaultArgs,
-    },
+    /// through corridors to the elevators, up to the fourth floor and to an office (the
+    /// department head's unless --to says), where it delivers a message. The plan is the
+    /// planner's, on the building's route map (docs/maps.md).
+    Deliver(DeliverArgs),
+}
+
+/// `skillfab demo deliver`'s options.
+#[derive(clap::Args, Debug)]
+struct DeliverArgs {
+    /// Building file.
+    #[arg(long, default_value = "devices/denning-sim/buildings/building-a.toml")]
+    building: PathBuf,
+    /// The building's route map the planner plans on (default: beside the building
+    /// file, NAME.map.toml; docs/maps.md).
+    #[arg(long, value_name = "FILE.map.toml")]
+    map: Option<PathBuf>,
+    /// The room to take the message to (default: the map's office). The judge's goal
+    /// moves to that room's door.
+    #[arg(long, value_name = "ROOM")]
+    to: Option<u32>,
+    /// The subtrees the planner builds the plan from (docs/sequence.md); with --tree, the
+    /// plan to run.
+    #[arg(
+        long,
+        value_name = "FILE.xml",
+        default_value = "skills/plans/deliver.xml"
+    )]
+    plan: PathBuf,
+    /// Run this tree of --plan as it is written, not the planner's (e.g. the routes
+    /// written by hand before the planner: manager/planner/tests/fixtures/hand-written.xml).
+    #[arg(long)]
+    tree: Option<String>,
+    #[command(flatten)]
+    run: DemoRuns,
+    /// Simulated seconds before a run counts as failed (20 minutes).
+    #[arg(long, default_value_t = 1200.0)]
+    limit_s: f64,
+    #[command(flatten)]
+    faults: FaultArgs,
 }
 
 /// How the demos run: the arguments `demo exit-lab` and `demo deliver` share.
@@ -635,24 +640,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Cmd::Demo {
-            which:
-                DemoCmd::Deliver {
-                    building,
-                    map,
-                    to,
-                    plan,
-                    tree,
-                    run,
-                    limit_s,
-                    faults,
-                },
+            which: DemoCmd::Deliver(args),
         } => {
             // The planner's plan and a building whose goal is another room live here while
             // the runs last (each run copies the plan into its own directory).
             let work =
                 std::env::temp_dir().join(format!("skillfab-deliver-{}", std::process::id()));
             std::fs::create_dir_all(&work)?;
-            let delivered = deliver(&building, map, to, plan, tree, run, limit_s, &faults, &work);
+            let delivered = deliver(args, &work);
             let _ = std::fs::remove_dir_all(&work);
             delivered
         }
@@ -661,18 +656,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 /// `skillfab demo deliver`: the planner's plan to the room (or a tree of a plan file, as
 /// written), the judge's goal at that room; `work` holds the files this writes.
-#[allow(clippy::too_many_arguments)]
-fn deliver(
-    building: &std::path::Path,
-    map: Option<PathBuf>,
-    to: Option<u32>,
-    plan: PathBuf,
-    tree: Option<String>,
-    run: DemoRuns,
-    limit_s: f64,
-    faults: &FaultArgs,
-    work: &std::path::Path,
-) -> anyhow::Result<()> {
+fn deliver(args: DeliverArgs, work: &std::path::Path) -> anyhow::Result<()> {
+    let DeliverArgs {
+        building,
+        map,
+        to,
+        plan,
+        tree,
+        run,
+        limit_s,
+        faults,
+    } = args;
     use anyhow::Context;
     let json = run.json;
     let (plan, room) = match &tree {
@@ -681,7 +675,7 @@ fn deliver(
             (plan, to)
         }
         None => {
-            let map = map.unwrap_or_else(|| skillfab_planner::map_beside(building));
+            let map = map.unwrap_or_else(|| skillfab_planner::map_beside(&building));
             let p = plan::plan(&map, to, "lab", &plan)
                 .with_context(|| format!("planning on {}", map.display()))?;
             if !json {
@@ -693,10 +687,10 @@ fn deliver(
         }
     };
     let site = match room {
-        Some(r) => plan::building_for_room(building, r, work)?,
+        Some(r) => plan::building_for_room(&building, r, work)?,
         None => None,
     }
-    .unwrap_or_else(|| building.to_path_buf());
+    .unwrap_or(building);
     let mut opts = run.options(demo::Site::Building(site), plan, limit_s)?;
     opts.faults = faults.faults(opts.lockstep, opts.seed)?;
     opts.tree = tree;

@@ -725,9 +725,36 @@ pub enum LoadError {
     Refused(#[from] MapError),
 }
 
+/// A place's index by its floor and name (names are a floor's own).
+type Names<'a> = BTreeMap<(i32, &'a str), usize>;
+
 /// From the file as written to a [`Map`]; every problem found is pushed.
 fn resolve(raw: raw::Map, problems: &mut Vec<Problem>) -> Map {
-    let mut floors = raw.floors.clone();
+    let floors = check_floors(&raw.floors, problems);
+    let junction_at = name_junctions(&raw, &floors, problems);
+    let (legs, leg_at) = resolve_legs(&raw, &floors, &junction_at, problems);
+    let junctions = raw
+        .junctions
+        .iter()
+        .enumerate()
+        .map(|(j, raw_j)| resolve_junction(j, raw_j, &legs, &leg_at, problems))
+        .collect();
+    let lobbies = resolve_lobbies(&raw, &floors, &legs, &leg_at, problems);
+    let map = Map {
+        building: raw.building,
+        office: raw.office,
+        floors,
+        legs,
+        junctions,
+        lobbies,
+    };
+    map.check_doors(problems);
+    map
+}
+
+/// The floors in order, each once.
+fn check_floors(listed: &[i32], problems: &mut Vec<Problem>) -> Vec<i32> {
+    let mut floors = listed.to_vec();
     floors.sort_unstable();
     if floors.is_empty() {
         problems.push(Problem::NoFloors);
@@ -738,16 +765,21 @@ fn resolve(raw: raw::Map, problems: &mut Vec<Problem>) -> Map {
         }
     }
     floors.dedup();
-    let on_floor = |what: String, floor: i32, problems: &mut Vec<Problem>| {
-        if !floors.contains(&floor) {
-            problems.push(Problem::UnknownFloor { what, floor });
-        }
-    };
+    floors
+}
 
-    // Junctions by name.
-    let mut junction_at: BTreeMap<(i32, &str), usize> = BTreeMap::new();
+/// Refuses a place on a floor the map does not list.
+fn on_floor(floors: &[i32], what: String, floor: i32, problems: &mut Vec<Problem>) {
+    if !floors.contains(&floor) {
+        problems.push(Problem::UnknownFloor { what, floor });
+    }
+}
+
+/// The junctions by name: each name once a floor, none a word that names another place.
+fn name_junctions<'a>(raw: &'a raw::Map, floors: &[i32], problems: &mut Vec<Problem>) -> Names<'a> {
+    let mut junction_at = Names::new();
     for (i, j) in raw.junctions.iter().enumerate() {
-        on_floor(format!("junction '{}'", j.name), j.floor, problems);
+        on_floor(floors, format!("junction '{}'", j.name), j.floor, problems);
         if matches!(j.name.as_str(), "lab" | "lobby" | "end") || room_end(&j.name).is_some() {
             problems.push(Problem::ReservedName(j.name.clone()));
         }
@@ -760,11 +792,20 @@ fn resolve(raw: raw::Map, problems: &mut Vec<Problem>) -> Map {
         }
     }
 
-    // Legs.
-    let mut leg_at: BTreeMap<(i32, &str), usize> = BTreeMap::new();
+    junction_at
+}
+
+/// The legs, their ends resolved to places on their floor and their doors read.
+fn resolve_legs<'a>(
+    raw: &'a raw::Map,
+    floors: &[i32],
+    junction_at: &Names<'_>,
+    problems: &mut Vec<Problem>,
+) -> (Vec<Leg>, Names<'a>) {
+    let mut leg_at = Names::new();
     let mut legs = Vec::new();
     for (i, l) in raw.legs.iter().enumerate() {
-        on_floor(format!("leg '{}'", l.name), l.floor, problems);
+        on_floor(floors, format!("leg '{}'", l.name), l.floor, problems);
         if leg_at.insert((l.floor, &l.name), i).is_some() {
             problems.push(Problem::NameTwice {
                 kind: "leg",
@@ -834,116 +875,131 @@ fn resolve(raw: raw::Map, problems: &mut Vec<Problem>) -> Map {
         });
     }
 
-    // Junctions' arms: each side turned into the heading it leaves in, checked against the
-    // way its leg runs.
-    let mut junctions = Vec::new();
-    for (j, raw_j) in raw.junctions.iter().enumerate() {
-        let name = &raw_j.name;
-        let leaving = |leg: usize| -> Option<Heading> {
-            let l: &Leg = &legs[leg];
-            if l.from == End::Junction(j) {
-                Some(l.heading)
-            } else if l.to == End::Junction(j) {
-                Some(l.heading.opposite())
-            } else {
+    (legs, leg_at)
+}
+
+/// A junction's arms: each side turned into the heading it leaves in, checked against the
+/// way its leg runs; every leg that ends there named, and only those.
+fn resolve_junction(
+    j: usize,
+    raw_j: &raw::Junction,
+    legs: &[Leg],
+    leg_at: &Names<'_>,
+    problems: &mut Vec<Problem>,
+) -> Junction {
+    let name = &raw_j.name;
+    let leaving = |leg: usize| -> Option<Heading> {
+        let l: &Leg = &legs[leg];
+        if l.from == End::Junction(j) {
+            Some(l.heading)
+        } else if l.to == End::Junction(j) {
+            Some(l.heading.opposite())
+        } else {
+            None
+        }
+    };
+    let mut arms: Vec<(usize, Heading)> = Vec::new();
+    let mut named = |leg_name: &str, problems: &mut Vec<Problem>| -> Option<usize> {
+        let Some(&leg) = leg_at.get(&(raw_j.floor, leg_name)) else {
+            problems.push(Problem::UnknownLeg {
+                at: format!("junction '{name}' (floor {})", raw_j.floor),
+                leg: leg_name.to_string(),
+            });
+            return None;
+        };
+        if arms.iter().any(|(l, _)| *l == leg) {
+            problems.push(Problem::ArmTwice {
+                junction: name.clone(),
+                leg: leg_name.to_string(),
+            });
+            return None;
+        }
+        match leaving(leg) {
+            Some(h) => {
+                arms.push((leg, h));
+                Some(leg)
+            }
+            None => {
+                problems.push(Problem::NotAnArm {
+                    junction: name.clone(),
+                    leg: leg_name.to_string(),
+                });
                 None
             }
-        };
-        let mut arms: Vec<(usize, Heading)> = Vec::new();
-        let mut named = |leg_name: &str, problems: &mut Vec<Problem>| -> Option<usize> {
-            let Some(&leg) = leg_at.get(&(raw_j.floor, leg_name)) else {
-                problems.push(Problem::UnknownLeg {
-                    at: format!("junction '{name}' (floor {})", raw_j.floor),
-                    leg: leg_name.to_string(),
-                });
-                return None;
-            };
-            if arms.iter().any(|(l, _)| *l == leg) {
-                problems.push(Problem::ArmTwice {
-                    junction: name.clone(),
-                    leg: leg_name.to_string(),
-                });
-                return None;
-            }
-            match leaving(leg) {
-                Some(h) => {
-                    arms.push((leg, h));
-                    Some(leg)
-                }
-                None => {
-                    problems.push(Problem::NotAnArm {
-                        junction: name.clone(),
-                        leg: leg_name.to_string(),
-                    });
-                    None
-                }
-            }
-        };
-        let arriving = named(&raw_j.arriving, problems);
-        let sides = [
-            (Turn::Straight, &raw_j.straight),
-            (Turn::Left, &raw_j.left),
-            (Turn::Right, &raw_j.right),
-        ];
-        let mut seen = Vec::new();
-        for (turn, leg_name) in sides {
-            if let Some(leg_name) = leg_name
-                && let Some(leg) = named(leg_name, problems)
+        }
+    };
+    let arriving = named(&raw_j.arriving, problems);
+    let sides = [
+        (Turn::Straight, &raw_j.straight),
+        (Turn::Left, &raw_j.left),
+        (Turn::Right, &raw_j.right),
+    ];
+    let mut seen = Vec::new();
+    for (turn, leg_name) in sides {
+        if let Some(leg_name) = leg_name
+            && let Some(leg) = named(leg_name, problems)
+        {
+            seen.push((turn, leg));
+        }
+    }
+    if let Some(a) = arriving {
+        // Arriving along a leg is heading against the way it leaves.
+        let heading = arms[0].1.opposite();
+        for (turn, leg) in seen {
+            let expected = heading.after(turn);
+            let actual = arms.iter().find(|(l, _)| *l == leg).map(|(_, h)| *h);
+            if let Some(actual) = actual
+                && actual != expected
             {
-                seen.push((turn, leg));
-            }
-        }
-        if let Some(a) = arriving {
-            // Arriving along a leg is heading against the way it leaves.
-            let heading = arms[0].1.opposite();
-            for (turn, leg) in seen {
-                let expected = heading.after(turn);
-                let actual = arms.iter().find(|(l, _)| *l == leg).map(|(_, h)| *h);
-                if let Some(actual) = actual
-                    && actual != expected
-                {
-                    problems.push(Problem::SideDisagrees {
-                        junction: name.clone(),
-                        side: turn,
-                        arriving: legs[a].name.clone(),
-                        heading,
-                        leg: legs[leg].name.clone(),
-                        expected,
-                        actual,
-                    });
-                }
-            }
-        }
-        for (l, leg) in legs.iter().enumerate() {
-            let ends_here = leg.from == End::Junction(j) || leg.to == End::Junction(j);
-            if ends_here && !arms.iter().any(|(a, _)| *a == l) {
-                problems.push(Problem::ArmMissing {
+                problems.push(Problem::SideDisagrees {
                     junction: name.clone(),
-                    leg: leg.name.clone(),
+                    side: turn,
+                    arriving: legs[a].name.clone(),
+                    heading,
+                    leg: legs[leg].name.clone(),
+                    expected,
+                    actual,
                 });
             }
         }
-        let count = legs
-            .iter()
-            .filter(|l| l.from == End::Junction(j) || l.to == End::Junction(j))
-            .count();
-        if count < 3 {
-            problems.push(Problem::TooFewArms {
+    }
+    for (l, leg) in legs.iter().enumerate() {
+        let ends_here = leg.from == End::Junction(j) || leg.to == End::Junction(j);
+        if ends_here && !arms.iter().any(|(a, _)| *a == l) {
+            problems.push(Problem::ArmMissing {
                 junction: name.clone(),
-                arms: count,
+                leg: leg.name.clone(),
             });
         }
-        junctions.push(Junction {
-            name: name.clone(),
-            floor: raw_j.floor,
-            arms,
+    }
+    let count = legs
+        .iter()
+        .filter(|l| l.from == End::Junction(j) || l.to == End::Junction(j))
+        .count();
+    if count < 3 {
+        problems.push(Problem::TooFewArms {
+            junction: name.clone(),
+            arms: count,
         });
     }
+    Junction {
+        name: name.clone(),
+        floor: raw_j.floor,
+        arms,
+    }
+}
 
-    // Lobbies: one a floor; each opening a leg to it, each leg to it an opening.
+/// The lobbies: one a floor; each opening a leg to it, each leg to it an opening.
+fn resolve_lobbies(
+    raw: &raw::Map,
+    floors: &[i32],
+    legs: &[Leg],
+    leg_at: &Names<'_>,
+    problems: &mut Vec<Problem>,
+) -> Vec<Lobby> {
     let mut lobbies: Vec<Lobby> = Vec::new();
     for raw_l in &raw.lobbies {
-        on_floor("a lobby".to_string(), raw_l.floor, problems);
+        on_floor(floors, "a lobby".to_string(), raw_l.floor, problems);
         if lobbies.iter().any(|l| l.floor == raw_l.floor) {
             problems.push(Problem::LobbyTwice(raw_l.floor));
             continue;
@@ -983,7 +1039,7 @@ fn resolve(raw: raw::Map, problems: &mut Vec<Problem>) -> Map {
         });
     }
     lobbies.sort_by_key(|l| l.floor);
-    for f in &floors {
+    for f in floors {
         if !lobbies.iter().any(|l| l.floor == *f) {
             problems.push(Problem::NoLobby(*f));
         }
@@ -1001,62 +1057,58 @@ fn resolve(raw: raw::Map, problems: &mut Vec<Problem>) -> Map {
         }
     }
 
-    let map = Map {
-        building: raw.building,
-        office: raw.office,
-        floors,
-        legs,
-        junctions,
-        lobbies,
-    };
+    lobbies
+}
 
-    // Doors: a room once, on the floor its number says; the lab once.
-    let mut rooms: BTreeMap<u32, String> = BTreeMap::new();
-    let mut lab: Option<String> = None;
-    for (leg, at, door) in map.doors() {
-        let l = &map.legs[leg];
-        let place = match at {
-            DoorAt::Side { side, index } => {
-                format!("the {side} of leg '{}' (door {})", l.name, index + 1)
-            }
-            DoorAt::End { .. } => format!("the end of leg '{}'", l.name),
-        };
-        match door {
-            Door::Room(room) => {
-                if i64::from(room / 100) != i64::from(l.floor) {
-                    problems.push(Problem::RoomOnWrongFloor {
-                        room,
-                        at: place.clone(),
-                        floor: l.floor,
-                    });
+impl Map {
+    /// Doors: a room once, on the floor its number says; the lab once; the office a room.
+    fn check_doors(&self, problems: &mut Vec<Problem>) {
+        let mut rooms: BTreeMap<u32, String> = BTreeMap::new();
+        let mut lab: Option<String> = None;
+        for (leg, at, door) in self.doors() {
+            let l = &self.legs[leg];
+            let place = match at {
+                DoorAt::Side { side, index } => {
+                    format!("the {side} of leg '{}' (door {})", l.name, index + 1)
                 }
-                if let Some(first) = rooms.get(&room) {
-                    problems.push(Problem::RoomTwice {
-                        room,
+                DoorAt::End { .. } => format!("the end of leg '{}'", l.name),
+            };
+            match door {
+                Door::Room(room) => {
+                    if i64::from(room / 100) != i64::from(l.floor) {
+                        problems.push(Problem::RoomOnWrongFloor {
+                            room,
+                            at: place.clone(),
+                            floor: l.floor,
+                        });
+                    }
+                    if let Some(first) = rooms.get(&room) {
+                        problems.push(Problem::RoomTwice {
+                            room,
+                            first: first.clone(),
+                            second: place,
+                        });
+                    } else {
+                        rooms.insert(room, place);
+                    }
+                }
+                Door::Lab => match &lab {
+                    Some(first) => problems.push(Problem::LabTwice {
                         first: first.clone(),
                         second: place,
-                    });
-                } else {
-                    rooms.insert(room, place);
-                }
+                    }),
+                    None => lab = Some(place),
+                },
+                Door::Unnumbered => {}
             }
-            Door::Lab => match &lab {
-                Some(first) => problems.push(Problem::LabTwice {
-                    first: first.clone(),
-                    second: place,
-                }),
-                None => lab = Some(place),
-            },
-            Door::Unnumbered => {}
+        }
+        if lab.is_none() {
+            problems.push(Problem::NoLab);
+        }
+        if let Some(office) = self.office
+            && !rooms.contains_key(&office)
+        {
+            problems.push(Problem::NoOffice(office));
         }
     }
-    if lab.is_none() {
-        problems.push(Problem::NoLab);
-    }
-    if let Some(office) = map.office
-        && !rooms.contains_key(&office)
-    {
-        problems.push(Problem::NoOffice(office));
-    }
-    map
 }

@@ -185,6 +185,8 @@ pub struct Leg {
     pub left: Vec<Door>,
     /// Doors on the right, likewise.
     pub right: Vec<Door>,
+    /// Rooms whose doors face each other across the corridor, in pairs.
+    pub facing: Vec<[u32; 2]>,
 }
 
 impl Leg {
@@ -194,6 +196,11 @@ impl Leg {
             Side::Left => &self.left,
             Side::Right => &self.right,
         }
+    }
+
+    /// Whether another door faces `room`'s across the corridor.
+    pub fn faced(&self, room: u32) -> bool {
+        self.facing.iter().any(|pair| pair.contains(&room))
     }
 }
 
@@ -353,6 +360,14 @@ pub enum Problem {
         at: String,
         /// That leg's floor.
         floor: i32,
+    },
+    /// A pair of facing doors that are not one on each side of the leg.
+    #[error("leg '{leg}': rooms {} and {} face each other, so each must be on one of its sides", pair[0], pair[1])]
+    NotFacing {
+        /// The leg.
+        leg: String,
+        /// The pair.
+        pair: [u32; 2],
     },
     /// No lab door anywhere.
     #[error("the map has no lab: name it on a leg's side (\"lab\") or at a leg's end (lab)")]
@@ -529,6 +544,8 @@ mod raw {
         pub left: Vec<DoorEntry>,
         #[serde(default)]
         pub right: Vec<DoorEntry>,
+        #[serde(default)]
+        pub facing: Vec<[u32; 2]>,
     }
 
     /// A room number, or a word ("door", "lab").
@@ -872,7 +889,23 @@ fn resolve_legs<'a>(
             heading: l.heading,
             left: doors(Side::Left, &l.left, problems),
             right: doors(Side::Right, &l.right, problems),
+            facing: l.facing.clone(),
         });
+        let leg = &legs[legs.len() - 1];
+        for pair in &leg.facing {
+            let side = |room: u32| {
+                [Side::Left, Side::Right]
+                    .into_iter()
+                    .find(|s| leg.doors(*s).contains(&Door::Room(room)))
+            };
+            match (side(pair[0]), side(pair[1])) {
+                (Some(a), Some(b)) if a != b => {}
+                _ => problems.push(Problem::NotFacing {
+                    leg: leg.name.clone(),
+                    pair: *pair,
+                }),
+            }
+        }
     }
 
     (legs, leg_at)

@@ -65,6 +65,8 @@ pub enum Step {
         room: u32,
         /// The side its door is on (`None`: ahead, at the corridor's end).
         side: Option<Side>,
+        /// Another door faces it across the corridor.
+        faced: bool,
     },
 }
 
@@ -102,8 +104,12 @@ impl fmt::Display for Step {
                     }
                 ),
             },
-            Step::AtTheRoom { room, side } => match side {
-                Some(s) => write!(f, "room {room}: its door on the {s}"),
+            Step::AtTheRoom { room, side, faced } => match side {
+                Some(s) => write!(
+                    f,
+                    "room {room}: its door on the {s}{}",
+                    if *faced { ", a door facing it" } else { "" }
+                ),
                 None => write!(f, "room {room}: its door ahead, at the corridor's end"),
             },
         }
@@ -385,7 +391,10 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
     let lab_floor = map.legs[lab_leg].floor;
     let out_of_the_lab = out_of_the_lab(map, lab_leg, lab_at);
     let to_room = |pos: Pos, door: Option<CameOut>| {
-        room_ahead(map, pos, room, door).map(|side| (0, vec![Step::AtTheRoom { room, side }]))
+        room_ahead(map, pos, room, door).map(|side| {
+            let faced = map.legs[pos.leg].faced(room);
+            (0, vec![Step::AtTheRoom { room, side, faced }])
+        })
     };
     let no_way = |from: &str, to: String, floor: i32| PlanError::NoWay {
         from: from.into(),

@@ -337,7 +337,7 @@ impl Route {
                         });
                     }
                 }
-                Step::AtTheRoom { room, side } => {
+                Step::AtTheRoom { room, side, faced } => {
                     w.set_turn(Turn::Straight);
                     for skill in ["barcode_track", "deliver"] {
                         w.push(X::SetParam {
@@ -346,10 +346,13 @@ impl Route {
                             value: room.to_string(),
                         });
                     }
-                    w.push(X::SubTree(match side {
-                        Some(Side::Left) => "ToTheOfficeOnTheLeft",
-                        Some(Side::Right) => "ToTheOfficeOnTheRight",
-                        None => "ToTheOfficeAhead",
+                    // `door_detect` says left when both sides open at once: a door on the
+                    // right with one facing it is waited for on either side.
+                    w.push(X::SubTree(match (side, faced) {
+                        (Some(Side::Left), _) => "ToTheOfficeOnTheLeft",
+                        (Some(Side::Right), false) => "ToTheOfficeOnTheRight",
+                        (Some(Side::Right), true) => "ToTheOfficeOnTheRightFacingADoor",
+                        (None, _) => "ToTheOfficeAhead",
                     }));
                     w.push(X::SubTree("DeliverTheMessage"));
                 }

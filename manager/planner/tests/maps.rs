@@ -189,6 +189,11 @@ fn a_room_on_two_doors_or_on_the_wrong_floor_is_refused() {
         "leg 'on': 'office' on its right is not a door (a room number, \"door\" or \"lab\")",
     );
     refused(
+        "right = [105]",
+        "right = [105]\nfacing = [[101, 103]]",
+        "leg 'on': rooms 101 and 103 face each other, so each must be on one of its sides",
+    );
+    refused(
         "office = 105",
         "office = 107",
         "the office, room 107, is on no door of the map",
@@ -292,7 +297,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
         r.steps.last(),
         Some(&Step::AtTheRoom {
             room: 105,
-            side: Some(Side::Right)
+            side: Some(Side::Right),
+            faced: false
         })
     );
     // A room on a leg walked against its way: its side is the other one.
@@ -306,7 +312,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
         r.steps.last(),
         Some(&Step::AtTheRoom {
             room: 102,
-            side: Some(Side::Left)
+            side: Some(Side::Left),
+            faced: false
         })
     );
     // On the lab's floor: no elevator. Room 2 is after the lab's door on its side (north):
@@ -322,7 +329,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
             },
             Step::AtTheRoom {
                 room: 2,
-                side: Some(Side::Left)
+                side: Some(Side::Left),
+                faced: false
             },
         ]
     );
@@ -332,7 +340,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
         r.steps.last(),
         Some(&Step::AtTheRoom {
             room: 9,
-            side: None
+            side: None,
+            faced: false
         })
     );
     // Room 1 is across the corridor from the lab's door: whether it is north or south of it
@@ -392,6 +401,15 @@ fn plans_on_the_labs_floor_and_to_a_corridors_end_read_and_say_so() {
     ] {
         assert!(to_405.contains(expected), "{expected}: {to_405}");
     }
+    // A door on the right with one facing it: waited for on either side (door_detect says
+    // left when both open at once).
+    let faced = small.replace("right = [405]", "right = [405]\nfacing = [[403, 405]]");
+    let faced = Map::parse(&faced, "small.map.toml").unwrap();
+    let xml = plan(&faced, Some(405), From::Lab)
+        .unwrap()
+        .plan_xml(&library, "small")
+        .unwrap();
+    assert!(xml.contains("<SubTree ID=\"ToTheOfficeOnTheRightFacingADoor\"/>"));
     // A room on the fifth floor would need a ride the library does not have.
     let mut steps = plan(&map, Some(405), From::Lab).unwrap();
     for s in &mut steps.steps {

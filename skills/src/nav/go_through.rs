@@ -48,13 +48,85 @@ pub struct GoOut<'a> {
 /// Drive through a located opening: to a point `approach` before it on its axis, then along
 /// the axis (a carrot 0.6 m ahead on it), centred between the posts by the side sonars, and
 /// on. Pushing without moving (a post) backs it off to line up again.
+///
+/// Once lined up (or past the line) and within [`COMMIT`] of the door line, it holds the door it is passing:
+/// between the posts the sonars see along the wall both ways and the estimate may move (in
+/// building C seed 17 it moved 1.5 m and 20°, and the robot turned 70° into the corridor). A
+/// newer estimate is taken there only when it refines the held one: centre within
+/// [`REFINE_CROSS`] of its axis and [`REFINE_ALONG`] along it, heading within
+/// [`REFINE_HEADING`]. Backing off a post lets the door go.
 #[derive(Default, Serialize, Deserialize)]
 pub struct GoThrough {
+    /// The door being passed (see above); `None` before the doorway.
+    #[serde(with = "held_door")]
+    held: Option<Door>,
     lined_up: bool,
     /// Cycles spent commanding forward motion without moving.
     stuck: u32,
     /// Cycles of backing off left.
     backing: u32,
+}
+
+/// Lined up this close before the door line (m, along its axis), the door is held.
+pub const COMMIT: f64 = 0.5;
+/// A held door takes a new estimate whose centre is this close to its axis (m) ...
+pub const REFINE_CROSS: f64 = 0.15;
+/// ... and this close along it (m) ...
+pub const REFINE_ALONG: f64 = 0.3;
+/// ... with a heading this close (rad, 5°).
+pub const REFINE_HEADING: f64 = 0.087;
+
+/// The along-axis and cross-axis position of `(x, y)` relative to door `d`'s centre.
+fn door_frame(d: &Door, x: f64, y: f64) -> (f64, f64) {
+    let (c, sn) = (d.heading.cos(), d.heading.sin());
+    (
+        (x - d.x) * c + (y - d.y) * sn,
+        -(x - d.x) * sn + (y - d.y) * c,
+    )
+}
+
+/// How a held door is kept (the message type has no serde).
+mod held_door {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+    use skillfab_msgs::Door;
+
+    type Kept = Option<(f64, f64, f64, f64)>;
+
+    pub fn serialize<S: Serializer>(d: &Option<Door>, s: S) -> Result<S::Ok, S::Error> {
+        d.map(|d| (d.x, d.y, d.heading, d.width)).serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Door>, D::Error> {
+        Ok(Kept::deserialize(d)?.map(|(x, y, heading, width)| Door {
+            found: true,
+            x,
+            y,
+            heading,
+            width,
+        }))
+    }
+}
+
+impl GoThrough {
+    /// The door to drive through this cycle: the newest estimate, or once in the doorway the
+    /// held one, refined by the newest when it stays within bounds.
+    fn door(&mut self, newest: Door, od: &Odometry) -> Door {
+        if let Some(held) = self.held {
+            let (along, cross) = door_frame(&held, newest.x, newest.y);
+            if along.abs() <= REFINE_ALONG
+                && cross.abs() <= REFINE_CROSS
+                && wrap(newest.heading - held.heading).abs() <= REFINE_HEADING
+            {
+                self.held = Some(newest);
+            }
+        } else {
+            let along = door_frame(&newest, od.x, od.y).0;
+            if along > -COMMIT && (self.lined_up || along > 0.3) {
+                self.held = Some(newest);
+            }
+        }
+        self.held.unwrap_or(newest)
+    }
 }
 
 impl Skill for GoThrough {
@@ -66,13 +138,14 @@ impl Skill for GoThrough {
     fn compute(&mut self, ctx: &Ctx<GoThroughParams>, i: GoIn, o: &mut GoOut) -> SkillResult {
         let (d, od, s, p) = (*i.door, *i.odometry, *i.sonar, ctx.params);
         if !d.found {
+            self.held = None;
             o.progress.set(Progress::default());
             return Ok(());
         }
+        let d = self.door(d, &od);
         let (c, sn) = (d.heading.cos(), d.heading.sin());
         // Along-axis and cross-axis position relative to the door centre.
-        let along = (od.x - d.x) * c + (od.y - d.y) * sn;
-        let cross = -(od.x - d.x) * sn + (od.y - d.y) * c;
+        let (along, cross) = door_frame(&d, od.x, od.y);
         let phase = if along >= p.past {
             2
         } else if self.backing == 0 && (self.lined_up || along > 0.3) {
@@ -100,6 +173,7 @@ impl Skill for GoThrough {
         // Off the axis before the wall: line up again.
         if self.lined_up && along < -0.2 && cross.abs() > 0.35 {
             self.lined_up = false;
+            self.held = None;
         }
         let goal = if self.lined_up || along > 0.3 {
             let ahead = along + 0.6;
@@ -130,6 +204,7 @@ impl Skill for GoThrough {
             self.stuck = 0;
             self.backing = 100;
             self.lined_up = false;
+            self.held = None;
         }
         o.drive.set(Drive { translate, rotate });
         Ok(())

@@ -563,3 +563,76 @@ fn door_locate_keeps_to_the_real_door_on_clutter_seed_8s_way() {
     }
     eprintln!("last: {:?}", doors.last());
 }
+
+/// Building C seed 17: between the posts the door's estimate jumped 1.5 m along the wall and
+/// 20° round, and go_through, steering for a point ahead on the new axis, turned the robot
+/// 70° into the corridor. Once in the doorway it holds the door it is passing: a far estimate
+/// is ignored, a near one (a refinement) is taken, and the robot goes straight through.
+#[test]
+fn go_through_holds_the_door_it_is_passing_and_only_refines_it() {
+    let door = Door {
+        found: true,
+        x: 3.0,
+        y: 0.0,
+        heading: 0.0,
+        width: 1.2,
+    };
+    let moved = Door {
+        x: 2.9,
+        y: 1.5,
+        heading: 0.35,
+        ..door
+    };
+    let refined = Door {
+        x: 3.1,
+        y: 0.05,
+        heading: 0.03,
+        ..door
+    };
+    let mut h = Harness::<GoThrough>::new();
+    h.input(GoIn::SONAR, ring(|_| 5.0));
+    // A unicycle from the approach point, heading along the axis.
+    let (mut x, mut y, mut th) = (2.0f64, 0.0f64, 0.0f64);
+    let mut through = false;
+    for k in 0..1000 {
+        // Into the doorway the estimate moves far, then a little.
+        let along = x - 3.0;
+        let estimate = if along < -0.3 {
+            door
+        } else if k % 2 == 0 {
+            moved
+        } else {
+            refined
+        };
+        h.input(GoIn::DOOR, estimate);
+        h.input(
+            GoIn::ODOMETRY,
+            Odometry {
+                x,
+                y,
+                theta: th,
+                v: 0.3,
+                w: 0.0,
+            },
+        );
+        let step = h.step().unwrap();
+        let (d, p) = (
+            *step.output(GoOut::DRIVE).unwrap(),
+            *step.output(GoOut::PROGRESS).unwrap(),
+        );
+        if p.done {
+            through = true;
+            break;
+        }
+        th += d.rotate * 0.01;
+        x += d.translate * 0.01 * th.cos();
+        y += d.translate * 0.01 * th.sin();
+        assert!(
+            th.abs() < 0.15 && y.abs() < 0.1,
+            "step {k}: off the door's axis at ({x:.2}, {y:.2}, {th:.2}): {p:?}"
+        );
+    }
+    assert!(through, "never through: at ({x:.2}, {y:.2}, {th:.2})");
+    // The refinement was taken: through is 0.8 m past the refined door line (x = 3.1).
+    assert!(x > 3.1 + 0.75, "through at x = {x:.2}");
+}

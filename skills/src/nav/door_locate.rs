@@ -172,8 +172,11 @@ struct DoorState {
 
 /// Readings kept for refitting the wall and rebuilding the evidence.
 const HISTORY: usize = 6000;
-/// Readings the wall is refitted on (the newest).
+/// Readings the wall is first fitted on (the newest).
 const FIT_RAYS: usize = 400;
+/// Readings the wall is refitted on (the newest, some 15 s): enough that a few readings
+/// meeting the wall do not move it, few enough that it follows the odometry's drift.
+const REFIT_RAYS: usize = 1200;
 /// The wall is fitted on readings that meet it this close to the barcode (m).
 const FIT_WINDOW: f64 = 1.2;
 /// ... and meet it this close to square (rad).
@@ -424,7 +427,13 @@ impl Skill for DoorLocate {
             // C seed 17: doors reported 0.2 m and 2.5 m from the real one).
             let anchor = if t.seen { (t.x, t.y) } else { w.anchor };
             let current = Wall { anchor, ..w };
-            let rays: Vec<Ray> = self.history.iter().copied().collect();
+            let rays: Vec<Ray> = self
+                .history
+                .iter()
+                .rev()
+                .take(REFIT_RAYS)
+                .copied()
+                .collect();
             let cands =
                 (-REFIT_STEPS..=REFIT_STEPS).map(|d| wrap(w.phi + f64::from(d) * REFIT_STEP));
             let held = Self::support(&rays, &current);

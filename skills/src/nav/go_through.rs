@@ -55,8 +55,17 @@ pub struct GoOut<'a> {
 /// newer estimate is taken there only when it refines the held one: centre within
 /// [`REFINE_CROSS`] of its axis and [`REFINE_ALONG`] along it, heading within
 /// [`REFINE_HEADING`]. Backing off a post lets the door go.
+///
+/// A door it cannot pass is not the door's estimate to keep trying: pushing a post in front
+/// of the door line, it moves its aim [`SHIFT_STEP`] along the wall away from the post (the
+/// side whose front sonars read nearer), up to [`SHIFT_MAX`], and lines up again. An estimate
+/// 0.2–0.3 m off the opening's centre put the robot against a post for the rest of the run
+/// (exit-lab-clutter seed 8 before the door_locate fix, seed 17 after it).
 #[derive(Default, Serialize, Deserialize)]
 pub struct GoThrough {
+    /// How far the aim is moved along the wall from the estimate (m, + to the left going
+    /// through).
+    shift: f64,
     /// The door being passed (see above); `None` before the doorway.
     #[serde(with = "held_door")]
     held: Option<Door>,
@@ -75,6 +84,11 @@ pub const REFINE_CROSS: f64 = 0.15;
 pub const REFINE_ALONG: f64 = 0.3;
 /// ... with a heading this close (rad, 5°).
 pub const REFINE_HEADING: f64 = 0.087;
+
+/// A post met in front of the door line moves the aim this far along the wall (m) ...
+pub const SHIFT_STEP: f64 = 0.15;
+/// ... up to this far from the estimate (m).
+pub const SHIFT_MAX: f64 = 0.45;
 
 /// The along-axis and cross-axis position of `(x, y)` relative to door `d`'s centre.
 fn door_frame(d: &Door, x: f64, y: f64) -> (f64, f64) {
@@ -144,6 +158,11 @@ impl Skill for GoThrough {
         }
         let d = self.door(d, &od);
         let (c, sn) = (d.heading.cos(), d.heading.sin());
+        let d = Door {
+            x: d.x - self.shift * sn,
+            y: d.y + self.shift * c,
+            ..d
+        };
         // Along-axis and cross-axis position relative to the door centre.
         let (along, cross) = door_frame(&d, od.x, od.y);
         let phase = if along >= p.past {
@@ -201,6 +220,17 @@ impl Skill for GoThrough {
             self.stuck = 0;
         }
         if self.stuck > 80 {
+            if (-0.9..0.3).contains(&along) {
+                // A post: aim away from it.
+                let left = min_in(&s, 0.2, 1.3);
+                let right = min_in(&s, -1.3, -0.2);
+                let away = if left < right {
+                    -SHIFT_STEP
+                } else {
+                    SHIFT_STEP
+                };
+                self.shift = (self.shift + away).clamp(-SHIFT_MAX, SHIFT_MAX);
+            }
             self.stuck = 0;
             self.backing = 100;
             self.lined_up = false;

@@ -670,3 +670,52 @@ fn door_locate_holds_the_door_while_the_robot_walks_away() {
         );
     }
 }
+
+/// Pushing a post in front of the door line (the robot does not move; the left front sonars
+/// read near), go_through backs off and aims 0.15 m to the right of the estimate.
+#[test]
+fn go_through_aims_away_from_a_post_it_cannot_pass() {
+    let door = Door {
+        found: true,
+        x: 3.0,
+        y: 0.0,
+        heading: 0.0,
+        width: 1.2,
+    };
+    let mut h = Harness::<GoThrough>::new();
+    h.input(GoIn::DOOR, door);
+    // Lined up at the approach point, then against a post on the left 0.5 m before the line.
+    let at = |x: f64, v: f64| Odometry {
+        x,
+        y: 0.0,
+        theta: 0.0,
+        v,
+        w: 0.0,
+    };
+    h.input(GoIn::SONAR, ring(|_| 5.0))
+        .input(GoIn::ODOMETRY, at(2.0, 0.3));
+    h.step().unwrap();
+    h.input(
+        GoIn::SONAR,
+        ring(|a| if (0.0..1.0).contains(&a) { 0.2 } else { 5.0 }),
+    )
+    .input(GoIn::ODOMETRY, at(2.5, 0.0));
+    let mut backing = 0;
+    for _ in 0..400 {
+        let d = *h.step().unwrap().output(GoOut::DRIVE).unwrap();
+        if d.translate < 0.0 {
+            backing += 1;
+        }
+    }
+    assert!(backing > 0, "never backed off");
+    // Backed off: it lines up on an axis 0.15 m to the right (y = -0.15).
+    h.input(GoIn::SONAR, ring(|_| 5.0))
+        .input(GoIn::ODOMETRY, at(1.0, 0.0));
+    let p = *h.step().unwrap().output(GoOut::PROGRESS).unwrap();
+    assert!((p.value + 2.0).abs() < 1e-9, "{p:?}");
+    let d = *h.step().unwrap().output(GoOut::DRIVE).unwrap();
+    assert!(
+        d.rotate < 0.0,
+        "turns right toward the moved approach point: {d:?}"
+    );
+}

@@ -49,18 +49,18 @@ pub struct GoOut<'a> {
 /// the axis (a carrot 0.6 m ahead on it), centred between the posts by the side sonars, and
 /// on. Pushing without moving (a post) backs it off to line up again.
 ///
-/// Once lined up (or past the line) and within [`COMMIT`] of the door line, it holds the door it is passing:
-/// between the posts the sonars see along the wall both ways and the estimate may move (in
-/// building C seed 17 it moved 1.5 m and 20°, and the robot turned 70° into the corridor). A
-/// newer estimate is taken there only when it refines the held one: centre within
-/// [`REFINE_CROSS`] of its axis and [`REFINE_ALONG`] along it, heading within
+/// Once lined up (or past the line) and within [`COMMIT`] of the door line, it holds the door
+/// it is passing: between the posts the sonars see along the wall both ways and the estimate
+/// may move (in building C seed 17 it moved 1.5 m and 20°, and the robot turned 70° into the
+/// corridor). A newer estimate is taken there only when it refines the held one: centre
+/// within [`REFINE_CROSS`] of its axis and [`REFINE_ALONG`] along it, heading within
 /// [`REFINE_HEADING`]. Backing off a post lets the door go.
 ///
-/// A door it cannot pass is not the door's estimate to keep trying: pushing a post in front
-/// of the door line, it moves its aim [`SHIFT_STEP`] along the wall away from the post (the
-/// side whose front sonars read nearer), up to [`SHIFT_MAX`], and lines up again. An estimate
-/// 0.2–0.3 m off the opening's centre put the robot against a post for the rest of the run
-/// (exit-lab-clutter seed 8 before the door_locate fix, seed 17 after it).
+/// An estimate it cannot pass is not tried again as it is: pushing a post in front of the
+/// door line, it moves its aim [`SHIFT_STEP`] along the wall away from the post (the side
+/// whose front sonars read nearer), up to [`SHIFT_MAX`], and lines up again. An estimate
+/// 0.2–0.3 m off the opening's centre had put the robot against a post for the rest of the
+/// run (exit-lab-clutter seed 8 before door_locate's refit changed, seed 17 after).
 #[derive(Default, Serialize, Deserialize)]
 pub struct GoThrough {
     /// How far the aim is moved along the wall from the estimate (m, + to the left going

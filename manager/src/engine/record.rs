@@ -177,6 +177,7 @@ impl Recording {
             if let Err(e) = drained {
                 tracing::warn!(%topic, error = %e, "recording read failed");
             }
+            let mut samples = Vec::with_capacity(taken.len());
             for (bytes, h) in taken {
                 // A command's header names the proposal that won, not the device.
                 let source = match h
@@ -209,13 +210,20 @@ impl Recording {
                     self.out_of_order += 1;
                 }
                 *last = h.cycle;
-                n += 1;
-                self.rec.sample(IoSample {
+                samples.push(IoSample {
                     cycle: h.cycle,
                     stamp_ns: h.stamp_ns,
                     source,
                     bytes,
                 });
+            }
+            // A topic with several producers (a channel's proposals) delivers their samples
+            // in the order its publishers connected, which is the host's: recorded by cycle,
+            // then producer's name, so one run's recording is the same on any host.
+            samples.sort_by(|a, b| (a.cycle, &a.source.skill).cmp(&(b.cycle, &b.source.skill)));
+            n += samples.len() as u64;
+            for sample in samples {
+                self.rec.sample(sample);
             }
         }
         self.samples += n;

@@ -69,7 +69,8 @@ pub(super) fn release(skills: &mut Skills, names: &[String]) -> Result<Effects, 
     Ok(effects)
 }
 
-/// What the wanted skills `names` need running (themselves first among the ones they read).
+/// What the wanted skills `names` need running: they and their producers, transitively, each
+/// producer before the skills that read it.
 fn needed_by(skills: &Skills, names: &[String]) -> Result<Vec<String>, ControlError> {
     let known = skills.known();
     match crate::graph::demand(&known, names) {

@@ -104,6 +104,8 @@ for _name, _res, _args in [
     ("sf_client_free", None, [_P]),
     ("sf_client_activate", _c.c_int32, [_P, _S]),
     ("sf_client_deactivate", _c.c_int32, [_P, _S]),
+    ("sf_client_want", _c.c_int32, [_P, _S]),
+    ("sf_client_release", _c.c_int32, [_P, _S]),
     ("sf_client_set_param", _c.c_int32, [_P, _S, _S, _S]),
     ("sf_client_get_param", _c.c_int32, [_P, _S, _S, _c.c_char_p, _c.c_size_t]),
     ("sf_client_query", _c.c_int32, [_P, _S, _c.c_char_p, _c.c_size_t]),
@@ -327,6 +329,14 @@ class Client:
 
     def deactivate(self, skill):
         _check(lib.sf_client_deactivate(self._c, _b(skill)))
+
+    def want(self, skill):
+        """Activates `skill` with every skill it reads from, transitively."""
+        _check(lib.sf_client_want(self._c, _b(skill)))
+
+    def release(self, skill):
+        """Deactivates a wanted skill and what was activated only for it."""
+        _check(lib.sf_client_release(self._c, _b(skill)))
 
     def set_param(self, skill, param, value):
         """Sets a parameter (checked against its type and bounds by the manager)."""

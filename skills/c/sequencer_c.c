@@ -1,6 +1,7 @@
 /* sequencer_c: a sequencer in C driving the hello network (skills/launch/hello.toml) through
  * libskillfab's client: set a parameter, read it back, query an output, wait for a monitor's
- * event, deactivate and reactivate a skill. Exits 0 when every step did what it should.
+ * event, deactivate and reactivate a skill, want a skill (its producer comes with it) and
+ * release it. Exits 0 when every step did what it should.
  *
  *   target/debug/skillfab up skills/launch/hello.toml &   then   target/debug/sequencer_c
  */
@@ -54,6 +55,26 @@ int main(int argc, char **argv) {
     TRY(sf_client_deactivate(c, "smooth"));
     TRY(sf_client_activate(c, "smooth"));
     printf("smooth deactivated and activated again\n");
+
+    /* Demand: smooth reads what scale writes, so wanting smooth brings scale back, and
+     * releasing smooth deactivates both. A skill nobody knows is refused. */
+    TRY(sf_client_deactivate(c, "smooth"));
+    TRY(sf_client_deactivate(c, "scale"));
+    TRY(sf_client_want(c, "smooth"));
+    static char list[1 << 16];
+    TRY(sf_client_list(c, list, sizeof list));
+    const char *scale = strstr(list, "\"name\":\"scale\"");
+    const char *state = scale ? strstr(scale, "\"state\":\"") : NULL;
+    if (!state || strncmp(state + 9, "active\"", 7) != 0) {
+        fprintf(stderr, "sequencer_c: scale is not active after want smooth: %s\n", list);
+        return 1;
+    }
+    TRY(sf_client_release(c, "smooth"));
+    if (sf_client_want(c, "ghost") >= 0) return 1;
+    printf("want refused: %s\n", sf_last_error());
+    TRY(sf_client_activate(c, "scale"));
+    TRY(sf_client_activate(c, "smooth"));
+    printf("wanted smooth with scale, released both\n");
     sf_client_free(c);
     printf("ok\n");
     return 0;

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """sequencer_py: a sequencer in Python driving the hello network (skills/launch/hello.toml):
 set and read a parameter, query an output, wait for a monitor's event, deactivate and
-reactivate a skill. Exits 0 when every step did what it should.
+reactivate a skill, want a skill (its producer comes with it) and release it. Exits 0 when every step did what it should.
 
     target/debug/skillfab up skills/launch/hello.toml &
     skills/python/sequencer_py.py [DOMAIN]
@@ -37,6 +37,18 @@ def main():
         c.deactivate("smooth")
         c.activate("smooth")
         print("smooth deactivated and activated again")
+        # Demand: smooth reads what scale writes, so wanting smooth brings scale back.
+        c.deactivate("smooth")
+        c.deactivate("scale")
+        c.want("smooth")
+        state = {s["name"]: s["state"] for s in c.skills()}
+        assert state["smooth"] == "active" and state["scale"] == "active", state
+        c.release("smooth")
+        state = {s["name"]: s["state"] for s in c.skills()}
+        assert state["smooth"] == "inactive" and state["scale"] == "inactive", state
+        print("wanted smooth with scale, released both")
+        c.activate("scale")
+        c.activate("smooth")
     print("ok")
 
 

@@ -169,6 +169,25 @@ int32_t sf_client_activate(sf_client *client, const char *skill);
 int32_t sf_client_deactivate(sf_client *client, const char *skill);
 
 /**
+ * Wants skill `skill`: activates it with every skill it reads from, transitively (the
+ * producers that were inactive are activated on demand). Refused, with nothing changed, when
+ * an input has no producer or producers read each other (the error says which).
+ *
+ * # Safety
+ * As `sf_client_activate`.
+ */
+int32_t sf_client_want(sf_client *client, const char *skill);
+
+/**
+ * Releases wanted skill `skill`: deactivates it and every skill activated on demand that no
+ * wanted skill still reads from. A skill activated by `sf_client_activate` stays active.
+ *
+ * # Safety
+ * As `sf_client_activate`.
+ */
+int32_t sf_client_release(sf_client *client, const char *skill);
+
+/**
  * Sets `skill`'s parameter `param` from text (parsed and bound-checked by its declared
  * type; a refusal says why); applied from the next cycle.
  *

@@ -136,6 +136,10 @@ public:
 
     void activate(const char *skill) { check(sf_client_activate(c_, skill)); }
     void deactivate(const char *skill) { check(sf_client_deactivate(c_, skill)); }
+    /// Activates `skill` with every skill it reads from, transitively.
+    void want(const char *skill) { check(sf_client_want(c_, skill)); }
+    /// Deactivates a wanted skill and what was activated only for it.
+    void release(const char *skill) { check(sf_client_release(c_, skill)); }
     void set_param(const char *skill, const char *param, const char *value) {
         check(sf_client_set_param(c_, skill, param, value));
     }

@@ -159,6 +159,29 @@ pub unsafe extern "C" fn sf_client_deactivate(client: *mut sf_client, skill: *co
     }
 }
 
+/// Wants skill `skill`: activates it with every skill it reads from, transitively (the
+/// producers that were inactive are activated on demand). Refused, with nothing changed, when
+/// an input has no producer or producers read each other (the error says which).
+///
+/// # Safety
+/// As `sf_client_activate`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn sf_client_want(client: *mut sf_client, skill: *const c_char) -> i32 {
+    // SAFETY: forwarded caller contract.
+    unsafe { with_client(client, [(skill, "skill")], |c, [s]| status(c.inner.want(&[s]))) }
+}
+
+/// Releases wanted skill `skill`: deactivates it and every skill activated on demand that no
+/// wanted skill still reads from. A skill activated by `sf_client_activate` stays active.
+///
+/// # Safety
+/// As `sf_client_activate`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn sf_client_release(client: *mut sf_client, skill: *const c_char) -> i32 {
+    // SAFETY: forwarded caller contract.
+    unsafe { with_client(client, [(skill, "skill")], |c, [s]| status(c.inner.release(&[s]))) }
+}
+
 /// Sets `skill`'s parameter `param` from text (parsed and bound-checked by its declared
 /// type; a refusal says why); applied from the next cycle.
 ///

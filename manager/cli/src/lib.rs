@@ -708,12 +708,16 @@ fn report(summary: &demo::Summary, json: bool, what: &str) -> anyhow::Result<()>
         println!("{}", serde_json::to_string(&summary)?);
     } else {
         println!(
-            "{} of {} runs {what}; median time {}",
+            "{} of {} runs {what}; median time {}{}",
             summary.successes,
             summary.runs,
             summary
                 .median_time_s
-                .map_or("-".into(), |t| format!("{t:.1} s simulated"))
+                .map_or("-".into(), |t| format!("{t:.1} s simulated")),
+            match summary.errors {
+                0 => String::new(),
+                n => format!("; {n} ended in an error (see above)"),
+            }
         );
     }
     Ok(())

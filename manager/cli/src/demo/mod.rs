@@ -143,8 +143,41 @@ pub struct RunOutcome {
     /// the plan's steps), the simulator's ground truth (`trajectory.csv`), the launch file
     /// and the plan. A run that succeeded leaves nothing.
     pub run_dir: Option<PathBuf>,
+    /// Why the run ended in an error instead of a judgement (the network did not come up,
+    /// the judge lost the manager): such a run counts as not successful, and the batch goes
+    /// on with the next seed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
     #[serde(skip)]
     trajectory: Vec<TruthRecord>,
+}
+
+impl RunOutcome {
+    /// A run of `seed` on `site` with nothing judged yet.
+    fn new(seed: u64, site: &Site) -> RunOutcome {
+        RunOutcome {
+            seed,
+            world: site
+                .path()
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            success: false,
+            time_s: 0.0,
+            wall_s: 0.0,
+            collisions: 0,
+            steps: Vec::new(),
+            kills: Vec::new(),
+            max_command_gap_s: 0.0,
+            max_stale_drive_s: 0.0,
+            link: None,
+            safety: None,
+            end: None,
+            run_dir: None,
+            error: None,
+            trajectory: Vec::new(),
+        }
+    }
 }
 
 /// What `--json` prints.
@@ -154,6 +187,9 @@ pub struct Summary {
     pub runs: u32,
     /// Successful runs.
     pub successes: u32,
+    /// Runs that ended in an error instead of a judgement (each run's `error` says why);
+    /// counted as not successful.
+    pub errors: u32,
     /// Median simulated time of the successful runs (s).
     pub median_time_s: Option<f64>,
     /// Each run.
@@ -454,28 +490,7 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     let (mut net, traj) = start(opts, seed, run)?;
     let mut c = connect(&net, opts.site.skills())?;
     c.subscribe()?;
-    let mut out = RunOutcome {
-        seed,
-        world: opts
-            .site
-            .path()
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        success: false,
-        time_s: 0.0,
-        wall_s: 0.0,
-        collisions: 0,
-        steps: Vec::new(),
-        kills: Vec::new(),
-        max_command_gap_s: 0.0,
-        max_stale_drive_s: 0.0,
-        link: None,
-        safety: None,
-        end: None,
-        run_dir: None,
-        trajectory: Vec::new(),
-    };
+    let mut out = RunOutcome::new(seed, &opts.site);
     // The judge's own steps (the plan's are its runner's, read from its log).
     let step = |c: &Client, out: &mut RunOutcome, what: &str| {
         let cycle = c.stats().map(|s| s.cycles).unwrap_or(0);
@@ -689,8 +704,21 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
                 opts.site.path().display()
             );
         }
-        let r = run_once(opts, seed, run)?;
-        if opts.verbose {
+        let wall = Instant::now();
+        let r = match run_once(opts, seed, run) {
+            Ok(r) => r,
+            Err(e) if interrupted() => return Err(e),
+            Err(e) => {
+                // One run's error (a network that did not come up on a loaded host, say)
+                // is that run's outcome, not the end of the batch.
+                let mut r = RunOutcome::new(seed, &opts.site);
+                r.wall_s = wall.elapsed().as_secs_f64();
+                r.error = Some(format!("{e:#}"));
+                eprintln!("run {} of {} (seed {seed}): error: {e:#}", run + 1, opts.runs);
+                r
+            }
+        };
+        if opts.verbose && r.error.is_none() {
             println!(
                 "  => {} in {:.1} s simulated ({:.1} s of host time), {} collisions",
                 if r.success { "SUCCESS" } else { "FAILURE" },
@@ -703,6 +731,7 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
             }
         }
         if run == 0
+            && r.error.is_none()
             && let Some(p) = &opts.plot
         {
             let picture = match &opts.site {
@@ -722,9 +751,16 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
         .map(|r| r.time_s)
         .collect();
     times.sort_by(f64::total_cmp);
+    let errors = detail.iter().filter(|r| r.error.is_some()).count() as u32;
+    if errors == opts.runs
+        && let Some(e) = detail.first().and_then(|r| r.error.clone())
+    {
+        bail!("every run ended in an error; the first: {e}");
+    }
     Ok(Summary {
         runs: opts.runs,
         successes: detail.iter().filter(|r| r.success).count() as u32,
+        errors,
         median_time_s: (!times.is_empty()).then(|| times[times.len() / 2]),
         runs_detail: detail,
     })

@@ -267,7 +267,10 @@ impl Observers {
         }
         let readers = &self.readers;
         let latest = |r: &crate::monitors::Resolved| readers.get(&r.topic)?.latest_of(r.slot);
-        let value = |r: &crate::monitors::Resolved| r.field.read(latest(r)?.0);
+        let value = |r: &crate::monitors::Resolved, from: u64| {
+            let (bytes, header) = latest(r)?;
+            (header.cycle >= from).then(|| r.field.read(bytes))?
+        };
         let stamp = |r: &crate::monitors::Resolved| latest(r).map(|(_, h)| h.stamp_ns);
         self.monitors.evaluate(cycle, &value, &stamp)
     }

@@ -168,6 +168,7 @@ impl Manager {
             self.cycles.holds.set(&client, Some(at));
         }
         let mut lost = Vec::new();
+        let from = self.in_progress() + 1;
         for m in saved.monitors {
             self.observers.monitors.set_next_id(m.id);
             let added = super::requests::add_monitor(
@@ -178,6 +179,7 @@ impl Manager {
                 m.text.clone(),
                 m.mode,
                 m.hold,
+                from,
             );
             if let Err(e) = added {
                 lost.push(format!("{} ({e})", m.text));

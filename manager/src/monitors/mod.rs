@@ -37,7 +37,9 @@ impl Default for Monitors {
 }
 
 impl Monitors {
-    /// Installs a monitor of `client` on a parsed, resolved condition; returns its id.
+    /// Installs a monitor of `client` on a parsed, resolved condition, evaluated from cycle
+    /// `from` on (see [`Monitor::from_cycle`]); returns its id.
+    #[allow(clippy::too_many_arguments)]
     pub fn install(
         &mut self,
         client: &str,
@@ -46,18 +48,13 @@ impl Monitors {
         mode: MonitorMode,
         hold: u32,
         paths: Vec<Resolved>,
+        from: u64,
     ) -> u64 {
         let id = self.next_id;
         self.next_id += 1;
-        self.list.push(Monitor::new(
-            id,
-            text,
-            expr,
-            mode,
-            hold,
-            client.to_string(),
-            paths,
-        ));
+        let mut m = Monitor::new(id, text, expr, mode, hold, client.to_string(), paths);
+        m.from_cycle = from;
+        self.list.push(m);
         id
     }
 
@@ -127,17 +124,23 @@ impl Monitors {
     }
 
     /// Evaluates every monitor on the newest samples at the end of `cycle` (`value` gives the
-    /// value at a resolved path, `stamp` the stamp of the sample it is read from): the events
-    /// of those that fired. `Once` monitors that fired are removed and remembered.
+    /// value at a resolved path read from a sample of that cycle or later — none if the
+    /// newest is older —, `stamp` the stamp of the sample it is read from): the events of
+    /// those that fired. A monitor is not evaluated before its [`Monitor::from_cycle`].
+    /// `Once` monitors that fired are removed and remembered.
     pub fn evaluate(
         &mut self,
         cycle: u64,
-        value: &dyn Fn(&Resolved) -> Option<Value>,
+        value: &dyn Fn(&Resolved, u64) -> Option<Value>,
         stamp: &dyn Fn(&Resolved) -> Option<u64>,
     ) -> Vec<EventKind> {
         let mut events = Vec::new();
         for m in &mut self.list {
-            if let Some(values) = m.step(value) {
+            if cycle < m.from_cycle {
+                continue;
+            }
+            let from = m.from_cycle;
+            if let Some(values) = m.step(&|r| value(r, from)) {
                 events.push(EventKind::MonitorFired {
                     id: m.id,
                     client: m.client.clone(),
@@ -192,6 +195,12 @@ pub struct Monitor {
     pub paths: Vec<Resolved>,
     /// Times fired.
     pub fired: u64,
+    /// The first cycle it is evaluated in, and the oldest cycle whose samples it reads: the
+    /// first to start after it was installed, so every request its client sent before it
+    /// (a parameter, an activation) has taken effect. A value a skill computed before (with
+    /// its old parameter, or in an earlier activation) never fires it, however late the
+    /// skill or the cycle ran.
+    pub from_cycle: u64,
     streak: u32,
     was_true: bool,
 }
@@ -216,6 +225,7 @@ impl Monitor {
             client,
             paths,
             fired: 0,
+            from_cycle: 0,
             streak: 0,
             was_true: false,
         }
@@ -321,6 +331,37 @@ mod tests {
         assert_eq!(run(&mut monitor(MonitorMode::Once, 0), &s), vec![1]);
         assert_eq!(run(&mut monitor(MonitorMode::Edge, 2), &s), vec![2, 5]);
         assert_eq!(run(&mut monitor(MonitorMode::Every, 3), &s), vec![6]);
+    }
+
+    #[test]
+    fn a_monitor_starts_at_its_cycle_and_reads_no_older_sample() {
+        let m = monitor(MonitorMode::Once, 0);
+        let mut ms = Monitors::default();
+        let id = ms.install(
+            "c",
+            m.text.clone(),
+            expr::parse("a.b.c > 2").unwrap(),
+            MonitorMode::Once,
+            0,
+            m.paths.clone(),
+            10,
+        );
+        // The newest sample says 5, made in `made`: a value is read only from a sample of
+        // the monitor's first cycle or later.
+        let made = std::cell::Cell::new(9u64);
+        let value = |_: &Resolved, from: u64| (made.get() >= from).then_some(Value::Float(5.0));
+        let stamp = |_: &Resolved| Some(0);
+        assert!(
+            ms.evaluate(9, &value, &stamp).is_empty(),
+            "before its cycle"
+        );
+        assert!(
+            ms.evaluate(10, &value, &stamp).is_empty(),
+            "a sample of cycle 9"
+        );
+        made.set(10);
+        let fired = ms.evaluate(10, &value, &stamp);
+        assert!(matches!(fired.as_slice(), [EventKind::MonitorFired { id: i, .. }] if *i == id));
     }
 
     #[test]

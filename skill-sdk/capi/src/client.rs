@@ -168,7 +168,11 @@ pub unsafe extern "C" fn sf_client_deactivate(client: *mut sf_client, skill: *co
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn sf_client_want(client: *mut sf_client, skill: *const c_char) -> i32 {
     // SAFETY: forwarded caller contract.
-    unsafe { with_client(client, [(skill, "skill")], |c, [s]| status(c.inner.want(&[s]))) }
+    unsafe {
+        with_client(client, [(skill, "skill")], |c, [s]| {
+            status(c.inner.want(&[s]))
+        })
+    }
 }
 
 /// Releases wanted skill `skill`: deactivates it and every skill activated on demand that no
@@ -179,7 +183,11 @@ pub unsafe extern "C" fn sf_client_want(client: *mut sf_client, skill: *const c_
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn sf_client_release(client: *mut sf_client, skill: *const c_char) -> i32 {
     // SAFETY: forwarded caller contract.
-    unsafe { with_client(client, [(skill, "skill")], |c, [s]| status(c.inner.release(&[s]))) }
+    unsafe {
+        with_client(client, [(skill, "skill")], |c, [s]| {
+            status(c.inner.release(&[s]))
+        })
+    }
 }
 
 /// Sets `skill`'s parameter `param` from text (parsed and bound-checked by its declared

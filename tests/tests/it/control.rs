@@ -271,6 +271,55 @@ fn a_wanted_skill_runs_with_its_producers_and_releasing_it_releases_them() {
     t.signal(lonely, Signal::SIGTERM);
 }
 
+/// A monitor reads only values made after it was installed: the last output of a skill
+/// deactivated before it stands on its topic and does not fire it; the first output of the
+/// skill's next activation does.
+#[test]
+fn a_value_made_before_a_monitor_does_not_fire_it() {
+    let t = hello("stale");
+    let mut c = Client::connect(&t.domain).unwrap();
+    c.subscribe().unwrap();
+    t.wait_until("scale's output above 0", || {
+        c.query("scale.scaled.value")
+            .is_ok_and(|(v, _)| v.as_f64().is_some_and(|v| v > 0.0))
+    });
+    c.deactivate(&["scale"]).unwrap();
+    let id = c
+        .add_monitor("scale.scaled.value > 0", MonitorMode::Once, 0)
+        .unwrap();
+    let fired = |c: &mut Client, wait: Duration| {
+        let until = std::time::Instant::now() + wait;
+        while let Some(ev) = c
+            .next_event(until.saturating_duration_since(std::time::Instant::now()))
+            .unwrap()
+        {
+            if matches!(ev.kind, EventKind::MonitorFired { id: m, .. } if m == id) {
+                return true;
+            }
+        }
+        false
+    };
+    let (last, _) = c.query("scale.scaled.value").unwrap();
+    assert!(
+        last.as_f64().unwrap() > 0.0,
+        "the stale value would fire it"
+    );
+    let a = json(&t, &["stats"])["cycles"].as_u64().unwrap();
+    assert!(
+        !fired(&mut c, Duration::from_millis(500)),
+        "fired on a stale value"
+    );
+    assert!(
+        json(&t, &["stats"])["cycles"].as_u64().unwrap() > a + 20,
+        "cycles ran meanwhile"
+    );
+    c.activate(&["scale"]).unwrap();
+    assert!(
+        fired(&mut c, Duration::from_secs(20)),
+        "not fired once scale ran"
+    );
+}
+
 #[test]
 fn the_client_library_sees_events_in_order_with_typed_errors() {
     let mut t = hello("client");

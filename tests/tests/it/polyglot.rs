@@ -204,8 +204,14 @@ fn sequencers_in_c_and_python_drive_the_hello_network() {
     assert!(stdout.contains("scale.gain = 3"), "{stdout}");
     assert!(stdout.contains("refused: "), "{stdout}");
     assert!(stdout.contains("\"event\":\"monitor_fired\""), "{stdout}");
-    assert!(stdout.contains("wanted smooth with scale, released both"), "{stdout}");
-    assert!(stdout.contains("want refused: unknown skill 'ghost'"), "{stdout}");
+    assert!(
+        stdout.contains("wanted smooth with scale, released both"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("want refused: unknown skill 'ghost'"),
+        "{stdout}"
+    );
     assert!(stdout.trim_end().ends_with("ok"), "{stdout}");
 
     let stdout = run_ok(
@@ -216,7 +222,10 @@ fn sequencers_in_c_and_python_drive_the_hello_network() {
     assert!(stdout.contains("skills: "), "{stdout}");
     assert!(stdout.contains("refused: "), "{stdout}");
     assert!(stdout.contains("'event': 'monitor_fired'"), "{stdout}");
-    assert!(stdout.contains("wanted smooth with scale, released both"), "{stdout}");
+    assert!(
+        stdout.contains("wanted smooth with scale, released both"),
+        "{stdout}"
+    );
     assert!(stdout.trim_end().ends_with("ok"), "{stdout}");
     assert_eq!(t.ctl(&["get", "scale.gain"]).trim(), "3");
 

@@ -714,7 +714,11 @@ pub fn demo(opts: &DemoOptions) -> anyhow::Result<Summary> {
                 let mut r = RunOutcome::new(seed, &opts.site);
                 r.wall_s = wall.elapsed().as_secs_f64();
                 r.error = Some(format!("{e:#}"));
-                eprintln!("run {} of {} (seed {seed}): error: {e:#}", run + 1, opts.runs);
+                eprintln!(
+                    "run {} of {} (seed {seed}): error: {e:#}",
+                    run + 1,
+                    opts.runs
+                );
                 r
             }
         };

@@ -141,18 +141,22 @@ impl Manager {
                 query::query(&mut self.observers, &self.skills, &self.node, &path),
                 Effects::default(),
             ),
-            Request::AddMonitor { expr, mode, hold } => (
-                add_monitor(
-                    &mut self.observers,
-                    &self.skills,
-                    &self.node,
-                    client,
-                    expr,
-                    mode,
-                    hold,
-                ),
-                Effects::default(),
-            ),
+            Request::AddMonitor { expr, mode, hold } => {
+                let from = self.in_progress() + 1;
+                (
+                    add_monitor(
+                        &mut self.observers,
+                        &self.skills,
+                        &self.node,
+                        client,
+                        expr,
+                        mode,
+                        hold,
+                        from,
+                    ),
+                    Effects::default(),
+                )
+            }
             Request::RemoveMonitor(id) => (
                 if self.observers.monitors.remove(id) {
                     Ok(Reply::Done)

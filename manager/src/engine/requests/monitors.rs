@@ -11,7 +11,9 @@ use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
 use skillfab_proto::control::{ControlError, MonitorMode, Reply, Response};
 
-/// Parses and type-checks a monitor expression against the outputs it reads; installs it.
+/// Parses and type-checks a monitor expression against the outputs it reads; installs it,
+/// evaluated from cycle `from` on (the next to start: see `Monitor::from_cycle`).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn add_monitor(
     observers: &mut Observers,
     skills: &Skills,
@@ -20,6 +22,7 @@ pub(crate) fn add_monitor(
     expr: String,
     mode: MonitorMode,
     hold: u32,
+    from: u64,
 ) -> Response {
     let parsed = expr::parse(&expr).map_err(|error| ControlError::BadExpression {
         expr: skillfab_proto::control::shorten(&expr, 120),
@@ -43,6 +46,6 @@ pub(crate) fn add_monitor(
     }
     let id = observers
         .monitors
-        .install(client, expr, parsed, mode, hold, paths);
+        .install(client, expr, parsed, mode, hold, paths, from);
     Ok(Reply::MonitorAdded(id))
 }

@@ -82,9 +82,10 @@ fn a_search_with_its_skills_restarted_again_and_again_is_the_same_search() {
 }
 
 /// The search's figures (docs/deliver.md): explore against wander, seeds 1–20, in the shipped
-/// labs and the held-out ones (never tuned against); every search must see the barcode in
-/// 300 s without a collision. `cargo test -p skills --release measure_the_search --
-/// --ignored --nocapture` (with `WANDER=1`: wander instead).
+/// labs and the held-out ones (never tuned against); no search may touch anything. Each
+/// lab's line gives how many searches saw the barcode in 300 s and the seeds of those that
+/// did not; `SEEDS=1` prints every seed's time. `cargo test -p skills --release
+/// measure_the_search -- --ignored --nocapture` (with `WANDER=1`: wander instead).
 #[test]
 #[ignore = "a measurement: run it by name"]
 fn measure_the_search() {
@@ -95,21 +96,33 @@ fn measure_the_search() {
         "heldout/west-long.toml",
         "heldout/south-tall.toml",
         "heldout/partition.toml",
+        "heldout/row-gaps.toml",
     ];
+    let each = std::env::var("SEEDS").is_ok();
     for file in worlds {
-        let mut times: Vec<f64> = (1..=20)
-            .map(|seed| {
-                let (seen, collisions) = search(file, seed, 30_000);
-                assert_eq!(collisions, 0, "{file} seed {seed}");
-                seen.unwrap_or_else(|| panic!("{file} seed {seed}: not seen in 300 s")) as f64
-                    / 100.0
-            })
-            .collect();
+        let mut times = Vec::new();
+        let mut unseen = Vec::new();
+        for seed in 1..=20 {
+            let (seen, collisions) = search(file, seed, 30_000);
+            assert_eq!(collisions, 0, "{file} seed {seed}");
+            if each {
+                eprintln!("{file} seed {seed}: {seen:?}");
+            }
+            match seen {
+                Some(k) => times.push(k as f64 / 100.0),
+                None => unseen.push(seed),
+            }
+        }
         times.sort_by(f64::total_cmp);
+        let median = match times.len() {
+            0 => f64::NAN,
+            n if n % 2 == 0 => (times[n / 2 - 1] + times[n / 2]) / 2.0,
+            n => times[n / 2],
+        };
         eprintln!(
-            "{file}: 20/20 seen, median {:.1} s, slowest {:.1} s",
-            (times[9] + times[10]) / 2.0,
-            times[19]
+            "{file}: {}/20 seen, median {median:.1} s, slowest {:.1} s, not seen: {unseen:?}",
+            times.len(),
+            times.last().copied().unwrap_or(f64::NAN),
         );
     }
 }

@@ -25,6 +25,9 @@ pub const ROOTS: &str = "/tmp/skillfab";
 /// Environment variable that selects the domain when `--domain` is not given.
 pub const DOMAIN_ENV: &str = "SKILLFAB_DOMAIN";
 
+/// How long opening a service waits for another process that is creating it.
+pub const CREATION_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// A validated domain name.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Domain {
@@ -155,6 +158,11 @@ impl Domain {
             .defaults
             .request_response
             .server_expired_connection_buffer = 4 * crate::services::CONTROL_MAX_CLIENTS;
+        // A service another process is creating is waited for this long before opening it
+        // fails with `HangsInCreation` (iceoryx2's default is 1 s). Twenty processes of a
+        // network starting at once on a loaded host took longer, and a skill exited for it
+        // ("open topic 'odometry': HangsInCreation", load average 30–100).
+        config.global.creation_timeout = CREATION_TIMEOUT;
         Ok(config)
     }
 

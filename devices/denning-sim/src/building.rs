@@ -118,6 +118,21 @@ pub struct Goal {
     pub radius: f64,
 }
 
+/// Where the robot counts as back at the lab ([`Building::lab_goal`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LabGoal {
+    /// The lab's floor.
+    pub floor: i32,
+    /// A point in the corridor in front of the lab's door.
+    pub at: P,
+    /// How near `at` the robot must be (m).
+    pub radius: f64,
+}
+
+/// How far into the corridor from the lab door's middle the lab's goal is (m): the corridor's
+/// centre line, as the office goals are in front of their doors.
+pub const LAB_GOAL_INTO_THE_CORRIDOR: f64 = 1.2;
+
 /// One floor: its fixed layout, as in a world file.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -247,6 +262,35 @@ impl Building {
             problem,
         })?;
         Ok(b)
+    }
+
+    /// Where the robot counts as back at the lab: a point in the corridor in front of the lab's
+    /// door (the floor-0 door nearest the [`LAB_DOOR`] barcode, [`LAB_GOAL_INTO_THE_CORRIDOR`]
+    /// from its middle on the side away from the barcode, which is inside the lab), within
+    /// the office goal's radius. `None` without a barcode 7 or a door on floor 0.
+    pub fn lab_goal(&self) -> Option<LabGoal> {
+        let f = self.floor(0)?;
+        let sign = f.barcode.iter().find(|b| b.id == LAB_DOOR)?;
+        let near = |d: &Segment| point_segment(sign.at, d).0;
+        let door = f.door.iter().min_by(|a, b| near(a).total_cmp(&near(b)))?;
+        let mid = [
+            (door.from[0] + door.to[0]) / 2.0,
+            (door.from[1] + door.to[1]) / 2.0,
+        ];
+        let (ax, ay) = (door.to[0] - door.from[0], door.to[1] - door.from[1]);
+        let len = ax.hypot(ay);
+        let (mut nx, mut ny) = (-ay / len, ax / len);
+        if (sign.at[0] - mid[0]) * nx + (sign.at[1] - mid[1]) * ny > 0.0 {
+            (nx, ny) = (-nx, -ny);
+        }
+        Some(LabGoal {
+            floor: 0,
+            at: [
+                mid[0] + nx * LAB_GOAL_INTO_THE_CORRIDOR,
+                mid[1] + ny * LAB_GOAL_INTO_THE_CORRIDOR,
+            ],
+            radius: self.goal.radius,
+        })
     }
 
     /// The floor at `level`.
@@ -431,6 +475,32 @@ mod tests {
             (f.to_string(), b)
         })
         .collect()
+    }
+
+    /// The lab's goal is in the corridor in front of its door: 1.2 m from the door's middle,
+    /// on the side away from the lab's sign (which is inside), clear of the walls.
+    #[test]
+    fn the_labs_goal_is_in_the_corridor_in_front_of_its_door() {
+        for (f, b) in shipped() {
+            let g = b.lab_goal().unwrap_or_else(|| panic!("{f}: no lab goal"));
+            assert_eq!(g.floor, 0, "{f}");
+            let floor = b.floor(0).unwrap();
+            let sign = floor.barcode.iter().find(|c| c.id == LAB_DOOR).unwrap();
+            let door = floor
+                .door
+                .iter()
+                .min_by(|a, c| {
+                    point_segment(sign.at, a)
+                        .0
+                        .total_cmp(&point_segment(sign.at, c).0)
+                })
+                .unwrap();
+            let (d, _) = point_segment(g.at, door);
+            assert!((d - LAB_GOAL_INTO_THE_CORRIDOR).abs() < 1e-9, "{f}: {d}");
+            let to_sign = (g.at[0] - sign.at[0]).hypot(g.at[1] - sign.at[1]);
+            assert!(to_sign > LAB_GOAL_INTO_THE_CORRIDOR, "{f}: the sign's side");
+            assert!(clearance(&b.segments(0), g.at) > 0.9, "{f}: {:?}", g.at);
+        }
     }
 
     /// Length of a polyline, and its least clearance on `level` with the doors closed.

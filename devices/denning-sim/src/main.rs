@@ -60,7 +60,7 @@ struct Args {
     /// Probability that an output byte is dropped.
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
-    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force, floor, said — messages spoken, delivered — spoken at the building's goal).
+    /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force, floor, said — messages spoken, delivered — spoken at the building's goal, at_lab — in front of the lab's door on its floor).
     #[arg(long)]
     trajectory: Option<PathBuf>,
     /// Keep the robot's physical state (pose, odometry, velocities, time) in this file, and
@@ -431,6 +431,7 @@ impl Robot {
                 floor: sim.floor(),
                 said: u32::from(sim.said),
                 delivered: sim.delivered.is_some(),
+                at_lab: sim.at_lab(),
             }
             .write(t)?;
             t.flush()?;

@@ -228,6 +228,13 @@ impl Sim {
         !self.in_transit() && self.world.is_outside([self.pose[0], self.pose[1]])
     }
 
+    /// Whether the robot is back at the lab (a building's ground truth: [`Site::at_lab`]).
+    pub fn at_lab(&self) -> bool {
+        self.site
+            .as_ref()
+            .is_some_and(|s| s.at_lab([self.pose[0], self.pose[1]]))
+    }
+
     /// Rebuilds the building's segments and barcodes if anything in sight changed, and the
     /// floor's world if the robot changed floors.
     fn refresh(&mut self) {

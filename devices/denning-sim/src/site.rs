@@ -161,6 +161,16 @@ impl Site {
             && (at[0] - g.at[0]).hypot(at[1] - g.at[1]) <= g.radius
     }
 
+    /// Whether the robot's centre at `at` is back at the lab: on the lab's floor, near the
+    /// lab's goal ([`Building::lab_goal`]), not riding a car.
+    pub fn at_lab(&self, at: P) -> bool {
+        self.building.lab_goal().is_some_and(|g| {
+            !self.in_transit()
+                && self.floor == g.floor
+                && (at[0] - g.at[0]).hypot(at[1] - g.at[1]) <= g.radius
+        })
+    }
+
     /// Advances the cars `dt` seconds with the robot's centre at `at`.
     pub(crate) fn step(&mut self, dt: f64, at: P) {
         self.locate(at);
@@ -537,6 +547,26 @@ mod tests {
         sim.step(1.0);
         sim.say("again");
         assert_eq!((sim.said, sim.delivered), (5, Some(first)));
+    }
+
+    #[test]
+    fn back_at_the_lab_only_near_its_goal_on_its_floor() {
+        let b = quiet();
+        let lab = b.lab_goal().unwrap();
+        let mut sim = Sim::in_building(b, 4);
+        let put = |sim: &mut Sim, floor: i32, at: P| {
+            let mut p = sim.physical();
+            p.pose = [at[0], at[1], 0.0];
+            p.floor = floor;
+            sim.resume(p);
+        };
+        assert!(!sim.at_lab(), "inside the lab, at the start");
+        put(&mut sim, 0, lab.at);
+        assert!(sim.at_lab());
+        put(&mut sim, 0, [lab.at[0], lab.at[1] + lab.radius + 0.5]);
+        assert!(!sim.at_lab(), "too far");
+        put(&mut sim, 4, lab.at);
+        assert!(!sim.at_lab(), "another floor");
     }
 
     #[test]

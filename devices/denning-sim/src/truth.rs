@@ -36,18 +36,21 @@ pub struct TruthRecord {
     pub said: u32,
     /// Whether the message has been delivered (spoken at the building's goal).
     pub delivered: bool,
+    /// Whether the robot is back at the lab: near the point in front of its door, on its floor
+    /// (`Building::lab_goal`). Read as false from a file written before the column was.
+    pub at_lab: bool,
 }
 
 impl TruthRecord {
     /// The CSV header: the column names [`TruthRecord::read`] looks columns up by.
     pub const HEADER: &'static str =
-        "t,x,y,theta,v,w,stall,collisions,outside,cmd_age,driven,floor,said,delivered";
+        "t,x,y,theta,v,w,stall,collisions,outside,cmd_age,driven,floor,said,delivered,at_lab";
 
     /// Writes the record as one CSV line.
     pub fn write(&self, out: &mut impl Write) -> io::Result<()> {
         writeln!(
             out,
-            "{:.3},{:.4},{:.4},{:.4},{:.3},{:.3},{},{},{},{:.3},{},{},{},{}",
+            "{:.3},{:.4},{:.4},{:.4},{:.3},{:.3},{},{},{},{:.3},{},{},{},{},{}",
             self.t,
             self.x,
             self.y,
@@ -61,7 +64,8 @@ impl TruthRecord {
             u8::from(self.driven),
             self.floor,
             self.said,
-            u8::from(self.delivered)
+            u8::from(self.delivered),
+            u8::from(self.at_lab)
         )
     }
 
@@ -78,10 +82,13 @@ impl TruthRecord {
         };
         let names: Vec<&str> = header.split(',').map(str::trim).collect();
         let col = |name: &str| names.iter().position(|n| *n == name);
-        let cols: Option<Vec<usize>> = Self::HEADER.split(',').map(col).collect();
+        // Every column but the newest, `at_lab`, must be there.
+        let (required, _) = Self::HEADER.rsplit_once(',').unwrap_or((Self::HEADER, ""));
+        let cols: Option<Vec<usize>> = required.split(',').map(col).collect();
         let Some(cols) = cols else {
             return Vec::new();
         };
+        let at_lab = col("at_lab");
         lines
             .filter_map(|line| {
                 let f: Vec<f64> = line
@@ -104,6 +111,10 @@ impl TruthRecord {
                     floor: at(11)? as i32,
                     said: at(12)? as u32,
                     delivered: at(13)? > 0.5,
+                    at_lab: match at_lab {
+                        Some(i) => *f.get(i)? > 0.5,
+                        None => false,
+                    },
                 })
             })
             .collect()
@@ -131,6 +142,7 @@ mod tests {
             floor: -1,
             said: 3,
             delivered: true,
+            at_lab: true,
         };
         let mut text = format!("{}\n", TruthRecord::HEADER).into_bytes();
         r.write(&mut text).unwrap();

@@ -219,6 +219,7 @@ class Signs(ctypes.Structure):
     TYPE_NAME = "skillfab.Signs"
     _fields_ = [
         ("floor_known", ctypes.c_bool),
+        ("at_floor", ctypes.c_bool),
         ("floor", ctypes.c_int32),
         ("room", ctypes.c_uint32),
         ("room_range", ctypes.c_double),

@@ -180,6 +180,7 @@ typedef struct sf_Scaled {
 /** What the camera reads on signs (barcodes by the building's convention: 900 + floor on a floor sign or a car's floor indicator, a room number beside a door). */
 typedef struct sf_Signs {
     bool floor_known;
+    bool at_floor;
     int32_t floor;
     uint32_t room;
     double room_range;

@@ -3,6 +3,15 @@
 use super::*;
 use serde::{Deserialize, Serialize};
 
+/// Parameters of [`SignRead`].
+#[derive(Params, Debug, Clone)]
+pub struct SignReadParams {
+    /// The floor a ride is for (the route's tree sets it before the ride): `signs.at_floor`
+    /// says whether the floor last read is this one. −1: none (`at_floor` is never true).
+    #[param(default = -1, min = -1, max = 99)]
+    pub floor: i64,
+}
+
 /// Input of [`SignRead`].
 #[derive(Inputs)]
 pub struct SignIn<'a> {
@@ -29,7 +38,9 @@ const ROOMS: std::ops::RangeInclusive<u32> = 100..=799;
 ///
 /// For a sequencer: `signs.floor_known == 1 && signs.floor == 4` (the car's indicator says
 /// floor 4; `floor_known` is false again after a reactivation, so an indicator read on another
-/// ride does not count), `signs.room == 405 && signs.room_range < 2.0`.
+/// ride does not count), or with `floor` set to the ride's floor, `signs.at_floor == 1` (the
+/// same test, the floor a parameter: a plan's subtree cannot take a number);
+/// `signs.room == 405 && signs.room_range < 2.0`.
 #[derive(Default, Serialize, Deserialize)]
 pub struct SignRead {
     activation: Activation,
@@ -38,11 +49,11 @@ pub struct SignRead {
 }
 
 impl Skill for SignRead {
-    type Params = NoParams;
+    type Params = SignReadParams;
     type Inputs<'a> = SignIn<'a>;
     type Outputs<'a> = SignsOut<'a>;
     const STATE: State<Self> = State::kept(1);
-    fn compute(&mut self, ctx: &Ctx<NoParams>, i: SignIn, o: &mut SignsOut) -> SkillResult {
+    fn compute(&mut self, ctx: &Ctx<SignReadParams>, i: SignIn, o: &mut SignsOut) -> SkillResult {
         let b = &*i.barcodes;
         if self.activation.begins(ctx) {
             self.floor = None;
@@ -64,6 +75,7 @@ impl Skill for SignRead {
         }
         signs.floor_known = self.floor.is_some();
         signs.floor = self.floor.unwrap_or(0);
+        signs.at_floor = self.floor.is_some_and(|f| i64::from(f) == ctx.params.floor);
         o.signs.set(signs);
         Ok(())
     }

@@ -38,6 +38,30 @@ fn sign_read_reads_the_floor_and_the_nearest_room_and_forgets_the_floor_when_rea
     assert!(!s.floor_known, "reactivated: read it again");
 }
 
+#[test]
+fn sign_read_says_whether_the_floor_read_is_the_one_its_parameter_names() {
+    let mut g = Gapped::<SignRead>::new();
+    g.input("barcodes", frame(&[(904, 1.0, 0.0)], 20.0));
+    let s = g.step_at::<Signs>(1, "signs").unwrap();
+    assert!(
+        s.floor_known && s.floor == 4 && !s.at_floor,
+        "no floor named: {s:?}"
+    );
+    g.params.floor = 4;
+    let s = g.step_at::<Signs>(2, "signs").unwrap();
+    assert!(s.at_floor, "{s:?}");
+    g.params.floor = 0;
+    let s = g.step_at::<Signs>(3, "signs").unwrap();
+    assert!(!s.at_floor, "{s:?}");
+    g.input("barcodes", frame(&[(900, 1.0, 0.0)], 20.0));
+    let s = g.step_at::<Signs>(4, "signs").unwrap();
+    assert!(s.at_floor && s.floor == 0, "{s:?}");
+    // Reactivated: nothing read yet, so not at floor 0 even though `floor` reads 0.
+    g.input("barcodes", frame(&[], f64::INFINITY));
+    let s = g.step_at::<Signs>(30, "signs").unwrap();
+    assert!(!s.floor_known && s.floor == 0 && !s.at_floor, "{s:?}");
+}
+
 /// Also with both skills restarted (as after `kill -9`) every 3 cycles: a restarted deliver
 /// that forgot what it said would say it again.
 #[test]

@@ -196,19 +196,24 @@ enum Cmd {
         remote: RemoteArg,
     },
     /// The planner: the route from the lab to a room on a building's route map (docs/maps.md),
-    /// printed as a plan (BehaviorTree.CPP v4 XML) built from the delivery mission's subtrees,
-    /// ready for `skillfab sequence`. The map is checked first: one that contradicts itself
-    /// is refused, each problem one sentence naming the place.
+    /// from a room back to the lab, or both, printed as a plan (BehaviorTree.CPP v4 XML) built
+    /// from the delivery mission's subtrees, ready for `skillfab sequence`. The map is checked
+    /// first: one that contradicts itself is refused, each problem one sentence naming the
+    /// place.
     Plan {
         /// The route map (TOML; a building's is beside it: NAME.map.toml).
         #[arg(long, value_name = "FILE.map.toml")]
         map: PathBuf,
-        /// The room (default: the map's office).
-        #[arg(long, value_name = "ROOM")]
-        to: Option<u32>,
-        /// Where the route starts: only `lab` (the way back from a room is not planned yet).
-        #[arg(long, value_name = "PLACE", default_value = "lab")]
-        from: String,
+        /// Where the route goes: a room (default: the map's office), or `lab` from a room.
+        #[arg(long, value_name = "ROOM|lab")]
+        to: Option<plan::Place>,
+        /// Where the route starts: `lab`, or a room (its number) with `--to lab`: the way
+        /// back, from the room's door where the message was said.
+        #[arg(long, value_name = "lab|ROOM", default_value = "lab")]
+        from: plan::Place,
+        /// To the room and back to the lab: one tree with both ways.
+        #[arg(long)]
+        and_back: bool,
         /// The subtrees the plan is built from.
         #[arg(
             long,
@@ -343,6 +348,10 @@ struct DeliverArgs {
     /// moves to that room's door.
     #[arg(long, value_name = "ROOM")]
     to: Option<u32>,
+    /// Then back to the lab: the planner's round trip, judged as the message delivered and
+    /// the plan ended with the robot in front of the lab's door (the simulator's `at_lab`).
+    #[arg(long, conflicts_with = "tree")]
+    and_back: bool,
     /// The subtrees the planner builds the plan from (docs/sequence.md); with --tree, the
     /// plan to run.
     #[arg(
@@ -435,6 +444,7 @@ impl DemoRuns {
             truth: self.truth,
             plan,
             tree: None,
+            and_back: false,
         })
     }
 }
@@ -549,7 +559,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             library,
             words,
             check,
-        } => plan::run(&map, to, &from, &library, words, check),
+            and_back,
+        } => plan::run(
+            &map,
+            plan::Trip { from, to, and_back },
+            &library,
+            words,
+            check,
+        ),
         Cmd::Sequence {
             file,
             tree,
@@ -661,6 +678,7 @@ fn deliver(args: DeliverArgs, work: &std::path::Path) -> anyhow::Result<()> {
         building,
         map,
         to,
+        and_back,
         plan,
         tree,
         run,
@@ -676,7 +694,12 @@ fn deliver(args: DeliverArgs, work: &std::path::Path) -> anyhow::Result<()> {
         }
         None => {
             let map = map.unwrap_or_else(|| skillfab_planner::map_beside(&building));
-            let p = plan::plan(&map, to, "lab", &plan)
+            let trip = plan::Trip {
+                from: plan::Place::Lab,
+                to: to.map(plan::Place::Room),
+                and_back,
+            };
+            let p = plan::plan(&map, trip, &plan)
                 .with_context(|| format!("planning on {}", map.display()))?;
             if !json {
                 println!("{}", p.route);
@@ -694,7 +717,19 @@ fn deliver(args: DeliverArgs, work: &std::path::Path) -> anyhow::Result<()> {
     let mut opts = run.options(demo::Site::Building(site), plan, limit_s)?;
     opts.faults = faults.faults(opts.lockstep, opts.seed)?;
     opts.tree = tree;
+    opts.and_back = and_back;
     let summary = demo::demo(&opts)?;
+    if and_back {
+        report(
+            &summary,
+            json,
+            "delivered the message and came back to the lab",
+        )?;
+        if summary.successes == 0 {
+            anyhow::bail!("the robot did not deliver the message and come back");
+        }
+        return Ok(());
+    }
     report(&summary, json, "delivered the message")?;
     if summary.successes == 0 {
         anyhow::bail!("the robot did not deliver the message");

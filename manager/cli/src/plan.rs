@@ -6,6 +6,39 @@ use anyhow::Context;
 use skillfab_planner::{From, Library, Map, Route};
 use std::path::{Path, PathBuf};
 
+/// A place a route starts or ends at: the lab or a room.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Place {
+    /// The lab.
+    Lab,
+    /// A room, by its number.
+    Room(u32),
+}
+
+impl std::str::FromStr for Place {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Place, String> {
+        match s {
+            "lab" => Ok(Place::Lab),
+            n => n
+                .parse()
+                .map(Place::Room)
+                .map_err(|_| format!("'{n}' is neither `lab` nor a room's number")),
+        }
+    }
+}
+
+/// Which route: from, to (`None`: the map's office), and whether back again.
+#[derive(Debug, Clone, Copy)]
+pub struct Trip {
+    /// Where it starts.
+    pub from: Place,
+    /// Where it goes.
+    pub to: Option<Place>,
+    /// To the room and back to the lab.
+    pub and_back: bool,
+}
+
 /// A plan the planner wrote: its route and the file's text.
 pub struct Planned {
     /// The route.
@@ -14,29 +47,38 @@ pub struct Planned {
     pub xml: String,
 }
 
-/// Plans the way to `to` (default: the map's office) from `from`, as a tree of `library`'s
-/// subtrees.
-pub fn plan(map: &Path, to: Option<u32>, from: &str, library: &Path) -> anyhow::Result<Planned> {
+/// Plans `trip` (to the map's office unless it says), as a tree of `library`'s subtrees.
+pub fn plan(map: &Path, trip: Trip, library: &Path) -> anyhow::Result<Planned> {
     let m = Map::load(map)?;
-    let route = skillfab_planner::plan(&m, to, from.parse::<From>()?)?;
+    let route = match (trip.from, trip.to, trip.and_back) {
+        (Place::Lab, Some(Place::Lab), _) => anyhow::bail!("from the lab to the lab: no route"),
+        (Place::Lab, to, false) => skillfab_planner::plan(&m, room(to), From::Lab)?,
+        (Place::Lab, to, true) => skillfab_planner::plan_round_trip(&m, room(to))?,
+        (Place::Room(r), Some(Place::Lab), false) => skillfab_planner::plan_back(&m, Some(r))?,
+        (Place::Room(r), _, false) => {
+            anyhow::bail!("--from {r}: from a room the planner plans the way back (--to lab)")
+        }
+        (Place::Room(_), _, true) => anyhow::bail!("--and-back starts at the lab"),
+    };
     let text = std::fs::read_to_string(library)
         .with_context(|| format!("reading {}", library.display()))?;
     let lib = Library::parse(&text, &library.display().to_string())?;
     let xml = route.plan_xml(&lib, &map.display().to_string())?;
     // What the sequencer would refuse is refused here (a library it does not read).
-    skillfab_sequence::Plan::parse(&xml, &format!("the plan to room {}", route.room))?;
+    skillfab_sequence::Plan::parse(&xml, &format!("the plan {}", route.tree_id()))?;
     Ok(Planned { route, xml })
 }
 
+/// The room of a destination (`None`: the map's office).
+fn room(to: Option<Place>) -> Option<u32> {
+    match to {
+        Some(Place::Room(r)) => Some(r),
+        _ => None,
+    }
+}
+
 /// `skillfab plan`: the plan on stdout (or the route in words, or only the map's check).
-pub fn run(
-    map: &Path,
-    to: Option<u32>,
-    from: &str,
-    library: &Path,
-    words: bool,
-    check: bool,
-) -> anyhow::Result<()> {
+pub fn run(map: &Path, trip: Trip, library: &Path, words: bool, check: bool) -> anyhow::Result<()> {
     if check {
         let m = Map::load(map)?;
         println!(
@@ -50,7 +92,7 @@ pub fn run(
         );
         return Ok(());
     }
-    let p = plan(map, to, from, library)?;
+    let p = plan(map, trip, library)?;
     if words {
         println!("{}", p.route);
     } else {

@@ -3,7 +3,8 @@
 //!
 //! Layout: [`map`] reads a route map (TOML, docs/maps.md) and refuses one that contradicts
 //! itself, each problem one sentence naming the place; [`route`] finds the way from the lab to
-//! a room (corridor legs, junctions and their turns, the lobby, the elevator); [`tree`] writes
+//! a room, from a room back to the lab, or both (corridor legs, junctions and their turns, the
+//! lobbies, the elevator); [`tree`] writes
 //! that route as a BehaviorTree.CPP v4 plan built from the delivery library's subtrees
 //! (`skills/plans/deliver.xml`). Pure code: no fabric, no files but what [`Map::load`] reads.
 //!
@@ -27,7 +28,7 @@ pub mod route;
 pub mod tree;
 
 pub use map::{LoadError, Map, MapError, Problem};
-pub use route::{From, PlanError, Route, Step, plan};
+pub use route::{From, PlanError, Route, Step, Trip, plan, plan_back, plan_round_trip};
 pub use tree::{Library, TreeError};
 
 /// Where the map of a building file is by convention: beside it, `NAME.map.toml` for

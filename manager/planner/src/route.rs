@@ -1,5 +1,5 @@
-//! Finding a route on a [`Map`]: from the lab to a room, through the elevator when the room
-//! is on another floor. On each floor the route passes the fewest junctions (the map has no
+//! Finding a route on a [`Map`]: from the lab to a room, from a room back to the lab, or both
+//! one after the other, through the elevator when the room is on another floor. On each floor the route passes the fewest junctions (the map has no
 //! lengths; a junction is what the robot counts, so fewer is also fewer chances to miscount);
 //! ties go to the way written first in the map.
 
@@ -59,6 +59,22 @@ pub enum Step {
         /// car, not from in front of the call button.
         beside_bank: bool,
     },
+    /// Out of the room's door where the message was said (the robot facing it) into the
+    /// corridor: a turn (the robot counts it as its first junction).
+    OutOfTheRoom {
+        /// The room.
+        room: u32,
+        /// Which way, from facing the door.
+        turn: Turn,
+    },
+    /// At the lab's door, from the corridor: in the leg's side after `doors_before` other
+    /// doors on that side, or ahead at the corridor's end (`side` `None`).
+    AtTheLab {
+        /// The side its door is on.
+        side: Option<Side>,
+        /// Doors on that side the robot passes before it.
+        doors_before: usize,
+    },
     /// At the room's door; the message is delivered.
     AtTheRoom {
         /// The room.
@@ -104,6 +120,17 @@ impl fmt::Display for Step {
                     }
                 ),
             },
+            Step::OutOfTheRoom { room, turn } => {
+                write!(f, "out of room {room}'s door: {turn} into the corridor")
+            }
+            Step::AtTheLab { side, doors_before } => match side {
+                Some(s) => write!(
+                    f,
+                    "the lab: its door on the {s}, after {doors_before} other door{} on the {s}",
+                    if *doors_before == 1 { "" } else { "s" }
+                ),
+                None => write!(f, "the lab: its door ahead, at the corridor's end"),
+            },
             Step::AtTheRoom { room, side, faced } => match side {
                 Some(s) => write!(
                     f,
@@ -116,7 +143,18 @@ impl fmt::Display for Step {
     }
 }
 
-/// A route to a room.
+/// Which way a route goes between the lab and its room.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Trip {
+    /// From the lab to the room.
+    ToTheRoom,
+    /// From the room (the robot at its door, facing it) back to the lab.
+    BackToTheLab,
+    /// To the room and back to the lab.
+    RoundTrip,
+}
+
+/// A route between the lab and a room.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Route {
     /// The building.
@@ -125,17 +163,20 @@ pub struct Route {
     pub room: u32,
     /// Its floor.
     pub floor: i32,
+    /// Which way.
+    pub trip: Trip,
     /// The steps, in order.
     pub steps: Vec<Step>,
 }
 
 impl fmt::Display for Route {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}: to room {} (floor {}) from the lab",
-            self.building, self.room, self.floor
-        )?;
+        let (b, r, fl) = (&self.building, self.room, self.floor);
+        match self.trip {
+            Trip::ToTheRoom => write!(f, "{b}: to room {r} (floor {fl}) from the lab"),
+            Trip::BackToTheLab => write!(f, "{b}: from room {r} (floor {fl}) back to the lab"),
+            Trip::RoundTrip => write!(f, "{b}: to room {r} (floor {fl}) from the lab, and back"),
+        }?;
         for (i, s) in self.steps.iter().enumerate() {
             write!(f, "\n{:>3}. {s}", i + 1)?;
         }
@@ -179,10 +220,13 @@ pub enum PlanError {
     #[error("the map of {0} names no office: say which room (--to)")]
     NoDestination(String),
     /// A start the planner does not plan from.
-    #[error(
-        "--from {0}: routes are planned from the lab only (the way back from a room is not done)"
-    )]
+    #[error("--from {0}: a route starts at the lab or, back to the lab, at a room (its number)")]
     NotFrom(String),
+    /// The way back from a door at a corridor's end: the robot would have to turn round.
+    #[error(
+        "room {0}'s door is at a corridor's end: the way back from it needs a turn round, which the library does not have"
+    )]
+    NoWayBack(u32),
     /// No way on a floor (a map that passed its checks always has one).
     #[error("no way from {from} to {to} on floor {floor}")]
     NoWay {
@@ -361,14 +405,14 @@ fn room_ahead(map: &Map, pos: Pos, room: u32, door: Option<CameOut>) -> Option<O
     (*pos.ahead(map) == End::Room(room)).then_some(None)
 }
 
-/// The route from the lab to `room` (default: the map's office).
-pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
-    let From::Lab = from;
+/// The room asked for (default: the map's office) and its leg and door.
+fn the_room(map: &Map, room: Option<u32>) -> Result<(u32, usize, DoorAt), PlanError> {
     let room = room
         .or(map.office)
         .ok_or_else(|| PlanError::NoDestination(map.building.clone()))?;
-    let Some((room_leg, _)) = map.room(room) else {
-        return Err(PlanError::UnknownRoom {
+    match map.room(room) {
+        Some((leg, at)) => Ok((room, leg, at)),
+        None => Err(PlanError::UnknownRoom {
             room,
             building: map.building.clone(),
             rooms: map
@@ -377,105 +421,233 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
                 .map(ToString::to_string)
                 .collect::<Vec<_>>()
                 .join(", "),
-        });
-    };
-    let floor = map.legs[room_leg].floor;
-    // A checked map has its lab.
-    let Some((lab_leg, lab_at)) = map.lab() else {
-        return Err(PlanError::NoWay {
+        }),
+    }
+}
+
+/// The lab's leg, door and floor (a checked map has its lab).
+fn the_lab(map: &Map, room: u32, floor: i32) -> Result<(usize, DoorAt, i32), PlanError> {
+    match map.lab() {
+        Some((leg, at)) => Ok((leg, at, map.legs[leg].floor)),
+        None => Err(PlanError::NoWay {
             from: "the lab".into(),
             to: format!("room {room}"),
             floor,
-        });
-    };
-    let lab_floor = map.legs[lab_leg].floor;
-    let out_of_the_lab = out_of_the_lab(map, lab_leg, lab_at);
+        }),
+    }
+}
+
+/// The route from the lab to `room` (default: the map's office).
+pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
+    let From::Lab = from;
+    let (room, room_leg, _) = the_room(map, room)?;
+    let floor = map.legs[room_leg].floor;
+    let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
     let to_room = |pos: Pos, door: Option<CameOut>| {
         room_ahead(map, pos, room, door).map(|side| {
             let faced = map.legs[pos.leg].faced(room);
             (0, vec![Step::AtTheRoom { room, side, faced }])
         })
     };
+    let steps = between_floors(
+        map,
+        ("the lab", out_of_the_lab(map, lab_leg, lab_at), lab_floor),
+        (format!("room {room}"), &to_room, floor),
+    )?;
+    Ok(Route {
+        building: map.building.clone(),
+        room,
+        floor,
+        trip: Trip::ToTheRoom,
+        steps,
+    })
+}
+
+/// The route back to the lab from `room`'s door (default: the map's office), the robot
+/// standing at it facing it, as a route to the room leaves it.
+pub fn plan_back(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
+    let (room, room_leg, room_at) = the_room(map, room)?;
+    let floor = map.legs[room_leg].floor;
+    let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
+    let to_lab = |pos: Pos, door: Option<CameOut>| {
+        lab_ahead(map, pos, lab_leg, lab_at, door)
+            .map(|(side, doors_before)| (0, vec![Step::AtTheLab { side, doors_before }]))
+    };
+    let steps = between_floors(
+        map,
+        (
+            &format!("room {room}"),
+            out_of_the_room(map, room, room_leg, room_at)?,
+            floor,
+        ),
+        ("the lab".to_string(), &to_lab, lab_floor),
+    )?;
+    Ok(Route {
+        building: map.building.clone(),
+        room,
+        floor,
+        trip: Trip::BackToTheLab,
+        steps,
+    })
+}
+
+/// The route from the lab to `room` (default: the map's office) and back: the message said,
+/// the way back starts at its door.
+pub fn plan_round_trip(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
+    let to = plan(map, room, From::Lab)?;
+    let back = plan_back(map, Some(to.room))?;
+    Ok(Route {
+        trip: Trip::RoundTrip,
+        steps: to.steps.into_iter().chain(back.steps).collect(),
+        ..to
+    })
+}
+
+/// The steps from `starts` on their floor to where `goal` says the destination is on its
+/// floor: on one floor, or to the starts' floor's lobby, a car, and out of the goal floor's
+/// lobby. The names say the places in errors.
+fn between_floors(
+    map: &Map,
+    (from, starts, from_floor): (&str, Vec<Start>, i32),
+    (to, goal, floor): (String, &Goal<'_>, i32),
+) -> Result<Vec<Step>, PlanError> {
     let no_way = |from: &str, to: String, floor: i32| PlanError::NoWay {
         from: from.into(),
         to,
         floor,
     };
-    let steps = if floor == lab_floor {
-        search(map, out_of_the_lab, &to_room)
-            .ok_or_else(|| no_way("the lab", format!("room {room}"), floor))?
-    } else {
-        let into_the_lobby = |pos: Pos, _: Option<CameOut>| {
-            if *pos.ahead(map) != End::Lobby {
-                return None;
-            }
-            let opening = map
-                .lobby(lab_floor)?
-                .openings
-                .iter()
-                .find(|o| o.leg == pos.leg)?;
-            // Through a side wall the bank wall is on that side (seen facing it, the left
-            // wall is on the left).
-            let turn = match opening.wall {
-                Wall::Opposite => Turn::Straight,
-                Wall::Left => Turn::Left,
-                Wall::Right => Turn::Right,
-            };
-            let cost = u32::from(turn != Turn::Straight);
-            Some((
-                cost,
-                vec![Step::IntoTheLobby {
-                    floor: lab_floor,
-                    turn,
-                }],
-            ))
-        };
-        let mut steps = search(map, out_of_the_lab, &into_the_lobby)
-            .ok_or_else(|| no_way("the lab", "the lobby".into(), lab_floor))?;
-        steps.push(Step::Ride {
-            from: lab_floor,
-            to: floor,
-        });
-        let starts = map
-            .lobby(floor)
-            .map(|l| l.openings.as_slice())
-            .unwrap_or_default()
+    if floor == from_floor {
+        return search(map, starts, goal).ok_or_else(|| no_way(from, to, floor));
+    }
+    let into_the_lobby = |pos: Pos, _: Option<CameOut>| {
+        if *pos.ahead(map) != End::Lobby {
+            return None;
+        }
+        let opening = map
+            .lobby(from_floor)?
+            .openings
             .iter()
-            .map(|o| {
-                // With the bank wall behind, the left wall (seen facing it) is on the right.
-                let turn = match o.wall {
-                    Wall::Opposite => Turn::Straight,
-                    Wall::Left => Turn::Right,
-                    Wall::Right => Turn::Left,
-                };
-                let pos = Pos::leaving(map, o.leg, &End::Lobby);
-                Start {
-                    pos,
-                    cost: u32::from(turn != Turn::Straight),
-                    steps: vec![
-                        Step::OutOfTheLobby {
-                            floor,
-                            turn,
-                            beside_bank: o.beside_bank,
-                        },
-                        pos.along(map),
-                    ],
-                    door: None,
-                }
-            })
-            .collect();
-        steps.extend(
-            search(map, starts, &to_room)
-                .ok_or_else(|| no_way("the lobby", format!("room {room}"), floor))?,
-        );
-        steps
+            .find(|o| o.leg == pos.leg)?;
+        // Through a side wall the bank wall is on that side (seen facing it, the left
+        // wall is on the left).
+        let turn = match opening.wall {
+            Wall::Opposite => Turn::Straight,
+            Wall::Left => Turn::Left,
+            Wall::Right => Turn::Right,
+        };
+        let cost = u32::from(turn != Turn::Straight);
+        Some((
+            cost,
+            vec![Step::IntoTheLobby {
+                floor: from_floor,
+                turn,
+            }],
+        ))
     };
-    Ok(Route {
-        building: map.building.clone(),
-        room,
-        floor,
-        steps,
-    })
+    let mut steps = search(map, starts, &into_the_lobby)
+        .ok_or_else(|| no_way(from, "the lobby".into(), from_floor))?;
+    steps.push(Step::Ride {
+        from: from_floor,
+        to: floor,
+    });
+    let starts = map
+        .lobby(floor)
+        .map(|l| l.openings.as_slice())
+        .unwrap_or_default()
+        .iter()
+        .map(|o| {
+            // With the bank wall behind, the left wall (seen facing it) is on the right.
+            let turn = match o.wall {
+                Wall::Opposite => Turn::Straight,
+                Wall::Left => Turn::Right,
+                Wall::Right => Turn::Left,
+            };
+            let pos = Pos::leaving(map, o.leg, &End::Lobby);
+            Start {
+                pos,
+                cost: u32::from(turn != Turn::Straight),
+                steps: vec![
+                    Step::OutOfTheLobby {
+                        floor,
+                        turn,
+                        beside_bank: o.beside_bank,
+                    },
+                    pos.along(map),
+                ],
+                door: None,
+            }
+        })
+        .collect();
+    steps.extend(search(map, starts, goal).ok_or_else(|| no_way("the lobby", to, floor))?);
+    Ok(steps)
+}
+
+/// Whether the lab's door (on `lab_leg`, at `lab_at`) is ahead on `pos`'s leg: its side
+/// (`None`: at the leg's end) and how many doors on that side come before it. `door`: the
+/// door the robot came out of on this leg — on its side only the doors after it are ahead;
+/// on the other side the order is not known, so none is taken.
+fn lab_ahead(
+    map: &Map,
+    pos: Pos,
+    lab_leg: usize,
+    lab_at: DoorAt,
+    door: Option<CameOut>,
+) -> Option<(Option<Side>, usize)> {
+    if pos.leg != lab_leg {
+        return None;
+    }
+    match lab_at {
+        DoorAt::Side { side, index } => {
+            let n = map.legs[lab_leg].doors(side).len();
+            // Doors on its side between where the robot comes onto the leg and the lab.
+            let (first, past) = match door {
+                None => (0, 0),
+                Some(out) if out.side == side => (out.index, 1),
+                Some(_) => return None,
+            };
+            let before = if pos.forward {
+                if door.is_some() && index <= first {
+                    return None;
+                }
+                index - first - past
+            } else {
+                let first = if door.is_some() { first } else { n };
+                if index >= first {
+                    return None;
+                }
+                first - index - 1
+            };
+            Some((Some(if pos.forward { side } else { side.other() }), before))
+        }
+        DoorAt::End { .. } => (*pos.ahead(map) == End::Lab).then_some((None, 0)),
+    }
+}
+
+/// Out of `room`'s door, the robot facing it: into the corridor both ways (cost 1, the turn
+/// is counted as a junction). A door at a corridor's end is refused: that way back is a turn
+/// round.
+fn out_of_the_room(map: &Map, room: u32, leg: usize, at: DoorAt) -> Result<Vec<Start>, PlanError> {
+    let DoorAt::Side { side, index } = at else {
+        return Err(PlanError::NoWayBack(room));
+    };
+    Ok([true, false]
+        .into_iter()
+        .map(|forward| {
+            let pos = Pos { leg, forward };
+            // Facing a door on the leg's left, its `to` is to the right.
+            let turn = match side {
+                Side::Left => Turn::Right,
+                Side::Right => Turn::Left,
+            };
+            let turn = if forward { turn } else { turn.mirrored() };
+            Start {
+                pos,
+                cost: 1,
+                steps: vec![Step::OutOfTheRoom { room, turn }, pos.along(map)],
+                door: Some(CameOut { side, index }),
+            }
+        })
+        .collect())
 }
 
 /// The ways out of the lab: into its corridor to the left and to the right (a door in the

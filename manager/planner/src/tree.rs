@@ -15,10 +15,16 @@
 //!   once the robot is between a corridor's walls (`InTheCorridor`), when there are junctions
 //!   to count on that floor.
 //! - The corridor skills are activated with the first junction (or the lobby) after the lab,
-//!   with `sign_read` on the room's floor.
+//!   with `sign_read` on the room's floor on the way there.
+//! - A ride: `BoardACar`, then `barcode_track.id` set to the floor's panel button (860 + f)
+//!   and `sign_read.floor` to the floor, then `RideToTheFloor`.
+//! - The way back: out of the room's door as out of the lab's (`IntoTheCorridorLeft`/`Right`,
+//!   the first junction counted); at the lab's leg, doors counted again from the corridor
+//!   (`DoorsCountedFromHere`) and `door_detect.doors.<side>` waited for to pass the lab's
+//!   door, then `AtTheLabsDoor`; a lab's door at the corridor's end is `ToTheLabAhead`.
 
 use crate::map::{Side, Turn};
-use crate::route::{Route, Step};
+use crate::route::{Route, Step, Trip};
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
@@ -56,9 +62,9 @@ pub enum TreeError {
         /// The tree.
         id: String,
     },
-    /// No subtree rides to that floor.
+    /// No button in a car for that floor: the panel's are 860 + f, floors 0 to 9.
     #[error(
-        "the route rides from floor {from} to floor {to}: the library's only ride is RideToTheFourthFloor (from the basement)"
+        "the route rides from floor {from} to floor {to}: a car's buttons are for floors 0 to 9 (barcodes 860 + f)"
     )]
     NoRide {
         /// From.
@@ -145,9 +151,10 @@ struct Writer {
     turn: Option<Turn>,
     /// The junction count `intersection` is at.
     count: u32,
-    /// The floor the robot is on, and the room's.
+    /// The floor the robot is on, and the room's while the robot is on its way there
+    /// (`sign_read` is on with the corridor skills there).
     floor: i32,
-    room_floor: i32,
+    sign_floor: Option<i32>,
 }
 
 impl Writer {
@@ -172,7 +179,7 @@ impl Writer {
     /// The corridor skills; on the room's floor `sign_read` too (the office's sign).
     fn corridor_skills(&self) -> Vec<&'static str> {
         let mut s = vec!["intersection", "door_detect", "hall_follow"];
-        if self.floor == self.room_floor {
+        if Some(self.floor) == self.sign_floor {
             s.push("sign_read");
         }
         s
@@ -196,7 +203,11 @@ impl Writer {
 impl Route {
     /// The ID of the route's tree in its plan.
     pub fn tree_id(&self) -> String {
-        format!("deliver-to-{}", self.room)
+        match self.trip {
+            Trip::ToTheRoom => format!("deliver-to-{}", self.room),
+            Trip::BackToTheLab => format!("back-from-{}", self.room),
+            Trip::RoundTrip => format!("deliver-to-{}-and-back", self.room),
+        }
     }
 
     /// The plan: the route's tree, then the library's trees; a whole BehaviorTree.CPP v4
@@ -251,21 +262,22 @@ impl Route {
             active: false,
             turn: None,
             count: 0,
-            floor: self
-                .steps
-                .iter()
-                .find_map(|s| match s {
+            // The way back starts on the room's floor, the way there on the first ride's.
+            floor: match self.trip {
+                Trip::BackToTheLab => None,
+                _ => self.steps.iter().find_map(|s| match s {
                     Step::Ride { from, .. } => Some(*from),
                     _ => None,
-                })
-                .unwrap_or(self.floor),
-            room_floor: self.floor,
+                }),
+            }
+            .unwrap_or(self.floor),
+            sign_floor: (self.trip != Trip::BackToTheLab).then_some(self.floor),
         };
         for (i, step) in self.steps.iter().enumerate() {
-            // Junctions still to count on this floor after this step.
+            // Junctions still to count on this floor after this step, on this way.
             let junctions_follow = self.steps[i + 1..]
                 .iter()
-                .take_while(|s| !matches!(s, Step::Ride { .. }))
+                .take_while(|s| !matches!(s, Step::Ride { .. } | Step::AtTheRoom { .. }))
                 .any(|s| matches!(s, Step::Junction { .. }));
             match step {
                 Step::LeaveTheLab => w.push(X::SubTree("LeaveTheLab")),
@@ -275,9 +287,17 @@ impl Route {
                         _ => "IntoTheCorridorLeft",
                     }));
                     (w.active, w.turn, w.count) = (true, Some(*turn), 1);
-                    if w.floor == w.room_floor {
+                    if Some(w.floor) == w.sign_floor {
                         w.push(X::Activate(vec!["sign_read"]));
                     }
+                }
+                // Facing the room's door, the corridor's turn is taken as out of the lab's.
+                Step::OutOfTheRoom { turn, .. } => {
+                    w.push(X::SubTree(match turn {
+                        Turn::Right => "IntoTheCorridorRight",
+                        _ => "IntoTheCorridorLeft",
+                    }));
+                    (w.active, w.turn, w.count) = (true, Some(*turn), 1);
                 }
                 Step::Along { .. } => {}
                 Step::Junction { name, turn } => w.junction(name, *turn),
@@ -294,13 +314,26 @@ impl Route {
                     w.active = false;
                 }
                 Step::Ride { from, to } => {
-                    if *to != 4 || *from != 0 {
+                    if !(0..=9).contains(to) {
                         return Err(TreeError::NoRide {
                             from: *from,
                             to: *to,
                         });
                     }
-                    w.push(X::SubTree("RideToTheFourthFloor"));
+                    // The ride's floor, which its subtree cannot be told: the button
+                    // barcode_track finds, the floor sign_read waits for.
+                    w.push(X::SubTree("BoardACar"));
+                    w.push(X::SetParam {
+                        skill: "barcode_track",
+                        param: "id",
+                        value: (860 + to).to_string(),
+                    });
+                    w.push(X::SetParam {
+                        skill: "sign_read",
+                        param: "floor",
+                        value: to.to_string(),
+                    });
+                    w.push(X::SubTree("RideToTheFloor"));
                     w.floor = *to;
                 }
                 Step::OutOfTheLobby {
@@ -355,6 +388,30 @@ impl Route {
                         (None, _) => "ToTheOfficeAhead",
                     }));
                     w.push(X::SubTree("DeliverTheMessage"));
+                    w.sign_floor = None;
+                }
+                Step::AtTheLab { side, doors_before } => {
+                    w.set_turn(Turn::Straight);
+                    match side {
+                        // Doors are counted from the corridor after the last junction: the
+                        // lab's is the one after `doors_before` others on its side.
+                        Some(s) => {
+                            w.push(X::SubTree("DoorsCountedFromHere"));
+                            let field = match s {
+                                Side::Left => "left",
+                                Side::Right => "right",
+                            };
+                            w.push(X::WaitFor {
+                                name: format!("past the lab's door on the {s}"),
+                                condition: format!(
+                                    "door_detect.doors.{field} >= {}",
+                                    doors_before + 1
+                                ),
+                            });
+                            w.push(X::SubTree("AtTheLabsDoor"));
+                        }
+                        None => w.push(X::SubTree("ToTheLabAhead")),
+                    }
                 }
             }
         }

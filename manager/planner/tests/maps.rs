@@ -4,7 +4,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use skillfab_planner::map::{Heading, Side, Turn};
-use skillfab_planner::{From, Library, Map, PlanError, Step, map_beside, plan};
+use skillfab_planner::{
+    From, Library, Map, PlanError, Step, Trip, map_beside, plan, plan_back, plan_round_trip,
+};
 use std::path::Path;
 
 /// A small building: the lab's door on the left of a corridor running north to a T; right at
@@ -380,7 +382,7 @@ fn plans_on_the_labs_floor_and_to_a_corridors_end_read_and_say_so() {
         xml[..xml.find("<BehaviorTree ID=\"LeaveTheLab\"").unwrap()].to_string()
     };
     let to_9 = xml(9);
-    assert!(!to_9.contains("RideToTheFourthFloor"), "{to_9}");
+    assert!(!to_9.contains("RideToTheFloor"), "{to_9}");
     assert!(
         to_9.contains("<SubTree ID=\"ToTheOfficeAhead\"/>"),
         "{to_9}"
@@ -410,14 +412,165 @@ fn plans_on_the_labs_floor_and_to_a_corridors_end_read_and_say_so() {
         .plan_xml(&library, "small")
         .unwrap();
     assert!(xml.contains("<SubTree ID=\"ToTheOfficeOnTheRightFacingADoor\"/>"));
-    // A room on the fifth floor would need a ride the library does not have.
+    // The ride's floor is set before the ride: floor 4's button and indicator here.
+    let ride = "<SubTree ID=\"BoardACar\"/>\n      \
+                <SetParam skill=\"barcode_track\" param=\"id\" value=\"864\"/>\n      \
+                <SetParam skill=\"sign_read\" param=\"floor\" value=\"4\"/>\n      \
+                <SubTree ID=\"RideToTheFloor\"/>";
+    assert!(to_405.contains(ride), "{to_405}");
+    // A room on the fifth floor: its button is 865. A tenth floor has no button (860 + f
+    // stays in its decade).
     let mut steps = plan(&map, Some(405), From::Lab).unwrap();
     for s in &mut steps.steps {
         if let Step::Ride { to, .. } = s {
             *to = 5;
         }
     }
+    let xml = steps.plan_xml(&library, "small").unwrap();
+    assert!(xml.contains("param=\"id\" value=\"865\""), "{xml}");
+    assert!(xml.contains("param=\"floor\" value=\"5\""), "{xml}");
+    for s in &mut steps.steps {
+        if let Step::Ride { to, .. } = s {
+            *to = 10;
+        }
+    }
     assert!(steps.plan_xml(&library, "small").is_err());
+}
+
+/// The way back from a room's door (the robot facing it): into the corridor toward the
+/// lobby, the junctions the other way round, a car down, and the lab's door counted among
+/// the doors on its side.
+#[test]
+fn the_way_back_turns_out_of_the_door_and_counts_the_labs_door_on_its_side() {
+    let map = Map::parse(SMALL, "small.map.toml").unwrap();
+    // 105 is on the right going north from the crossing: facing it, the lobby is to the
+    // right. Straight over the crossing, into the lobby through its left side (turning left
+    // to face the bank), down, straight out, left at the T (south), and the lab's door on
+    // the right after door 2 (the lab's corridor lists ["door", "lab", 2] on its left going
+    // north).
+    let r = plan_back(&map, None).unwrap();
+    assert_eq!((r.room, r.trip), (105, Trip::BackToTheLab));
+    assert_eq!(
+        r.steps[0],
+        Step::OutOfTheRoom {
+            room: 105,
+            turn: Turn::Right
+        }
+    );
+    assert!(r.steps.contains(&Step::IntoTheLobby {
+        floor: 1,
+        turn: Turn::Left
+    }));
+    assert!(r.steps.contains(&Step::Ride { from: 1, to: 0 }));
+    assert_eq!(
+        junctions(&r.steps),
+        [
+            ("the crossing".into(), Turn::Straight),
+            ("the T".into(), Turn::Left)
+        ]
+    );
+    assert_eq!(
+        r.steps.last(),
+        Some(&Step::AtTheLab {
+            side: Some(Side::Right),
+            doors_before: 1
+        })
+    );
+    // 102: on the right of the east arm, which runs west to the crossing, so on its north
+    // side; facing it, the crossing (west) is to the left, and there the way south is left.
+    let r = plan_back(&map, Some(102)).unwrap();
+    assert_eq!(
+        r.steps[0],
+        Step::OutOfTheRoom {
+            room: 102,
+            turn: Turn::Left
+        }
+    );
+    assert_eq!(junctions(&r.steps)[0], ("the crossing".into(), Turn::Left));
+    // On the lab's own corridor: room 2 is north of the lab's door on its side; facing it,
+    // the lab is to the left, and no door between.
+    let r = plan_back(&map, Some(2)).unwrap();
+    assert_eq!(
+        r.steps,
+        [
+            Step::OutOfTheRoom {
+                room: 2,
+                turn: Turn::Left
+            },
+            Step::Along {
+                leg: "the lab's corridor".into(),
+                heading: Heading::South
+            },
+            Step::AtTheLab {
+                side: Some(Side::Right),
+                doors_before: 0
+            },
+        ]
+    );
+    // Refused: a door at a corridor's end (the way back is a turn round), a room across the
+    // lab's corridor (which way the lab is the map cannot say), a room not on the map.
+    assert_eq!(plan_back(&map, Some(9)), Err(PlanError::NoWayBack(9)));
+    assert!(matches!(
+        plan_back(&map, Some(1)),
+        Err(PlanError::NoWay { .. })
+    ));
+    assert!(matches!(
+        plan_back(&map, Some(404)),
+        Err(PlanError::UnknownRoom { .. })
+    ));
+}
+
+/// The round trip is the way there, then the way back from the room's door, in one tree:
+/// the second ride's floor is the lab's, the corridor skills on the way back go without
+/// `sign_read`, and the lab's door is counted on its side.
+#[test]
+fn a_round_trip_is_one_tree_with_both_ways() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    let map = Map::parse(SMALL, "small.map.toml").unwrap();
+    let there = plan(&map, None, From::Lab).unwrap();
+    let back = plan_back(&map, None).unwrap();
+    let both = plan_round_trip(&map, None).unwrap();
+    assert_eq!(both.trip, Trip::RoundTrip);
+    assert_eq!(
+        both.steps,
+        [there.steps.clone(), back.steps.clone()].concat()
+    );
+    let xml = both.plan_xml(&library, "small").unwrap();
+    let parsed = skillfab_sequence::Plan::parse(&xml, "planned").unwrap();
+    assert_eq!(parsed.main, "deliver-to-105-and-back");
+    let own = &xml[..xml.find("<BehaviorTree ID=\"LeaveTheLab\"").unwrap()];
+    // The way there's tree is the round trip's first part, node for node.
+    let there_xml = there.plan_xml(&library, "small").unwrap();
+    let there_own = &there_xml[..there_xml.find("<BehaviorTree ID=\"LeaveTheLab\"").unwrap()];
+    let body = |t: &str| {
+        let from = t.find("<Sequence>").unwrap();
+        t[from..t.rfind("</Sequence>").unwrap()].to_string()
+    };
+    assert!(body(own).starts_with(&body(there_own)), "{own}");
+    let rest = &body(own)[body(there_own).len()..];
+    for expected in [
+        "<SubTree ID=\"IntoTheCorridorRight\"/>",
+        "<SetParam skill=\"barcode_track\" param=\"id\" value=\"860\"/>",
+        "<SetParam skill=\"sign_read\" param=\"floor\" value=\"0\"/>",
+        "<SubTree ID=\"DoorsCountedFromHere\"/>",
+        "condition=\"door_detect.doors.right &gt;= 2\"",
+        "<SubTree ID=\"AtTheLabsDoor\"/>",
+    ] {
+        assert!(rest.contains(expected), "{expected}: {rest}");
+    }
+    assert!(
+        !rest.contains("sign_read\"/>") && !rest.contains(", sign_read"),
+        "{rest}"
+    );
+    // The way back alone is the round trip's second part, node for node.
+    let back_xml = back.plan_xml(&library, "small").unwrap();
+    let back_own = &back_xml[..back_xml.find("<BehaviorTree ID=\"LeaveTheLab\"").unwrap()];
+    assert_eq!(
+        rest.trim(),
+        body(back_own).trim_start_matches("<Sequence>").trim()
+    );
 }
 
 #[test]
@@ -449,6 +602,15 @@ fn every_numbered_room_of_the_shipped_maps_has_a_plan_that_reads() {
             assert_eq!(plan.main, format!("deliver-to-{room}"), "{building}");
             assert!(
                 xml.contains(&format!("value=\"{room}\"")),
+                "{building} {room}"
+            );
+            // And back: every room's door is in a corridor's side on these maps.
+            let both = plan_round_trip(&map, Some(room)).unwrap();
+            let xml = both.plan_xml(&library, building).unwrap();
+            let plan = skillfab_sequence::Plan::parse(&xml, "planned").unwrap();
+            assert_eq!(plan.main, format!("deliver-to-{room}-and-back"));
+            assert!(
+                matches!(both.steps.last(), Some(Step::AtTheLab { .. })),
                 "{building} {room}"
             );
         }

@@ -65,21 +65,37 @@ pub(super) enum Verdict {
     Outside,
     /// The message was delivered (deliver).
     Delivered,
+    /// The message was delivered, and the plan ended with the robot back at the lab (deliver
+    /// `--and-back`).
+    Back,
     /// The time limit passed.
     Limit,
 }
 
-/// How the run at `site` ended by ground truth `now`, if it has.
-pub(super) fn judge_truth(site: &Site, now: &TruthRecord, limit_s: f64) -> Option<Verdict> {
+/// How the run at `site` ended by ground truth `now`, if it has. With `and_back` the message
+/// delivered does not end it: the plan's end does ([`judge_back`]).
+pub(super) fn judge_truth(
+    site: &Site,
+    now: &TruthRecord,
+    limit_s: f64,
+    and_back: bool,
+) -> Option<Verdict> {
     if matches!(site, Site::World(_)) && now.outside {
         Some(Verdict::Outside)
-    } else if now.delivered {
+    } else if now.delivered && !and_back {
         Some(Verdict::Delivered)
     } else if now.t > limit_s {
         Some(Verdict::Limit)
     } else {
         None
     }
+}
+
+/// A round trip's verdict once its plan `ended` (its runner's last line), by ground truth
+/// `now`, a record after the end: back only when the plan succeeded, the message was
+/// delivered and the robot is back at the lab (the simulator's `at_lab`).
+pub(super) fn judge_back(ended: Option<&str>, now: &TruthRecord) -> Option<Verdict> {
+    (ended == Some("Success") && now.delivered && now.at_lab).then_some(Verdict::Back)
 }
 
 /// The first ground-truth record a status period after `then`, or `then` if none comes
@@ -174,6 +190,11 @@ pub(super) fn verdict(
             out.success = true;
             c.activate(&["stop"])?;
             step(c, out, "the message is delivered: stop");
+        }
+        Verdict::Back => {
+            out.success = true;
+            c.activate(&["stop"])?;
+            step(c, out, "delivered, and back at the lab: stop");
         }
         Verdict::Limit => step(c, out, "time limit reached"),
     }

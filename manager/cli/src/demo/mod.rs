@@ -37,7 +37,9 @@ use crate::faults::{Faults, Kill, Killer};
 mod judge;
 mod plot;
 
-use judge::{Judge, NO_TRUTH, NO_TRUTH_ERROR, StepLog, judge_truth, truth_after, verdict};
+use judge::{
+    Judge, NO_TRUTH, NO_TRUTH_ERROR, StepLog, judge_back, judge_truth, truth_after, verdict,
+};
 
 /// Where a demo's robot is: a one-room world (the exit-lab experiment) or a building (the
 /// delivery mission).
@@ -100,6 +102,9 @@ pub struct DemoOptions {
     pub plan: PathBuf,
     /// The plan's tree to run (default: its main tree).
     pub tree: Option<String>,
+    /// A round trip (deliver `--and-back`): the message delivered does not end the run; it
+    /// succeeds when the plan ends with the message delivered and the robot back at the lab.
+    pub and_back: bool,
 }
 
 /// One run's outcome.
@@ -139,6 +144,9 @@ pub struct RunOutcome {
     /// Where the robot was at the end (ground truth): floor, x, y (m). A failed run's
     /// first clue.
     pub end: Option<(i32, f64, f64)>,
+    /// A round trip's: when the message was delivered (simulated s), if it was.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delivered_s: Option<f64>,
     /// A failed run's directory, kept for its diagnosis: `up.log` (every process's log and
     /// the plan's steps), the simulator's ground truth (`trajectory.csv`), the launch file
     /// and the plan. A run that succeeded leaves nothing.
@@ -173,6 +181,7 @@ impl RunOutcome {
             link: None,
             safety: None,
             end: None,
+            delivered_s: None,
             run_dir: None,
             error: None,
             trajectory: Vec::new(),
@@ -552,7 +561,9 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
         }
         log.read(&net.dir.join(STEPS_FILE), opts.verbose);
         match &last {
-            Some(now) if look && judge_truth(&opts.site, now, opts.limit_s).is_some() => {
+            Some(now)
+                if look && judge_truth(&opts.site, now, opts.limit_s, opts.and_back).is_some() =>
+            {
                 break None;
             }
             None if started.elapsed() > NO_TRUTH => bail!(NO_TRUTH_ERROR),
@@ -583,11 +594,13 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     // A plan that ended before the ground truth says how: the simulator writes it once per
     // status period (100 ms), and a lock-step manager stays paused when a plan ends. Let the
     // robot's time go on until a record after the plan's end.
-    if ended.is_some() && judge_truth(&opts.site, &now, opts.limit_s).is_none() {
+    if ended.is_some() && judge_truth(&opts.site, &now, opts.limit_s, opts.and_back).is_none() {
         now = truth_after(&mut c, &traj, now, judge.as_mut())?;
     }
     (out.time_s, out.collisions) = (now.t, now.collisions);
-    if let Some(v) = judge_truth(&opts.site, &now, opts.limit_s) {
+    let judged = judge_truth(&opts.site, &now, opts.limit_s, opts.and_back)
+        .or_else(|| judge_back(ended.as_deref(), &now).filter(|_| opts.and_back));
+    if let Some(v) = judged {
         verdict(&c, &mut out, v, &step)?;
     }
     if let Some(k) = killer {
@@ -636,10 +649,14 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     // outside (or the message was delivered) is the mission's.
     let done = |r: &&TruthRecord| match opts.site {
         Site::World(_) => r.outside,
+        Site::Building(_) if opts.and_back => r.delivered && r.at_lab,
         Site::Building(_) => r.delivered,
     };
     if let Some(first) = out.trajectory.iter().find(done) {
         out.time_s = first.t;
+    }
+    if opts.and_back {
+        out.delivered_s = out.trajectory.iter().find(|r| r.delivered).map(|r| r.t);
     }
     out.wall_s = wall.elapsed().as_secs_f64();
     (out.max_command_gap_s, out.max_stale_drive_s) = command_gaps(&out.trajectory);

@@ -522,8 +522,8 @@ enum Ride {
     Out,
 }
 
-/// The elevator ride of the delivery plan (skills/plans/deliver.xml, RideToTheFourthFloor) in
-/// the shipped building A's simulator (its cars come and go with other passengers): call a
+/// The elevator ride of the delivery plan (skills/plans/deliver.xml, BoardACar and
+/// RideToTheFloor with floor 4's button) in the shipped building A's simulator (its cars come and go with other passengers): call a
 /// car from the lobby of floor 0, board whichever opens, press 4, turn to the doors, leave
 /// when the indicator says 4. A small sequencer of harnessed skills; a fresh harness is a
 /// reactivated skill.

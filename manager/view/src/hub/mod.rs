@@ -795,7 +795,7 @@ mod tests {
         std::fs::write(&f, &text).unwrap();
         assert!(last_truth_record(&f, text.len() as u64).is_none());
         for i in 0..200 {
-            text.push_str(&format!("{i}.0,{i}.5,2.0,0.1,0,0,0,0,0,0,0,1,0,0\n"));
+            text.push_str(&format!("{i}.0,{i}.5,2.0,0.1,0,0,0,0,0,0,0,1,0,0,0\n"));
         }
         text.push_str("200.0,9");
         std::fs::write(&f, &text).unwrap();

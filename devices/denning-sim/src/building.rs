@@ -271,24 +271,11 @@ impl Building {
     pub fn lab_goal(&self) -> Option<LabGoal> {
         let f = self.floor(0)?;
         let sign = f.barcode.iter().find(|b| b.id == LAB_DOOR)?;
-        let near = |d: &Segment| point_segment(sign.at, d).0;
-        let door = f.door.iter().min_by(|a, b| near(a).total_cmp(&near(b)))?;
-        let mid = [
-            (door.from[0] + door.to[0]) / 2.0,
-            (door.from[1] + door.to[1]) / 2.0,
-        ];
-        let (ax, ay) = (door.to[0] - door.from[0], door.to[1] - door.from[1]);
-        let len = ax.hypot(ay);
-        let (mut nx, mut ny) = (-ay / len, ax / len);
-        if (sign.at[0] - mid[0]) * nx + (sign.at[1] - mid[1]) * ny > 0.0 {
-            (nx, ny) = (-nx, -ny);
-        }
+        // The corridor is on the side away from the sign, which is inside the lab.
+        let at = f.before_door(sign.at, -LAB_GOAL_INTO_THE_CORRIDOR)?;
         Some(LabGoal {
             floor: 0,
-            at: [
-                mid[0] + nx * LAB_GOAL_INTO_THE_CORRIDOR,
-                mid[1] + ny * LAB_GOAL_INTO_THE_CORRIDOR,
-            ],
+            at,
             radius: self.goal.radius,
         })
     }
@@ -325,6 +312,29 @@ impl Building {
 }
 
 impl Floor {
+    /// The point `d` m from the middle of the door nearest `sign` (by the door's nearest
+    /// point), square to the door: on the sign's side for `d` > 0, on the other for `d` < 0.
+    /// `None` without a door. How a room's sign tells its door (the goal in front of an
+    /// office, the lab's goal in its corridor).
+    pub fn before_door(&self, sign: P, d: f64) -> Option<P> {
+        let near = |s: &Segment| point_segment(sign, s).0;
+        let door = self
+            .door
+            .iter()
+            .min_by(|a, b| near(a).total_cmp(&near(b)))?;
+        let mid = [
+            (door.from[0] + door.to[0]) / 2.0,
+            (door.from[1] + door.to[1]) / 2.0,
+        ];
+        let (ax, ay) = (door.to[0] - door.from[0], door.to[1] - door.from[1]);
+        let len = ax.hypot(ay);
+        let (mut nx, mut ny) = (-ay / len, ax / len);
+        if (sign[0] - mid[0]) * nx + (sign[1] - mid[1]) * ny < 0.0 {
+            (nx, ny) = (-nx, -ny);
+        }
+        Some([mid[0] + nx * d, mid[1] + ny * d])
+    }
+
     /// The floor as a world called `name` starting at `start`.
     pub fn world(&self, name: String, start: [f64; 3]) -> World {
         World {

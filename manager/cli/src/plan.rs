@@ -129,32 +129,9 @@ pub fn building_for_room(
         .with_context(|| format!("{}: room {room} has no sign", building.display()))?;
     // The sign is 0.3 m beside its door's edge, 0.05 m in front of the wall: the door whose
     // nearest point is nearest, and the corridor on the sign's side of it.
-    let near = |d: &denning_sim::world::Segment| {
-        let (ax, ay) = (d.to[0] - d.from[0], d.to[1] - d.from[1]);
-        let len2 = ax * ax + ay * ay;
-        let t = (((sign.at[0] - d.from[0]) * ax + (sign.at[1] - d.from[1]) * ay) / len2)
-            .clamp(0.0, 1.0);
-        (sign.at[0] - d.from[0] - t * ax).hypot(sign.at[1] - d.from[1] - t * ay)
-    };
-    let door = f
-        .door
-        .iter()
-        .min_by(|a, b| near(a).total_cmp(&near(b)))
+    let at = f
+        .before_door(sign.at, GOAL_INTO_THE_CORRIDOR_M)
         .with_context(|| format!("{}: no door on floor {floor}", building.display()))?;
-    let mid = [
-        (door.from[0] + door.to[0]) / 2.0,
-        (door.from[1] + door.to[1]) / 2.0,
-    ];
-    let (ax, ay) = (door.to[0] - door.from[0], door.to[1] - door.from[1]);
-    let len = ax.hypot(ay);
-    let (mut nx, mut ny) = (-ay / len, ax / len);
-    if (sign.at[0] - mid[0]) * nx + (sign.at[1] - mid[1]) * ny < 0.0 {
-        (nx, ny) = (-nx, -ny);
-    }
-    let at = [
-        mid[0] + nx * GOAL_INTO_THE_CORRIDOR_M,
-        mid[1] + ny * GOAL_INTO_THE_CORRIDOR_M,
-    ];
     // The file as a TOML table with its goal replaced (the simulator reads it as ever).
     let text = std::fs::read_to_string(building)?;
     let mut doc: toml::Table = toml::from_str(&text)?;

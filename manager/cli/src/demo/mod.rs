@@ -34,6 +34,7 @@ use std::time::{Duration, Instant};
 
 use crate::faults::{Faults, Kill, Killer};
 
+pub(crate) mod deliver;
 mod judge;
 mod plot;
 

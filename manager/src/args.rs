@@ -26,6 +26,12 @@ pub struct PaceArgs {
     /// Start the next cycle as soon as the previous one finished.
     #[arg(long)]
     pub free_run: bool,
+    /// The fabric's clock runs F times faster than the host's, as a simulator sped up F
+    /// times does: each cycle, paced every --period-ms of the host's time, stands for F times
+    /// that of the clock skills and plans time things in (default 1). Not with --lockstep
+    /// (its clock is the simulator's already) or --free-run.
+    #[arg(long, value_name = "F", conflicts_with_all = ["free_run", "lockstep"])]
+    pub time_factor: Option<f64>,
     /// Stop after N cycles.
     #[arg(long, value_name = "N")]
     pub cycles: Option<u64>,
@@ -77,6 +83,16 @@ impl PaceArgs {
         } else {
             pace
         })
+    }
+
+    /// --time-factor, checked: a positive number.
+    pub fn time_factor(&self) -> anyhow::Result<Option<f64>> {
+        match self.time_factor {
+            Some(f) if !(f.is_finite() && f > 0.0) => {
+                anyhow::bail!("--time-factor must be a positive number, got {f}")
+            }
+            f => Ok(f),
+        }
     }
 
     /// The pace of --period-ms and --free-run alone.
@@ -196,6 +212,9 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
     if let Some(p) = pace.pace()? {
         config.pace = p;
     }
+    if let Some(f) = pace.time_factor()? {
+        config.time_factor = f;
+    }
     config.deadline = deadline_ms.map(|ms| Duration::from_secs_f64(ms.max(0.0) / 1000.0));
     config.paused = paused;
     config.held = held;
@@ -229,6 +248,7 @@ pub fn run_manager(domain: Domain, args: ManagerArgs) -> anyhow::Result<()> {
 pub fn run_up(domain: Domain, args: UpArgs) -> anyhow::Result<()> {
     let launch = Launch::load(&args.launch)?;
     up(UpOptions {
+        time_factor: args.pace.time_factor()?.or(launch.time_factor),
         launch,
         domain,
         cycles: args.pace.cycles,

@@ -43,6 +43,9 @@ pub struct UpOptions {
     pub pace: Option<Pace>,
     /// Lock-step at the period of `pace`, else the launch file's, else 10 ms.
     pub lockstep: bool,
+    /// The fabric's clock runs this many times faster than the host's (with a period, not in
+    /// lock-step: see `ManagerConfig::time_factor`); overrides the launch file's.
+    pub time_factor: Option<f64>,
     /// Start with cycling stopped.
     pub paused: bool,
     /// Run no cycle until a client holds the fabric at one.
@@ -368,6 +371,13 @@ fn manager_args(opts: &UpOptions, restart: u32) -> Vec<String> {
         Some(Pace::Period(p)) => a.extend(["--period-ms".into(), ms(p)]),
         Some(Pace::LockStep(p)) => a.extend(["--lockstep".into(), "--period-ms".into(), ms(p)]),
         None => {}
+    }
+    // (In lock-step the clock is the simulator's time already; free-running, the host's.)
+    if let Some(f) = opts.time_factor
+        && !opts.lockstep
+        && !matches!(pace, Some(Pace::FreeRun | Pace::LockStep(_)))
+    {
+        a.extend(["--time-factor".into(), f.to_string()]);
     }
     // A restarted manager takes the pause, the holds and the cycle number from its predecessor.
     if restart == 0 && opts.paused {

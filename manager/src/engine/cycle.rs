@@ -203,7 +203,7 @@ impl Manager {
         let h = self.board.header();
         run.start_ns = now_ns();
         h.cycle_start_ns.store(run.start_ns, Ordering::Release);
-        let time = match self.config.pace.period() {
+        let time = match self.config.clock_period() {
             Some(p) => (p.as_nanos() as u64).saturating_mul(k),
             None => run.start_ns,
         };

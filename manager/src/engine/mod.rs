@@ -124,6 +124,10 @@ pub struct ManagerConfig {
     /// The first cycle's number (a replay numbers cycles as the recording did); a manager
     /// that takes over from a dead one numbers on from it instead.
     pub first_cycle: u64,
+    /// With a period: the fabric's clock runs this many times faster than the host's, as a
+    /// simulator sped up as much does — a cycle paced every period stands for
+    /// `period × time_factor` of the clock skills and plans time things in (1: the host's).
+    pub time_factor: f64,
 }
 
 /// Where a manager's fabric log goes by default: `<domain>-<unix seconds>-<pid>.jsonl` in
@@ -169,7 +173,23 @@ impl ManagerConfig {
             wait_timeout: Duration::from_secs(30),
             param_log: None,
             first_cycle: 1,
+            time_factor: 1.0,
             record: None,
+        }
+    }
+
+    /// The period of the fabric's clock (`None`: it free-runs, the clock is the host's): the
+    /// pace's period, times [`ManagerConfig::time_factor`] when paced in real time.
+    pub fn clock_period(&self) -> Option<Duration> {
+        match self.pace {
+            // (A factor that is not a positive number, which the flags refuse, counts as 1.)
+            Pace::Period(p) if self.time_factor.is_finite() && self.time_factor > 0.0 => {
+                let ns = (p.as_nanos() as f64 * self.time_factor).round();
+                Some(Duration::from_nanos(ns.min(u64::MAX as f64) as u64))
+            }
+            Pace::Period(p) => Some(p),
+            Pace::LockStep(p) => Some(p),
+            Pace::FreeRun => None,
         }
     }
 
@@ -350,7 +370,7 @@ impl Manager {
         let previous_cycle = Board::retire_dead(&config.domain.prefix());
         let board = Board::create(&config.domain.prefix())?;
         let h = board.header();
-        let period = config.pace.period().map_or(0, |p| p.as_nanos() as u64);
+        let period = config.clock_period().map_or(0, |p| p.as_nanos() as u64);
         h.period_ns.store(period, Ordering::Release);
         h.lockstep
             .store(u32::from(config.pace.is_lockstep()), Ordering::Release);

@@ -201,6 +201,11 @@ pub struct ManagerSection {
     /// Cycle deadline (ms).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub deadline_ms: Option<f64>,
+    /// The fabric's clock runs this many times faster than the host's (a simulator sped up
+    /// as much): each cycle stands for `period_ms × time_factor` of the clock skills and
+    /// plans time things in. Default 1; ignored in lock-step and free-running.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_factor: Option<f64>,
     /// Spin budget (µs) of every registering process that does not set its own (`--spin-us`;
     /// default 0: they sleep between rings).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -294,6 +299,8 @@ pub struct Launch {
     pub period: Option<Duration>,
     /// Cycle deadline if the file sets it.
     pub deadline: Option<Duration>,
+    /// The clock's time factor if the file sets it.
+    pub time_factor: Option<f64>,
     /// Processes in file order.
     pub processes: Vec<ProcessSpec>,
     /// Real-time mode of the manager's cycle thread (from `[realtime]`).
@@ -512,6 +519,15 @@ impl Launch {
         Ok(Launch {
             period: ms(raw.manager.period_ms, "period_ms")?,
             deadline: ms(raw.manager.deadline_ms, "deadline_ms")?,
+            time_factor: match raw.manager.time_factor {
+                Some(f) if !(f.is_finite() && f > 0.0) => {
+                    return Err(LaunchError::Parse {
+                        path: path.to_path_buf(),
+                        message: format!("manager.time_factor must be a positive number, got {f}"),
+                    });
+                }
+                f => f,
+            },
             processes,
             manager_realtime: raw.realtime.as_ref().map(RealTimeSection::manager),
         })
@@ -630,6 +646,12 @@ mod tests {
         assert!(e.to_string().contains("a b"), "{e}");
         let e = parse("[manager]\nperiod_ms = -1\n").unwrap_err();
         assert!(e.to_string().contains("period_ms"), "{e}");
+        let e = parse("[manager]\ntime_factor = 0\n").unwrap_err();
+        assert!(e.to_string().contains("time_factor"), "{e}");
+        assert_eq!(
+            parse("[manager]\ntime_factor = 4.0\n").unwrap().time_factor,
+            Some(4.0)
+        );
         let e = parse("[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\n[[process]]\nname = \"a\"\nbin = \"/bin/sh\"\n")
             .unwrap_err();
         assert!(e.to_string().contains("twice"), "{e}");

@@ -105,7 +105,8 @@ pub struct Clock {
     /// The cycle's time since the fabric's time origin: cycle × period when the manager has a
     /// period (lock-step included), the cycle's start stamp when it free-runs.
     pub time: std::time::Duration,
-    /// The manager's nominal period; `None` when it free-runs.
+    /// The manager's nominal period, in this clock's time (a manager with a time factor
+    /// paces cycles that many times faster on the host); `None` when it free-runs.
     pub period: Option<std::time::Duration>,
     /// Whether the manager runs in lock-step: cycles follow each other as fast as the units
     /// finish them and a simulator advances one period per cycle.

@@ -345,6 +345,41 @@ fn a_bad_launch_file_is_a_clear_error() {
     );
 }
 
+/// A fabric paced for a simulator sped up four times (`time_factor` in the launch file):
+/// each 5 ms cycle stands for 20 ms of the clock skills and plans time things in. A factor
+/// that is not a positive number, or one given with --lockstep, is refused.
+#[test]
+fn a_time_factor_makes_each_cycle_stand_for_that_much_more_clock_time() {
+    let mut t = TestDomain::new("timefactor");
+    let launch = t.launch_file(
+        "[manager]\nperiod_ms = 5\ntime_factor = 4.0\n[[process]]\nname = \"ticker\"\nbin = \"{bin:ticker}\"\n",
+    );
+    t.spawn("skillfab", &["up", launch.to_str().unwrap()]);
+    let board = t.board();
+    t.wait_until("ticker to run", || {
+        registered(&board, "ticker").is_some_and(|s| s.runs > 5)
+    });
+    let clock = board.header().clock();
+    let period = clock.period.expect("a period").as_nanos();
+    assert!(period.abs_diff(20_000_000) <= 1_000, "{clock:?}");
+    assert!(!clock.lockstep);
+    assert_eq!(clock.time.as_nanos() % period, 0, "{clock:?}");
+    for (args, says) in [
+        (
+            &["--time-factor", "0"][..],
+            "--time-factor must be a positive number",
+        ),
+        (&["--time-factor", "4", "--lockstep"][..], "--time-factor"),
+    ] {
+        let out = t.run("skillfab", &[&["manager", "--cycles", "1"], args].concat());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(says),
+            "{args:?}: {err}"
+        );
+    }
+}
+
 #[test]
 fn skillfab_up_restarts_a_killed_skill_by_its_policy() {
     let mut t = TestDomain::new("restart");

@@ -311,6 +311,9 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
             period_ms: Some(period_ms),
             // (Lock-step: the manager's own, 10 s.)
             deadline_ms: (!opts.lockstep).then_some((period_ms * 5.0).max(20.0)),
+            // The fabric's clock is the robot's: a cycle is 10 ms of it, so skills' timers
+            // and the plan's timeouts mean at every time factor what they mean in lock-step.
+            time_factor: (!opts.lockstep).then_some(time_factor),
             ..ManagerSection::default()
         },
         process: vec![

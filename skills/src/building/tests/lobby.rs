@@ -272,6 +272,60 @@ fn enter_car_backs_away_from_doors_that_close_in_front_of_it_then_is_lost() {
 }
 
 #[test]
+fn enter_car_drives_in_no_faster_than_it_can_stop_short_of_what_is_ahead() {
+    // Lined up 1.2 m before car 2's doorway, 0.2 rad askew (too far for the shut test): an
+    // open doorway reads the cabin behind it, doors that closed read 0.35 m.
+    let car = Car {
+        id: 2,
+        x: 3.0,
+        y: 0.0,
+        heading: 0.0,
+    };
+    let speed_with_ahead = |ahead: f64| {
+        let mut h = Harness::<EnterCar>::new();
+        h.input("car", car)
+            .input("sonar", ring(|a| if a.abs() < 0.6 { ahead } else { 3.0 }))
+            .input(
+                "odometry",
+                Odometry {
+                    x: 1.8,
+                    theta: 0.2,
+                    ..Odometry::default()
+                },
+            );
+        assert_eq!(
+            h.step()
+                .unwrap()
+                .output::<Progress>("progress")
+                .unwrap()
+                .phase,
+            enter_phase::ENTERING
+        );
+        h.input(
+            "odometry",
+            Odometry {
+                x: 2.3,
+                theta: 0.2,
+                ..Odometry::default()
+            },
+        );
+        h.step()
+            .unwrap()
+            .output::<Drive>("drive")
+            .unwrap()
+            .translate
+    };
+    let open = speed_with_ahead(3.0);
+    assert!(open > 0.6, "the cabin ahead: at `speed`, {open}");
+    let shut = speed_with_ahead(0.35);
+    assert!(
+        shut > 0.0 && shut <= (2.0 * 0.35 * 0.2f64).sqrt(),
+        "the doors 0.35 m ahead: slow enough to stop 0.15 m short, {shut}"
+    );
+    assert_eq!(speed_with_ahead(0.15), 0.0, "0.15 m ahead: stopped");
+}
+
+#[test]
 fn leave_car_turns_to_the_doors_waits_for_go_and_for_them_to_open_then_drives_out() {
     let start = [0.9, 0.95, FRAC_PI_2];
     let mut r = Robot::new(&lobby(start, false), 9);

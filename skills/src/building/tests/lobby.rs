@@ -374,6 +374,118 @@ fn leave_car_turns_to_the_doors_waits_for_go_and_for_them_to_open_then_drives_ou
     assert!(r.sim.vel[0].abs() < 1e-3, "stopped");
 }
 
+/// Building D seed 4's ride: out of the cabin 0.17 m off the doorway's axis (the doorway
+/// 1.1 m wide, the robot 0.72 m across), a post was in the front sonars' cones only, not in
+/// the side ones' it centred by, and it drove straight at it until the device's safety layer
+/// stopped it there for good. Past the cabin's walls it steers for the gap's middle.
+#[test]
+fn leave_car_steers_for_the_middle_of_the_gap_between_posts_seen_ahead() {
+    let out_at = |near: &[(f64, f64)]| {
+        let mut h = Harness::<LeaveCar>::new();
+        h.set_param("go=1").unwrap();
+        // Facing the back wall (+y), all clear: leaving along −y.
+        h.input(
+            "odometry",
+            Odometry {
+                theta: FRAC_PI_2,
+                ..Odometry::default()
+            },
+        )
+        .input("sonar", ring(|_| 3.0));
+        h.step().unwrap();
+        let ring = ring(|a| {
+            near.iter()
+                .find(|(deg, _)| (a - deg.to_radians()).abs() < 0.01)
+                .map_or(3.0, |&(_, r)| r)
+        });
+        h.input(
+            "odometry",
+            Odometry {
+                y: -0.9,
+                theta: -FRAC_PI_2,
+                ..Odometry::default()
+            },
+        )
+        .input("sonar", ring);
+        let step = h.step().unwrap();
+        assert_eq!(
+            step.output::<Progress>("progress").unwrap().phase,
+            leave_phase::LEAVING
+        );
+        *step.output::<Drive>("drive").unwrap()
+    };
+    // A post 0.12 m left of the centre line, 0.44 m ahead, in the 15° sonar's cone alone:
+    // turn right, and keep moving.
+    let d = out_at(&[(15.0, 0.1)]);
+    assert!(d.rotate < -0.5 && d.translate > 0.1, "{d:?}");
+    // The same on the right: turn left.
+    let d = out_at(&[(-15.0, 0.1)]);
+    assert!(d.rotate > 0.5 && d.translate > 0.1, "{d:?}");
+    // Both posts alike: straight on.
+    let d = out_at(&[(15.0, 0.3), (-15.0, 0.3)]);
+    assert!(d.rotate.abs() < 0.05 && d.translate > 0.2, "{d:?}");
+}
+
+/// Held at a post by the device's safety layer (told to drive, not moving), the way out
+/// itself is not to be trusted (D seed 4's was squared 0.2 rad off): it steers by the gap
+/// between the posts alone until it is past them.
+#[test]
+fn leave_car_held_at_a_post_steers_by_the_gap_alone() {
+    let mut h = Harness::<LeaveCar>::new();
+    h.set_param("go=1").unwrap();
+    h.input(
+        "odometry",
+        Odometry {
+            theta: FRAC_PI_2,
+            ..Odometry::default()
+        },
+    )
+    .input("sonar", ring(|_| 3.0));
+    h.step().unwrap();
+    // The way out is −y; it stands 0.25 rad off it, the posts alike on both sides, and does
+    // not move however it is told to.
+    let posts = ring(|a| {
+        if (a.abs() - 15f64.to_radians()).abs() < 0.01 {
+            0.3
+        } else {
+            3.0
+        }
+    });
+    h.input(
+        "odometry",
+        Odometry {
+            y: -0.3,
+            theta: -FRAC_PI_2,
+            ..Odometry::default()
+        },
+    );
+    let step = h.step().unwrap();
+    assert_eq!(
+        step.output::<Progress>("progress").unwrap().phase,
+        leave_phase::LEAVING
+    );
+    let held = Odometry {
+        y: -0.9,
+        theta: -FRAC_PI_2 + 0.25,
+        ..Odometry::default()
+    };
+    let mut drives = Vec::new();
+    for _ in 0..80 {
+        h.input("odometry", held).input("sonar", posts);
+        drives.push(*h.step().unwrap().output::<Drive>("drive").unwrap());
+    }
+    assert!(
+        drives[0].rotate < -0.3,
+        "first back to the way: {:?}",
+        drives[0]
+    );
+    let last = drives[79];
+    assert!(
+        last.rotate.abs() < 0.05 && last.translate > 0.2,
+        "then by the gap: {last:?}"
+    );
+}
+
 #[test]
 fn leave_car_waits_again_when_the_doors_close_in_front_of_it() {
     let mut h = Harness::<LeaveCar>::new();

@@ -100,6 +100,9 @@ const SHUT_MARGIN: f64 = 0.6;
 /// Within this of the doorway line (m) the robot's centre is in the doors' light curtain
 /// (0.51 m).
 const CURTAIN: f64 = 0.45;
+/// Deceleration the drive in counts on to stop short of what is ahead (m/s²; the robot's
+/// limit is 0.5, and a sonar reading is up to 300 ms old).
+const STOPPING: f64 = 0.35;
 
 /// Drives into the open car. First to a point `approach` before the doorway on its axis,
 /// then along the axis (a carrot 0.6 m ahead on it) centred between the door posts by the
@@ -251,9 +254,14 @@ impl Skill for EnterCar {
                 }
                 let limit = if along > -POSTS { p.through } else { p.speed };
                 let slow = 0.05 + 0.8 * (p.depth - along);
+                // Able to stop short of what the ring sees ahead: doors that closed while
+                // car_watch still reports the car (1.5 s after its lantern went out) stand
+                // across the way, and coming in askew the shut test does not see them. An
+                // open doorway reads the cabin behind it (1.7 m deep): no limit there.
+                let stoppable = (2.0 * STOPPING * (ahead - BLOCKED).max(0.0)).sqrt();
                 Drive {
                     translate: if err.abs() < 0.8 && ahead > BLOCKED {
-                        limit.min(slow) * err.cos().powi(2)
+                        limit.min(slow).min(stoppable) * err.cos().powi(2)
                     } else {
                         0.0
                     },

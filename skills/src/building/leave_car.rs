@@ -25,8 +25,9 @@ pub struct LeaveCarParams {
     /// until its front is in the doorway, where the light curtain holds them open.
     #[param(default = 0.6, min = 0.0, max = 5.0)]
     pub doorway: f64,
-    /// Centring gain between the door posts (rad per m of imbalance).
-    #[param(default = 0.8, min = 0.0, max = 10.0)]
+    /// Past the cabin's walls, steering toward the middle of the gap the door posts leave
+    /// ahead (rad per m off it, at most 0.5 rad).
+    #[param(default = 2.0, min = 0.0, max = 10.0)]
     pub centre: f64,
 }
 
@@ -64,6 +65,40 @@ const CABIN_CENTRING: f64 = 1.5;
 /// Something this near ahead (m, from the ring) stops it at once, doors or not.
 const BLOCKED: f64 = 0.3;
 
+/// Echoes ahead nearer than this (m, along the heading from the robot's centre) bound the
+/// gap it drives into.
+const GAP_AHEAD: f64 = 1.0;
+/// A side of the gap with no echo ahead within [`GAP_AHEAD`] is this far across (m).
+const GAP_OPEN: f64 = 0.8;
+
+/// Where the middle of the gap ahead is across the way (m, left of the robot's centre line
+/// positive): half-way between the nearest echo on each side of the centre line among those
+/// ahead within [`GAP_AHEAD`].
+fn gap_middle(s: &Sonar) -> f64 {
+    let (mut left, mut right) = (GAP_OPEN, -GAP_OPEN);
+    for i in 0..SONARS {
+        let Some(r) = range(s, i) else { continue };
+        let (a, d) = (crate::nav::sonar_angle(i), RING + r);
+        let (x, y) = (d * a.cos(), d * a.sin());
+        if x <= 0.0 || x > GAP_AHEAD {
+            continue;
+        }
+        if y >= 0.0 {
+            left = left.min(y);
+        } else {
+            right = right.max(y);
+        }
+    }
+    (left + right) / 2.0
+}
+
+/// Told to drive out and not moving this many cycles (0.5 s), it steers by the gap alone.
+const PINNED: u32 = 50;
+/// ... for this far along the way out (m): past the posts.
+const BY_THE_GAP: f64 = 0.3;
+/// Steering by the gap alone: toward its middle seen from this far back (m), at most 0.8 rad.
+const GAP_LOOK: f64 = 0.3;
+
 /// Leaves the car. At activation it faces the back wall, or the panel's button beside it; the
 /// way out is that heading turned half round, squared to the cabin's walls (the nearest of
 /// their directions, when the ring fits them standing still), and it turns to it on the spot. Then it holds still
@@ -91,6 +126,13 @@ pub struct LeaveCar {
     fresh: bool,
     /// Whether the way out has been squared to the cabin's walls.
     squared: bool,
+    /// Cycles it has been told to drive out and has not moved (the device's safety layer
+    /// holds it at a post), and once that lasted [`PINNED`], how far along it steers by the
+    /// gap alone.
+    #[serde(default)]
+    pinned_for: u32,
+    #[serde(default)]
+    by_the_gap_until: Option<f64>,
 }
 
 impl Skill for LeaveCar {
@@ -112,6 +154,8 @@ impl Skill for LeaveCar {
             self.still_for = 0;
             self.fresh = true;
             self.squared = false;
+            self.pinned_for = 0;
+            self.by_the_gap_until = None;
         }
         // Fits only from readings all taken standing still: the ring refreshes each sonar
         // every 300 ms.
@@ -179,18 +223,34 @@ impl Skill for LeaveCar {
                     let left_of = (r.distance - l.distance) / 2.0;
                     steer -= (CABIN_CENTRING * left_of).clamp(-0.45, 0.45);
                 } else if along > 0.2 && along < p.distance - 0.3 {
-                    // Between the posts: steer away from the nearer one.
-                    let left = min_in(s, 0.5, 2.4).min(0.8);
-                    let right = min_in(s, -2.4, -0.5).min(0.8);
-                    steer += p.centre * (left - right) / 2.0;
+                    // Between the posts: toward the middle of the gap they leave ahead. Off
+                    // the doorway's axis a post ahead may be in the front sonars' cones only
+                    // (building D seed 4: 0.17 m off, the posts never in the side sonars'),
+                    // so the echoes count by where they are across the way, not by sonar.
+                    let middle = gap_middle(s);
+                    steer = match self.by_the_gap_until {
+                        // Held at a post: the way out itself is off (squared to a bad fit of
+                        // the cabin), so the gap alone says where to go until past it.
+                        Some(until) if along < until => (middle / GAP_LOOK).atan().clamp(-0.8, 0.8),
+                        _ => steer + (p.centre * middle).clamp(-0.5, 0.5),
+                    };
                 }
                 let slow = 0.05 + 0.8 * (p.distance - along);
+                let translate = if steer.abs() < 0.8 && ahead > BLOCKED {
+                    p.speed.min(slow) * steer.cos().powi(2)
+                } else {
+                    0.0
+                };
+                self.pinned_for = if translate > 0.05 && od.v.abs() < 0.02 {
+                    self.pinned_for + 1
+                } else {
+                    0
+                };
+                if self.pinned_for > PINNED && self.by_the_gap_until.is_none_or(|u| along >= u) {
+                    self.by_the_gap_until = Some(along + BY_THE_GAP);
+                }
                 Drive {
-                    translate: if steer.abs() < 0.8 && ahead > BLOCKED {
-                        p.speed.min(slow) * steer.cos().powi(2)
-                    } else {
-                        0.0
-                    },
+                    translate,
                     rotate: (p.gain * steer).clamp(-1.0, 1.0),
                 }
             }

@@ -34,6 +34,13 @@ pub struct PushButtonParams {
     /// A robot that called a car waits where it sees all the cars' lanterns.
     #[param(default = 0.0, min = 0.0, max = 6.0)]
     pub retreat: f64,
+    /// After the press, before the retreat, look along the button's wall each way: turn this
+    /// far off its normal to the left, then to the right, then back (rad; 0: no look). From
+    /// the button the lanterns of the cars beside it are 55° and 77° off (the camera sees
+    /// ±30°), and a car already at the floor opens at once and closes 9.5 s later: from the
+    /// retreat's end, 4.6 m out, it would be seen only after it closed.
+    #[param(default = 0.0, min = 0.0, max = 1.6)]
+    pub look: f64,
     /// Turn rate looking for a button not seen yet (rad/s; 0: wait for it). A button beside
     /// the camera's field of view (a panel's end button, seen from the middle) comes into view.
     #[param(default = 0.4, min = 0.0, max = 1.5)]
@@ -85,6 +92,8 @@ pub mod push_phase {
     pub const FAILED: u32 = 5;
     /// Pressed; backing away `retreat` before it is done.
     pub const RETREAT: u32 = 6;
+    /// Pressed; looking along the wall each way (`look`) before the retreat.
+    pub const LOOK: u32 = 7;
 }
 use push_phase::*;
 
@@ -106,6 +115,12 @@ const LINE_UP_RANGE: f64 = 1.0;
 const INSET: f64 = 0.05;
 /// Beyond this bearing (rad) the approach turns on the spot before driving.
 const FACING: f64 = 0.2;
+/// Turn rate looking along the wall (rad/s, at most; the robot turns up to 3.1 rad/s and
+/// accelerates at 1.75 rad/s²): the whole look (4 × `look`) takes some 4 s at 0.95 rad, and a
+/// lantern stays in the camera's ±30° for half a second of a sweep, five camera frames.
+const LOOK_RATE: f64 = 2.0;
+/// A look's heading is reached within this (rad).
+const LOOKED: f64 = 0.05;
 
 /// Presses the tracked button: turns toward it, drives to `reach` of it (coming from within
 /// 40° of square to the button's wall, once the ring fits that wall: from further aside it
@@ -113,7 +128,10 @@ const FACING: f64 = 0.2;
 /// straight ahead, and proposes `push.press` until the pusher reports a new
 /// stroke, then releases. The stroke pressed the button when the report names the button's
 /// id (then it backs away `retreat`, if set, before it is done); a miss backs off `back` and
-/// tries again, up to `tries` strokes. Backing ends early where the sonars behind see
+/// tries again, up to `tries` strokes. With `look` set, the press is followed by a look along
+/// the wall: turning on the spot to `look` left of the wall's normal (the way it faces once
+/// the ring fits the wall; else the way it faced pressing), then as far right, then back,
+/// before the retreat. Backing ends early where the sonars behind see
 /// something within 0.25 m. A target not seen yet is looked for by turning on the
 /// spot at `search` (with `search` 0: no drive proposal, another skill may be bringing it
 /// near).
@@ -134,9 +152,28 @@ pub struct PushButton {
     back_from: (f64, f64),
     /// The normal of the button's wall, toward it (odometry frame), once the ring fits it.
     normal: Option<f64>,
+    /// Looking along the wall: the heading looked from (the wall's normal), and the looks
+    /// done (left, right, back).
+    look_from: f64,
+    looks_done: usize,
 }
 
 impl PushButton {
+    /// The button pressed (or, with `press` 0, faced): look along the wall, back away or be
+    /// done, as the parameters say.
+    fn pressed(&mut self, p: &PushButtonParams, od: &Odometry) {
+        self.phase = if p.look > 0.0 {
+            LOOK
+        } else if p.retreat > 0.0 {
+            RETREAT
+        } else {
+            DONE
+        };
+        self.look_from = self.normal.unwrap_or(od.theta);
+        self.looks_done = 0;
+        self.back_from = (od.x, od.y);
+    }
+
     /// Fits the button's wall: of the walls the ring fits, the one whose distance puts the
     /// button `INSET` in front of it (seen from aside, the sonars facing the button meet its
     /// wall too obliquely to fit it). Its normal is kept (blended: each fit is a few
@@ -207,8 +244,7 @@ impl Skill for PushButton {
         }
         if self.phase == ALIGN && t.bearing.abs() < p.align {
             if p.press == 0 {
-                self.phase = if p.retreat > 0.0 { RETREAT } else { DONE };
-                self.back_from = (od.x, od.y);
+                self.pressed(p, od);
             } else {
                 self.phase = STROKE;
                 self.stroke_from = Some((arm.strokes, ctx.cycle));
@@ -223,8 +259,7 @@ impl Skill for PushButton {
                 self.stroke_from = None;
                 self.strokes += u32::from(reported);
                 if reported && arm.pressed == t.id {
-                    self.phase = if p.retreat > 0.0 { RETREAT } else { DONE };
-                    self.back_from = (od.x, od.y);
+                    self.pressed(p, od);
                 } else {
                     self.misses += 1;
                     self.phase = if self.misses >= p.tries {
@@ -236,6 +271,23 @@ impl Skill for PushButton {
                 }
             } else {
                 press = true;
+            }
+        }
+        let look = [
+            self.look_from + p.look,
+            self.look_from - p.look,
+            self.look_from,
+        ];
+        if self.phase == LOOK {
+            while look
+                .get(self.looks_done)
+                .is_some_and(|&h| wrap(h - od.theta).abs() < LOOKED)
+            {
+                self.looks_done += 1;
+            }
+            if self.looks_done >= look.len() {
+                self.phase = if p.retreat > 0.0 { RETREAT } else { DONE };
+                self.back_from = (od.x, od.y);
             }
         }
         let backed = (od.x - self.back_from.0).hypot(od.y - self.back_from.1);
@@ -293,6 +345,15 @@ impl Skill for PushButton {
                 drive = Some(Drive {
                     translate: 0.0,
                     rotate: turn_toward(t.bearing, p.gain, 0.3, 0.05, 0.0),
+                });
+            }
+            LOOK => {
+                let err = look
+                    .get(self.looks_done)
+                    .map_or(0.0, |&h| wrap(h - od.theta));
+                drive = Some(Drive {
+                    translate: 0.0,
+                    rotate: turn_toward(err, 2.0 * p.gain, LOOK_RATE, 0.05, 0.0),
                 });
             }
             BACKING | RETREAT => {

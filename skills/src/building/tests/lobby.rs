@@ -374,6 +374,22 @@ fn leave_car_turns_to_the_doors_waits_for_go_and_for_them_to_open_then_drives_ou
     assert!(r.sim.vel[0].abs() < 1e-3, "stopped");
 }
 
+/// leave_car activated facing the back wall (+y), all clear, told to go: it leaves along −y.
+fn told_to_leave() -> Harness<LeaveCar> {
+    let mut h = Harness::<LeaveCar>::new();
+    h.set_param("go=1").unwrap();
+    h.input(
+        "odometry",
+        Odometry {
+            theta: FRAC_PI_2,
+            ..Odometry::default()
+        },
+    )
+    .input("sonar", ring(|_| 3.0));
+    h.step().unwrap();
+    h
+}
+
 /// Building D seed 4's ride: out of the cabin 0.17 m off the doorway's axis (the doorway
 /// 1.1 m wide, the robot 0.72 m across), a post was in the front sonars' cones only, not in
 /// the side ones' it centred by, and it drove straight at it until the device's safety layer
@@ -381,18 +397,7 @@ fn leave_car_turns_to_the_doors_waits_for_go_and_for_them_to_open_then_drives_ou
 #[test]
 fn leave_car_steers_for_the_middle_of_the_gap_between_posts_seen_ahead() {
     let out_at = |near: &[(f64, f64)]| {
-        let mut h = Harness::<LeaveCar>::new();
-        h.set_param("go=1").unwrap();
-        // Facing the back wall (+y), all clear: leaving along −y.
-        h.input(
-            "odometry",
-            Odometry {
-                theta: FRAC_PI_2,
-                ..Odometry::default()
-            },
-        )
-        .input("sonar", ring(|_| 3.0));
-        h.step().unwrap();
+        let mut h = told_to_leave();
         let ring = ring(|a| {
             near.iter()
                 .find(|(deg, _)| (a - deg.to_radians()).abs() < 0.01)
@@ -431,17 +436,7 @@ fn leave_car_steers_for_the_middle_of_the_gap_between_posts_seen_ahead() {
 /// between the posts alone until it is past them.
 #[test]
 fn leave_car_held_at_a_post_steers_by_the_gap_alone() {
-    let mut h = Harness::<LeaveCar>::new();
-    h.set_param("go=1").unwrap();
-    h.input(
-        "odometry",
-        Odometry {
-            theta: FRAC_PI_2,
-            ..Odometry::default()
-        },
-    )
-    .input("sonar", ring(|_| 3.0));
-    h.step().unwrap();
+    let mut h = told_to_leave();
     // The way out is −y; it stands 0.25 rad off it, the posts alike on both sides, and does
     // not move however it is told to.
     let posts = ring(|a| {
@@ -488,23 +483,13 @@ fn leave_car_held_at_a_post_steers_by_the_gap_alone() {
 
 #[test]
 fn leave_car_waits_again_when_the_doors_close_in_front_of_it() {
-    let mut h = Harness::<LeaveCar>::new();
-    h.set_param("go=1").unwrap();
+    // Facing the back wall (+y); the way out is −y.
+    let mut h = told_to_leave();
     let od = |y: f64| Odometry {
         y,
         theta: -FRAC_PI_2,
         ..Odometry::default()
     };
-    // Facing the back wall (+y); the way out is −y.
-    h.input(
-        "odometry",
-        Odometry {
-            theta: FRAC_PI_2,
-            ..Odometry::default()
-        },
-    )
-    .input("sonar", ring(|_| 3.0));
-    h.step().unwrap();
     h.input("odometry", od(0.0));
     assert_eq!(
         h.step()

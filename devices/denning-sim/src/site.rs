@@ -521,17 +521,19 @@ mod tests {
         }));
     }
 
+    /// Puts the robot at `at` on `floor`, facing +x.
+    fn put(sim: &mut Sim, floor: i32, at: P) {
+        let mut p = sim.physical();
+        p.pose = [at[0], at[1], 0.0];
+        p.floor = floor;
+        sim.resume(p);
+    }
+
     #[test]
     fn say_counts_and_delivers_only_near_the_goal_on_the_goal_floor() {
         let b = quiet();
         let goal = b.goal;
         let mut sim = Sim::in_building(b, 4);
-        let put = |sim: &mut Sim, floor: i32, at: P| {
-            let mut p = sim.physical();
-            p.pose = [at[0], at[1], 0.0];
-            p.floor = floor;
-            sim.resume(p);
-        };
         assert_eq!(sim.say("hello"), 1);
         put(&mut sim, 0, goal.at);
         assert_eq!(sim.say("wrong floor"), 2);
@@ -554,12 +556,6 @@ mod tests {
         let b = quiet();
         let lab = b.lab_goal().unwrap();
         let mut sim = Sim::in_building(b, 4);
-        let put = |sim: &mut Sim, floor: i32, at: P| {
-            let mut p = sim.physical();
-            p.pose = [at[0], at[1], 0.0];
-            p.floor = floor;
-            sim.resume(p);
-        };
         assert!(!sim.at_lab(), "inside the lab, at the start");
         put(&mut sim, 0, lab.at);
         assert!(sim.at_lab());

@@ -95,7 +95,9 @@ fn the_plan_drives_the_robot_out_of_the_room() {
     let t_out = run["time_s"].as_f64().unwrap();
     assert!(t_out > 5.0 && t_out < 150.0, "{run}");
     assert_eq!(summary["median_time_s"].as_f64(), Some(t_out));
-    // The paper's sequence (skills/plans/exit-lab.xml), in order, each at a later cycle.
+    // The paper's sequence (skills/plans/exit-lab.xml), in order. The barcode is in view from
+    // the start, and a skill's first output comes in the cycle it is activated in, so
+    // "barcode seen" may share explore's cycle; each later step comes at a later cycle.
     let order = skillfab_tests::steps_at(
         run,
         &[
@@ -106,8 +108,9 @@ fn the_plan_drives_the_robot_out_of_the_room() {
         ],
     );
     assert!(order.windows(2).all(|w| w[0].0 < w[1].0), "{run}");
+    assert!(order[0].1 <= order[1].1, "cycles increase: {run}");
     assert!(
-        order.windows(2).all(|w| w[0].1 < w[1].1),
+        order[1..].windows(2).all(|w| w[0].1 < w[1].1),
         "cycles increase: {run}"
     );
     assert_nothing_left(pid);

@@ -66,8 +66,13 @@ const SIDE_WALL: f64 = 2.0;
 /// readings refreshed every 300 ms with a few cm of noise, so the axis averages about two
 /// seconds of them.
 const AXIS_BLEND: f64 = 0.005;
-/// Wall measurements farther than this from the held axis (rad) are not the corridor's.
+/// Wall measurements farther than this from the held axis (rad) are not the corridor's —
+/// unless both sides' walls agree within [`WALLS_AGREE`]: two parallel walls, one each side,
+/// are the corridor, and it is the held axis that is wrong (taken facing a sign beside a
+/// door, not square to it, and turned out of the door from there).
 const AXIS_GATE: f64 = 0.3;
+/// Both side walls' axes within this of each other (rad) are taken whatever the held axis.
+const WALLS_AGREE: f64 = 0.1;
 /// Nothing is driven into: a wall ahead this near stops translation in every mode (m).
 const TOO_CLOSE: f64 = 0.4;
 /// Most the centring turns the heading off the axis (rad).
@@ -216,16 +221,22 @@ impl Skill for HallFollow {
             .collect();
         let axis = match self.axis {
             None => measured.first().copied().unwrap_or(od.theta),
-            Some(a) if !matches!(self.mode, Mode::Turn { .. }) => {
-                measured.iter().fold(a, |a, &m| {
+            Some(a) if !matches!(self.mode, Mode::Turn { .. }) => match measured[..] {
+                [l, r]
+                    if wrap(l - r).abs() < WALLS_AGREE
+                        && wrap(l + wrap(r - l) / 2.0 - a).abs() >= AXIS_GATE =>
+                {
+                    wrap(a + AXIS_BLEND * wrap(l + wrap(r - l) / 2.0 - a))
+                }
+                _ => measured.iter().fold(a, |a, &m| {
                     let d = wrap(m - a);
                     if d.abs() < AXIS_GATE {
                         wrap(a + AXIS_BLEND * d)
                     } else {
                         a
                     }
-                })
-            }
+                }),
+            },
             Some(a) => a,
         };
         self.axis = Some(axis);

@@ -637,3 +637,35 @@ fn hall_follow_out_of_a_door_askew_turns_to_the_axis_and_goes_on() {
     assert_eq!(r.sim.collisions, 0);
     assert!(r.sim.pose[0] > 14.0, "along the corridor: {:?}", r.sim.pose);
 }
+
+/// Out of an office's door (building B, room 402, seed 1 of the round trips): the robot faced
+/// the office's sign, 0.44 rad off square to the door, so the turn out of it left the robot
+/// 0.3 rad off the corridor's axis, at the edge of what the walls may correct; the front
+/// cones then saw the wall ahead within `stop`, and it stood 767 s. With walls on both sides
+/// agreeing, it must take their axis and go on to the T.
+#[test]
+fn hall_follow_out_of_a_door_turned_off_the_axis_takes_it_from_both_walls() {
+    let mut r = Robot::in_building("building-b.toml", 1, 4, [15.52, 0.87, -1.13]);
+    let mut c = Corridor::default();
+    c.hall.set_param("turn=1").unwrap();
+    let mut to_the_t = None;
+    for k in 0..4000 {
+        c.cycle(&mut r);
+        if c.junction.count >= 1 {
+            c.hall.set_param("turn=-1").unwrap();
+        }
+        if c.junction.count >= 2 {
+            to_the_t = Some(k);
+            break;
+        }
+    }
+    assert_eq!(r.sim.collisions, 0);
+    assert!(
+        to_the_t.is_some(),
+        "at the T within 40 s: stood at {:?}",
+        r.sim.pose
+    );
+    // The T's stem, the corridor down to the lobby, opens at x 18.2..20.6.
+    let x = r.sim.pose[0];
+    assert!((18.0..20.6).contains(&x), "counted at the T: {x}");
+}

@@ -140,6 +140,15 @@ impl HallFollow {
     }
 }
 
+/// The axis two side walls agree on (within [`WALLS_AGREE`]), from the axes measured on
+/// each side; `None` unless both sides have a wall.
+fn both_walls(measured: &[f64]) -> Option<f64> {
+    match *measured {
+        [l, r] if wrap(l - r).abs() < WALLS_AGREE => Some(wrap(l + wrap(r - l) / 2.0)),
+        _ => None,
+    }
+}
+
 /// Steering into a corridor's mouth from open space (rad, counter-clockwise, at most
 /// [`CENTRING_MAX`]): off its centre line, the near edge of the mouth shows first in the cone
 /// of the sonar at 15° on that side while the one at 15° on the other side still sees down the
@@ -221,13 +230,8 @@ impl Skill for HallFollow {
             .collect();
         let axis = match self.axis {
             None => measured.first().copied().unwrap_or(od.theta),
-            Some(a) if !matches!(self.mode, Mode::Turn { .. }) => match measured[..] {
-                [l, r]
-                    if wrap(l - r).abs() < WALLS_AGREE
-                        && wrap(l + wrap(r - l) / 2.0 - a).abs() >= AXIS_GATE =>
-                {
-                    wrap(a + AXIS_BLEND * wrap(l + wrap(r - l) / 2.0 - a))
-                }
+            Some(a) if !matches!(self.mode, Mode::Turn { .. }) => match both_walls(&measured) {
+                Some(m) if wrap(m - a).abs() >= AXIS_GATE => wrap(a + AXIS_BLEND * wrap(m - a)),
                 _ => measured.iter().fold(a, |a, &m| {
                     let d = wrap(m - a);
                     if d.abs() < AXIS_GATE {

@@ -665,7 +665,7 @@ fn hall_follow_out_of_a_door_turned_off_the_axis_takes_it_from_both_walls() {
         "at the T within 40 s: stood at {:?}",
         r.sim.pose
     );
-    // The T's stem, the corridor down to the lobby, opens at x 18.2..20.6.
+    // The T's stem, the corridor down to the lobby, opens between its walls at x 18.0 and 20.4.
     let x = r.sim.pose[0];
     assert!((18.0..20.6).contains(&x), "counted at the T: {x}");
 }

@@ -18,8 +18,8 @@
 //!   with `sign_read` on the room's floor on the way there.
 //! - A ride: `BoardACar`, then `barcode_track.id` set to the floor's panel button (860 + f)
 //!   and `sign_read.floor` to the floor, then `RideToTheFloor`.
-//! - The way back: out of the room's door as out of the lab's (`IntoTheCorridorLeft`/`Right`,
-//!   the first junction counted); at the lab's leg, doors counted again from the corridor
+//! - The way back: out of the room's door turned along the corridor on the spot, square to
+//!   its walls (`OutOfTheOfficeLeft`/`Right`), junctions counted from there; at the lab's leg, doors counted again from the corridor
 //!   (`DoorsCountedFromHere`) and `door_detect.doors.<side>` waited for to pass the lab's
 //!   door, then `AtTheLabsDoor`; a lab's door at the corridor's end is `ToTheLabAhead`.
 
@@ -291,13 +291,17 @@ impl Route {
                         w.push(X::Activate(vec!["sign_read"]));
                     }
                 }
-                // Facing the room's door, the corridor's turn is taken as out of the lab's.
+                // Facing the room's sign beside its door, not square to it: turned along the
+                // corridor on the spot, squared to its walls, then the corridor skills start
+                // counting junctions from 0 (were the door's exit counted as the first, as
+                // out of the lab's, a junction just beside the door would merge with it),
+                // hall_follow straight on.
                 Step::OutOfTheRoom { turn, .. } => {
                     w.push(X::SubTree(match turn {
-                        Turn::Right => "IntoTheCorridorRight",
-                        _ => "IntoTheCorridorLeft",
+                        Turn::Right => "OutOfTheOfficeRight",
+                        _ => "OutOfTheOfficeLeft",
                     }));
-                    (w.active, w.turn, w.count) = (true, Some(*turn), 1);
+                    (w.active, w.turn, w.count) = (true, Some(Turn::Straight), 0);
                 }
                 Step::Along { .. } => {}
                 Step::Junction { name, turn } => w.junction(name, *turn),

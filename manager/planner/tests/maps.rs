@@ -551,7 +551,7 @@ fn a_round_trip_is_one_tree_with_both_ways() {
     assert!(body(own).starts_with(&body(there_own)), "{own}");
     let rest = &body(own)[body(there_own).len()..];
     for expected in [
-        "<SubTree ID=\"IntoTheCorridorRight\"/>",
+        "<SubTree ID=\"OutOfTheOfficeRight\"/>",
         "<SetParam skill=\"barcode_track\" param=\"id\" value=\"860\"/>",
         "<SetParam skill=\"sign_read\" param=\"floor\" value=\"0\"/>",
         "<SubTree ID=\"DoorsCountedFromHere\"/>",

@@ -9,6 +9,11 @@ pub struct LeaveCarParams {
     /// 1: leave when the doors open (the sequencer sets it on the right floor); 0: hold.
     #[param(default = 0, min = 0, max = 1)]
     pub go: i64,
+    /// The way out: the heading at activation turned this many quarter turns (counter-
+    /// clockwise; 2: half round, out of a car's doors behind it; ±1: along a corridor from
+    /// its side, out of an office's door), squared to the walls around.
+    #[param(default = 2, min = -1, max = 2)]
+    pub quarters: i64,
     /// Done this far from where it started (m, along the way out).
     #[param(default = 1.8, min = 0.3, max = 10.0)]
     pub distance: f64,
@@ -100,8 +105,10 @@ const BY_THE_GAP: f64 = 0.3;
 const GAP_LOOK: f64 = 0.3;
 
 /// Leaves the car. At activation it faces the back wall, or the panel's button beside it; the
-/// way out is that heading turned half round, squared to the cabin's walls (the nearest of
-/// their directions, when the ring fits them standing still), and it turns to it on the spot. Then it holds still
+/// way out is that heading turned half round (or as many quarter turns as `quarters` says:
+/// out of an office's door, facing its sign, along the corridor), squared to the walls around
+/// (the nearest of their directions, when the ring fits them standing still), and it turns to
+/// it on the spot. Then it holds still
 /// until `go` is 1 and the way ahead is open (the front sonar reads farther than `clear`:
 /// the doors are open), and drives out straight along the way out, toward the cabin's centre
 /// line while its side walls are beside, then centred between the door posts by the side
@@ -150,7 +157,7 @@ impl Skill for LeaveCar {
         if self.activation.begins(ctx) {
             self.phase = TURNING;
             self.start = (od.x, od.y);
-            self.way = wrap(od.theta + PI);
+            self.way = wrap(od.theta + p.quarters as f64 * FRAC_PI_2);
             self.still_for = 0;
             self.fresh = true;
             self.squared = false;

@@ -669,3 +669,86 @@ fn hall_follow_out_of_a_door_turned_off_the_axis_takes_it_from_both_walls() {
     let x = r.sim.pose[0];
     assert!((18.0..20.6).contains(&x), "counted at the T: {x}");
 }
+
+/// Out of an office's door, facing its sign (0.3 m beside the door, so 0.4–0.6 rad off
+/// square): `leave_car` with a quarter turn squares up to the corridor's walls and turns
+/// along the corridor on the spot (`quarters` −1: right), and `leave_car.progress.phase`
+/// says when it has (held half a second, as the plan waits: a fit of the walls made
+/// standing still may turn it a little more). Returns the heading it stands at.
+fn turned_out_of_a_door(r: &mut Robot, quarters: i64) -> f64 {
+    // It stood there while the message was said: the ring read through.
+    for _ in 0..100 {
+        r.drive(Drive::default());
+    }
+    let mut h = Harness::<LeaveCar>::new();
+    h.set_param(&format!("quarters={quarters}")).unwrap();
+    h.set_param("go=0").unwrap();
+    let mut turned = 0;
+    for _ in 0..1500 {
+        h.input("odometry", r.odometry).input("sonar", r.sonar);
+        let step = h.step().unwrap();
+        let p = *step.output::<Progress>("progress").unwrap();
+        r.drive(*step.output::<Drive>("drive").unwrap());
+        turned = if p.phase == leave_phase::WAITING {
+            turned + 1
+        } else {
+            0
+        };
+        if turned >= 50 {
+            break;
+        }
+    }
+    r.sim.pose[2]
+}
+
+/// The way back from building B's rooms 401 and 403 (north side of floor 4's corridor, their
+/// signs east of their doors; round trips, seeds 1 and 2 of the lock-step runs): out of the
+/// door and east to the T, right down its stem to the lobby. Turned out as the plan of the
+/// way back does (square to the walls, a quarter turn, then the corridor skills started
+/// afresh: the T is the first junction), it must count the T there and turn down its stem.
+/// (Turned out by hall_follow from the heading it faced the sign at, 401's door exit and the
+/// T, 0.5 m apart, were one intersection, and 403's door exit was none.)
+#[test]
+fn out_of_building_bs_office_doors_square_to_the_corridor_then_right_at_the_t() {
+    // Stopped beside the door (door_detect), turned to the sign (home) from the corridor's
+    // centre line.
+    for (room, sign_x, at_x) in [
+        (401, 17.8, 17.0),
+        (401, 17.8, 17.3),
+        (403, 14.3, 13.5),
+        (403, 14.3, 13.8),
+    ] {
+        for seed in 1..=3 {
+            let facing = (2.35f64 - 1.2).atan2(sign_x - at_x);
+            let mut r = Robot::in_building("building-b.toml", seed, 4, [at_x, 1.2, facing]);
+            let at = format!("room {room}, from x {at_x}, seed {seed}");
+            let heading = turned_out_of_a_door(&mut r, -1);
+            assert!(
+                heading.abs() < 0.1,
+                "{at}: square along the corridor: {heading}"
+            );
+            let mut c = Corridor::default();
+            c.hall.set_param("turn=-1").unwrap();
+            let mut at_the_t = None;
+            for _ in 0..4000 {
+                c.cycle(&mut r);
+                if c.junction.count >= 1 {
+                    at_the_t.get_or_insert(r.sim.pose[0]);
+                    c.hall.set_param("turn=0").unwrap();
+                }
+                if r.sim.pose[1] < -2.0 {
+                    break;
+                }
+            }
+            assert_eq!(r.sim.collisions, 0, "{at}");
+            // The T's stem opens between its walls at x 18.0 and 20.4.
+            let x = at_the_t.unwrap_or_else(|| panic!("{at}: no junction: at {:?}", r.sim.pose));
+            assert!((18.0..20.4).contains(&x), "{at}: counted at the T: {x}");
+            assert!(
+                r.sim.pose[1] < -2.0,
+                "{at}: down the stem: {:?}",
+                r.sim.pose
+            );
+        }
+    }
+}

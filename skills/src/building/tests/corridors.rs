@@ -671,10 +671,10 @@ fn hall_follow_out_of_a_door_turned_off_the_axis_takes_it_from_both_walls() {
 }
 
 /// Out of an office's door, facing its sign (0.3 m beside the door, so 0.4–0.6 rad off
-/// square): `leave_car` with a quarter turn squares up to the corridor's walls and turns
-/// along the corridor on the spot (`quarters` −1: right), and `leave_car.progress.phase`
-/// says when it has (held half a second, as the plan waits: a fit of the walls made
-/// standing still may turn it a little more). Returns the heading it stands at.
+/// square), as the plan's `AlongTheCorridorFromItsSide` goes: `leave_car` with a quarter turn
+/// (`quarters` 1 left, −1 right) squares up to the walls around and turns along the corridor
+/// on the spot, holding still there half a second (a fit of the walls made standing still
+/// may turn it a little more). Returns the heading it turned to.
 fn turned_out_of_a_door(r: &mut Robot, quarters: i64) -> f64 {
     // It stood there while the message was said: the ring read through.
     for _ in 0..100 {
@@ -684,7 +684,7 @@ fn turned_out_of_a_door(r: &mut Robot, quarters: i64) -> f64 {
     h.set_param(&format!("quarters={quarters}")).unwrap();
     h.set_param("go=0").unwrap();
     let mut turned = 0;
-    for _ in 0..1500 {
+    for _ in 0..3000 {
         h.input("odometry", r.odometry).input("sonar", r.sonar);
         let step = h.step().unwrap();
         let p = *step.output::<Progress>("progress").unwrap();
@@ -694,45 +694,62 @@ fn turned_out_of_a_door(r: &mut Robot, quarters: i64) -> f64 {
         } else {
             0
         };
-        if turned >= 50 {
-            break;
+        if turned == 50 {
+            return r.sim.pose[2];
         }
     }
-    r.sim.pose[2]
+    panic!("not turned out of the door: at {:?}", r.sim.pose);
 }
 
-/// The way back from building B's rooms 401 and 403 (north side of floor 4's corridor, their
-/// signs east of their doors; round trips, seeds 1 and 2 of the lock-step runs): out of the
-/// door and east to the T, right down its stem to the lobby. Turned out as the plan of the
-/// way back does (square to the walls, a quarter turn, then the corridor skills started
-/// afresh: the T is the first junction), it must count the T there and turn down its stem.
-/// (Turned out by hall_follow from the heading it faced the sign at, 401's door exit and the
-/// T, 0.5 m apart, were one intersection, and 403's door exit was none.)
+/// The way back from building B's offices on the north side of floor 4's corridor (round
+/// trips, lock-step): out of the door along the corridor to the T, down its stem to the
+/// lobby. Out of the door as the plan of the way back goes — square to the walls and a
+/// quarter turn, then the corridor skills straight on, and junctions counted afresh once the
+/// robot is between the corridor's walls (`InTheCorridor`): the T is the first — it must count
+/// the T there and turn down its stem. (Turned out by hall_follow from the heading it faced
+/// the sign at, 401's door exit and the T, 0.5 m apart, were one intersection, and 403's door
+/// exit was none; counted from where it turned, 405's seed 1, stopped 0.29 m off the centre
+/// line toward its door, counted that door as the T.)
 #[test]
-fn out_of_building_bs_office_doors_square_to_the_corridor_then_right_at_the_t() {
-    // Stopped beside the door (door_detect), turned to the sign (home) on the corridor's
-    // centre line. (Stopped 0.27 m off it, as 403's seed 1 of an older build at (13.44,
-    // 1.47), the robot is squared and turned, but 401's door, passed 0.93 m away, opens all
-    // three cones of that side and counts as a junction before the T: docs/maps.md.)
+fn out_of_building_bs_office_doors_square_to_the_corridor_then_down_the_t() {
+    // Stopped beside the door (door_detect), turned to the sign (home): on the corridor's
+    // centre line, and where 405's seed 1 stood. In front of 405's door, with 406's facing
+    // it, the ring often fits no wall: the turn is not always squared there (0.33–0.38 rad
+    // off in these seeds), and hall_follow takes the axis from the walls after.
     let toward = |sign_x: f64, x: f64| (2.35f64 - 1.2).atan2(sign_x - x);
-    for (room, at_x, at_y, facing) in [
-        (401, 17.0, 1.2, toward(17.8, 17.0)),
-        (401, 17.3, 1.2, toward(17.8, 17.3)),
-        (403, 13.5, 1.2, toward(14.3, 13.5)),
-        (403, 13.8, 1.2, toward(14.3, 13.8)),
+    // Room, pose, the turn out of the door (quarters), at the T, and whether it squares up.
+    for (room, at_x, at_y, facing, out, at_t, squares) in [
+        (401, 17.0, 1.2, toward(17.8, 17.0), -1, -1, true),
+        (401, 17.3, 1.2, toward(17.8, 17.3), -1, -1, true),
+        (403, 13.5, 1.2, toward(14.3, 13.5), -1, -1, true),
+        (403, 13.8, 1.2, toward(14.3, 13.8), -1, -1, true),
+        (405, 22.2, 1.2, toward(21.7, 22.2), 1, 1, false),
+        (405, 22.39, 1.49, 1.93, 1, 1, false),
     ] {
         for seed in 1..=3 {
             let mut r = Robot::in_building("building-b.toml", seed, 4, [at_x, at_y, facing]);
             let at = format!("room {room}, from ({at_x}, {at_y}), seed {seed}");
-            let heading = turned_out_of_a_door(&mut r, -1);
+            let along = if out < 0 { 0.0 } else { PI };
+            let heading = wrap(turned_out_of_a_door(&mut r, out) - along);
             assert!(
-                heading.abs() < 0.1,
-                "{at}: square along the corridor: {heading}"
+                !squares || heading.abs() < 0.1,
+                "{at}: turned along the corridor: {heading}"
             );
             let mut c = Corridor::default();
-            c.hall.set_param("turn=-1").unwrap();
+            // In the corridor (a second out of any intersection): counted from there.
+            let mut out_of_any = 0;
+            for _ in 0..3000 {
+                c.cycle(&mut r);
+                out_of_any = if c.junction.inside { 0 } else { out_of_any + 1 };
+                if out_of_any == 100 {
+                    break;
+                }
+            }
+            assert_eq!(out_of_any, 100, "{at}: in the corridor: {:?}", r.sim.pose);
+            c.intersection.reactivate();
+            c.hall.set_param(&format!("turn={at_t}")).unwrap();
             let mut at_the_t = None;
-            for _ in 0..4000 {
+            for _ in 0..8000 {
                 c.cycle(&mut r);
                 if c.junction.count >= 1 {
                     at_the_t.get_or_insert(r.sim.pose[0]);
@@ -745,7 +762,11 @@ fn out_of_building_bs_office_doors_square_to_the_corridor_then_right_at_the_t() 
             assert_eq!(r.sim.collisions, 0, "{at}");
             // The T's stem opens between its walls at x 18.0 and 20.4.
             let x = at_the_t.unwrap_or_else(|| panic!("{at}: no junction: at {:?}", r.sim.pose));
-            assert!((18.0..20.4).contains(&x), "{at}: counted at the T: {x}");
+            assert!(
+                (18.0..20.4).contains(&x),
+                "{at}: counted at the T: {x} ({:?})",
+                r.sim.pose
+            );
             assert!(
                 r.sim.pose[1] < -2.0,
                 "{at}: down the stem: {:?}",

@@ -19,7 +19,8 @@
 //! - A ride: `BoardACar`, then `barcode_track.id` set to the floor's panel button (860 + f)
 //!   and `sign_read.floor` to the floor, then `RideToTheFloor`.
 //! - The way back: out of the room's door turned along the corridor on the spot, square to
-//!   its walls (`OutOfTheOfficeLeft`/`Right`), junctions counted from there; at the lab's leg, doors counted again from the corridor
+//!   its walls (`OutOfTheOfficeLeft`/`Right`), junctions counted once the robot is between
+//!   the corridor's walls; at the lab's leg, doors counted again from the corridor
 //!   (`DoorsCountedFromHere`) and `door_detect.doors.<side>` waited for to pass the lab's
 //!   door, then `AtTheLabsDoor`; a lab's door at the corridor's end is `ToTheLabAhead`.
 
@@ -292,10 +293,10 @@ impl Route {
                     }
                 }
                 // Facing the room's sign beside its door, not square to it: turned along the
-                // corridor on the spot, squared to its walls, then the corridor skills start
-                // counting junctions from 0 (were the door's exit counted as the first, as
-                // out of the lab's, a junction just beside the door would merge with it),
-                // hall_follow straight on.
+                // corridor on the spot, squared to its walls; the corridor skills start,
+                // hall_follow straight on, and junctions are counted from 0 once the robot is
+                // between the corridor's walls (were the door's exit counted as the first, as
+                // out of the lab's, a junction just beside the door would merge with it).
                 Step::OutOfTheRoom { turn, .. } => {
                     w.push(X::SubTree(match turn {
                         Turn::Right => "OutOfTheOfficeRight",

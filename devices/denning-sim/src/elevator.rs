@@ -114,6 +114,9 @@ pub struct Bank {
     traffic_s: f64,
     /// Random source of the starting floors, tie breaks and traffic.
     rng: Rng,
+    /// Out of service (fault injection): a car whose doors are closed stays where it is, its
+    /// requests kept for when it is back.
+    pub out_of_service: bool,
 }
 
 impl Bank {
@@ -144,6 +147,7 @@ impl Bank {
             dwell_s: spec.dwell_s,
             traffic_s: spec.traffic_s,
             rng,
+            out_of_service: false,
         }
     }
 
@@ -180,6 +184,7 @@ impl Bank {
                         car.doors = Doors::Closed;
                     }
                 }
+                Doors::Closed if self.out_of_service => {}
                 Doors::Closed => self.drive(k, dt, rider),
             }
         }
@@ -388,6 +393,27 @@ mod tests {
             bank.cars()[k].floor(),
             Some(2),
             "no request, no traffic: it stays"
+        );
+    }
+
+    #[test]
+    fn out_of_service_a_closed_car_stays_and_its_call_is_served_once_back() {
+        // Traffic every 2 s on average: in service, cars move.
+        let mut bank = Bank::new(&spec(2.0), 5, Rng::new(3));
+        run(&mut bank, 1.0, AWAY);
+        bank.out_of_service = true;
+        let k = bank.hall_call(4);
+        let before: Vec<f64> = bank.cars().iter().map(Car::position).collect();
+        run(&mut bank, 60.0, AWAY);
+        let after: Vec<f64> = bank.cars().iter().map(Car::position).collect();
+        assert_eq!(before, after, "no car moves while out of service");
+        assert!(bank.cars().iter().all(|c| c.doors() == Doors::Closed));
+        bank.out_of_service = false;
+        run(&mut bank, 4.0 * 2.5 + 1.0, AWAY);
+        assert_eq!(
+            bank.cars()[k].floor(),
+            Some(4),
+            "the call kept, served once back"
         );
     }
 

@@ -103,6 +103,9 @@ pub struct Sim {
     pub said: u16,
     /// When a message was first spoken at the building's goal (s).
     pub delivered: Option<f64>,
+    /// Fault injection: until this simulated time (s) no car answers a hall call (the
+    /// button is pressed, none comes).
+    pub cars_out_until: f64,
 }
 
 /// What the robot keeps when the process that simulates its serial side restarts: its body
@@ -205,6 +208,7 @@ impl Sim {
             presses: 0,
             said: 0,
             delivered: None,
+            cars_out_until: 0.0,
         }
     }
 
@@ -327,6 +331,7 @@ impl Sim {
         ];
         self.time += dt;
         if let Some(site) = self.site.as_mut() {
+            site.out_of_service(self.time < self.cars_out_until);
             site.step(dt, [self.pose[0], self.pose[1]]);
             self.refresh();
         }
@@ -369,7 +374,12 @@ impl Sim {
         };
         self.presses = self.presses.saturating_add(1);
         tracing::info!(button = id, floor = self.floor(), "button pressed");
-        if let Some(site) = self.site.as_mut() {
+        if matches!(mark, Mark::Call) && self.time < self.cars_out_until {
+            tracing::info!(
+                until = self.cars_out_until,
+                "hall call unanswered: the cars are out of service"
+            );
+        } else if let Some(site) = self.site.as_mut() {
             site.press(mark);
             self.refresh();
         }

@@ -193,6 +193,12 @@ impl Site {
         self.view = None;
     }
 
+    /// The cars out of service (fault injection) or back: out, a car whose doors are closed
+    /// stays where it is.
+    pub(crate) fn out_of_service(&mut self, out: bool) {
+        self.bank.out_of_service = out;
+    }
+
     /// A button pressed.
     pub(crate) fn press(&mut self, mark: Mark) {
         match mark {

@@ -32,6 +32,8 @@ pub struct Faults {
     pub corrupt_rate: f64,
     /// Share of the simulator's bytes dropped.
     pub drop_rate: f64,
+    /// No car answers a hall call before this simulated time (s).
+    pub cars_out_until: f64,
     /// Seed of the killer's choices.
     pub seed: u64,
 }

@@ -16,6 +16,7 @@ mod demo;
 mod faults;
 mod new;
 mod plan;
+mod replan;
 mod replay;
 mod sequence;
 
@@ -192,6 +193,26 @@ enum Cmd {
         /// How long to wait for the manager and the skills of --wait-for (s).
         #[arg(long, default_value_t = 60.0)]
         wait_timeout_s: f64,
+        /// The plan is the planner's route on this map (`skillfab plan --map MAP [--to ROOM]
+        /// [--and-back]`): when a step fails where the route says the robot still is
+        /// (a car that does not come: its floor's lobby), plan again from there and run that
+        /// plan (docs/maps.md, "Planning again").
+        #[arg(long, value_name = "FILE.map.toml", conflicts_with_all = ["tree", "check"])]
+        replan: Option<PathBuf>,
+        /// With --replan: the route's room (default: the map's office).
+        #[arg(long, value_name = "ROOM", requires = "replan")]
+        to: Option<u32>,
+        /// With --replan: the route goes back to the lab too.
+        #[arg(long, requires = "replan")]
+        and_back: bool,
+        /// With --replan: the subtrees the plans are built from.
+        #[arg(
+            long,
+            value_name = "FILE.xml",
+            default_value = "skills/plans/deliver.xml",
+            requires = "replan"
+        )]
+        library: PathBuf,
         #[command(flatten)]
         remote: RemoteArg,
     },
@@ -267,6 +288,10 @@ struct FaultArgs {
     /// Fault injection: share of the serial bytes dropped (0..=0.5).
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
+    /// Fault injection, in a building: no car answers a hall call before this many
+    /// simulated seconds (the button is pressed, none comes).
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+    cars_out_until: f64,
 }
 
 impl FaultArgs {
@@ -288,6 +313,12 @@ impl FaultArgs {
                 anyhow::bail!("{name} must be in [0, 0.5], got {r}");
             }
         }
+        if !(self.cars_out_until.is_finite() && self.cars_out_until >= 0.0) {
+            anyhow::bail!(
+                "--cars-out-until must be a number of simulated seconds, got {}",
+                self.cars_out_until
+            );
+        }
         if lockstep && (self.kill_every.is_some() || self.kill_sim_every.is_some()) {
             anyhow::bail!(
                 "--kill-every and --kill-sim-every time their kills on the host's clock; \
@@ -300,6 +331,7 @@ impl FaultArgs {
             kill_sim_every_s: self.kill_sim_every,
             corrupt_rate: self.corrupt_rate,
             drop_rate: self.drop_rate,
+            cars_out_until: self.cars_out_until,
             seed,
         })
     }
@@ -406,6 +438,7 @@ impl DemoRuns {
             plan,
             tree: None,
             and_back: false,
+            replan: None,
         })
     }
 }
@@ -536,6 +569,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             fresh,
             wait_for,
             wait_timeout_s,
+            replan,
+            to,
+            and_back,
+            library,
             remote,
         } => sequence::run(
             &domain,
@@ -548,6 +585,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 fresh,
                 wait_for,
                 wait: std::time::Duration::from_secs_f64(wait_timeout_s.max(0.0)),
+                replan: replan.map(|map| replan::Replanning {
+                    map,
+                    to,
+                    and_back,
+                    library,
+                }),
             },
         ),
         #[cfg(feature = "bridge")]

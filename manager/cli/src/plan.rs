@@ -6,24 +6,28 @@ use anyhow::Context;
 use skillfab_planner::{From, Library, Map, Route};
 use std::path::{Path, PathBuf};
 
-/// A place a route starts or ends at: the lab or a room.
+/// A place a route starts or ends at: the lab, a room, or (a start) a floor's lobby.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Place {
     /// The lab.
     Lab,
     /// A room, by its number.
     Room(u32),
+    /// A floor's lobby (`lobby:F`).
+    Lobby(i32),
 }
 
 impl std::str::FromStr for Place {
     type Err = String;
     fn from_str(s: &str) -> Result<Place, String> {
+        if let Ok(From::Lobby { floor }) = s.parse() {
+            return Ok(Place::Lobby(floor));
+        }
         match s {
             "lab" => Ok(Place::Lab),
-            n => n
-                .parse()
-                .map(Place::Room)
-                .map_err(|_| format!("'{n}' is neither `lab` nor a room's number")),
+            n => n.parse().map(Place::Room).map_err(|_| {
+                format!("'{n}' is neither `lab`, a room's number nor a lobby (`lobby:F`)")
+            }),
         }
     }
 }
@@ -51,7 +55,11 @@ pub struct Planned {
 pub fn plan(map: &Path, trip: Trip, library: &Path) -> anyhow::Result<Planned> {
     let m = Map::load(map)?;
     let route = match (trip.from, trip.to, trip.and_back) {
+        (_, Some(Place::Lobby(_)), _) => anyhow::bail!("a route ends at a room or the lab"),
         (Place::Lab, Some(Place::Lab), _) => anyhow::bail!("from the lab to the lab: no route"),
+        (Place::Lobby(_), Some(Place::Lab), _) => {
+            anyhow::bail!("--from lobby:F: from a lobby the planner plans to a room (--to ROOM)")
+        }
         (Place::Lab, to, false) => skillfab_planner::plan(&m, room(to), From::Lab)?,
         (Place::Lab, to, true) => skillfab_planner::plan_round_trip(&m, room(to))?,
         (Place::Room(r), Some(Place::Lab), false) => skillfab_planner::plan_back(&m, Some(r))?,
@@ -59,7 +67,19 @@ pub fn plan(map: &Path, trip: Trip, library: &Path) -> anyhow::Result<Planned> {
             anyhow::bail!("--from {r}: from a room the planner plans the way back (--to lab)")
         }
         (Place::Room(_), _, true) => anyhow::bail!("--and-back starts at the lab"),
+        (Place::Lobby(floor), to, false) => {
+            skillfab_planner::plan(&m, room(to), From::Lobby { floor })?
+        }
+        (Place::Lobby(floor), to, true) => {
+            skillfab_planner::plan_round_trip_from(&m, room(to), From::Lobby { floor })?
+        }
     };
+    written(route, map, library)
+}
+
+/// `route` as a plan of `library`'s subtrees (`map` named in its comment), checked as the
+/// sequencer reads it.
+pub fn written(route: Route, map: &Path, library: &Path) -> anyhow::Result<Planned> {
     let text = std::fs::read_to_string(library)
         .with_context(|| format!("reading {}", library.display()))?;
     let lib = Library::parse(&text, &library.display().to_string())?;

@@ -38,6 +38,8 @@ pub struct RunOptions {
     pub wait_for: Vec<String>,
     /// How long to wait for the manager and those skills.
     pub wait: Duration,
+    /// Plan again when a step fails (the plan is the planner's for this route).
+    pub replan: Option<crate::replan::Replanning>,
 }
 
 /// Reads and checks the plan in `file`.
@@ -143,11 +145,29 @@ pub fn run(
 ) -> anyhow::Result<()> {
     let plan = read_plan(file)?;
     let tree = opts.tree.as_deref();
-    let name = file.display().to_string();
-    let mut seq = Sequencer::kept(&plan, tree, &name, PlanStore::of(domain), opts.fresh)?;
     if opts.check {
         return check(&plan, file, tree, &address, opts);
     }
+    let store = PlanStore::of(domain);
+    // With --replan: the route the plan was planned from, and a plan made again that a runner
+    // before this one left running.
+    let mut replanner = match &opts.replan {
+        Some(r) => {
+            let text = std::fs::read_to_string(file)?;
+            Some(crate::replan::Replanner::new(r, file, &text)?)
+        }
+        None => None,
+    };
+    let kept = match replanner.as_mut() {
+        Some(r) if !opts.fresh => r.kept(&store)?,
+        _ => None,
+    };
+    let (plan, file) = match kept {
+        Some(f) => (read_plan(&f)?, f),
+        None => (plan, file.to_path_buf()),
+    };
+    let name = file.display().to_string();
+    let mut seq = Sequencer::kept(&plan, tree, &name, store.clone(), opts.fresh)?;
     let mut client = match &address {
         Address::Remote { .. } => address.connect().map_err(|e| Unfinished(e.into()))?,
         Address::Local(domain) => {
@@ -166,17 +186,47 @@ pub fn run(
         }
     };
     let mut stop = crate::demo::interrupted;
-    let ended = skillfab_sequence::run(&mut client, &mut seq, &mut stop, &mut print)
-        .map_err(|e| Unfinished(e.into()))?;
-    match ended {
-        Some(Status::Success) => {
-            println!("the plan succeeded");
-            Ok(())
+    loop {
+        let ended = skillfab_sequence::run(&mut client, &mut seq, &mut stop, &mut print)
+            .map_err(|e| Unfinished(e.into()))?;
+        match ended {
+            Some(Status::Success) => {
+                println!("the plan succeeded");
+                return Ok(());
+            }
+            None => {
+                println!("halted");
+                return Ok(());
+            }
+            Some(_) => {}
         }
-        Some(_) => anyhow::bail!("the plan failed"),
-        None => {
-            println!("halted");
-            Ok(())
+        let Some(r) = replanner.as_mut() else {
+            anyhow::bail!("the plan failed");
+        };
+        let live = seq.live();
+        let again = r
+            .after_failure(live.shape(), live.status())
+            .context("the plan failed")?;
+        print(
+            &client,
+            &format!(
+                "a step failed with the robot believed to be {}: planned again from there ({} of at most {}), {}",
+                again.at,
+                r.replans,
+                crate::replan::MAX_REPLANS,
+                again.file.display()
+            ),
+        );
+        for line in again.planned.route.to_string().lines() {
+            print(&client, &format!("  {line}"));
         }
+        let plan = read_plan(&again.file)?;
+        seq = Sequencer::kept(
+            &plan,
+            None,
+            &again.file.display().to_string(),
+            store.clone(),
+            false,
+        )?;
     }
 }

@@ -28,7 +28,10 @@ pub mod route;
 pub mod tree;
 
 pub use map::{LoadError, Map, MapError, Problem};
-pub use route::{From, PlanError, Route, Step, Trip, plan, plan_back, plan_round_trip};
+pub use route::{
+    Believed, From, PlanError, Route, Step, Trip, plan, plan_back, plan_back_from_lobby,
+    plan_round_trip, plan_round_trip_from,
+};
 pub use tree::{Library, TreeError};
 
 /// Where the map of a building file is by convention: beside it, `NAME.map.toml` for

@@ -165,6 +165,8 @@ pub struct Route {
     pub floor: i32,
     /// Which way.
     pub trip: Trip,
+    /// Where the way to the room starts (the way back alone starts at the room).
+    pub from: From,
     /// The steps, in order.
     pub steps: Vec<Step>,
 }
@@ -172,10 +174,14 @@ pub struct Route {
 impl fmt::Display for Route {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let (b, r, fl) = (&self.building, self.room, self.floor);
+        let from = match self.from {
+            From::Lab => "the lab".to_string(),
+            From::Lobby { floor } => format!("the lobby of floor {floor}"),
+        };
         match self.trip {
-            Trip::ToTheRoom => write!(f, "{b}: to room {r} (floor {fl}) from the lab"),
+            Trip::ToTheRoom => write!(f, "{b}: to room {r} (floor {fl}) from {from}"),
             Trip::BackToTheLab => write!(f, "{b}: from room {r} (floor {fl}) back to the lab"),
-            Trip::RoundTrip => write!(f, "{b}: to room {r} (floor {fl}) from the lab, and back"),
+            Trip::RoundTrip => write!(f, "{b}: to room {r} (floor {fl}) from {from}, and back"),
         }?;
         for (i, s) in self.steps.iter().enumerate() {
             write!(f, "\n{:>3}. {s}", i + 1)?;
@@ -184,20 +190,40 @@ impl fmt::Display for Route {
     }
 }
 
-/// Where a route starts.
+/// Where a route to a room starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum From {
     /// The lab (the robot inside it).
     Lab,
+    /// A floor's lobby, the robot anywhere in it (where a car that did not come left it):
+    /// the route calls a car there, or, on the room's floor, leaves the lobby.
+    Lobby {
+        /// The floor.
+        floor: i32,
+    },
 }
 
 impl std::str::FromStr for From {
     type Err = PlanError;
+    /// `lab`, or `lobby:F` (floor F's lobby).
     fn from_str(s: &str) -> Result<From, PlanError> {
-        match s {
-            "lab" => Ok(From::Lab),
-            other => Err(PlanError::NotFrom(other.to_string())),
+        if s == "lab" {
+            return Ok(From::Lab);
+        }
+        match s.strip_prefix("lobby:").map(str::parse) {
+            Some(Ok(floor)) => Ok(From::Lobby { floor }),
+            _ => Err(PlanError::NotFrom(s.to_string())),
+        }
+    }
+}
+
+impl fmt::Display for From {
+    /// As it is read: `lab`, `lobby:F`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            From::Lab => write!(f, "lab"),
+            From::Lobby { floor } => write!(f, "lobby:{floor}"),
         }
     }
 }
@@ -220,8 +246,18 @@ pub enum PlanError {
     #[error("the map of {0} names no office: say which room (--to)")]
     NoDestination(String),
     /// A start the planner does not plan from.
-    #[error("--from {0}: a route starts at the lab or, back to the lab, at a room (its number)")]
+    #[error(
+        "--from {0}: a route starts at the lab, at a floor's lobby (`lobby:F`) or, back to the lab, at a room (its number)"
+    )]
     NotFrom(String),
+    /// A lobby the map does not have.
+    #[error("the map of {building} has no lobby on floor {floor}")]
+    NoLobby {
+        /// The building.
+        building: String,
+        /// The floor.
+        floor: i32,
+    },
     /// The way back from a door at a corridor's end: the robot would have to turn round.
     #[error(
         "room {0}'s door is at a corridor's end: the way back from it needs a turn round, which the library does not have"
@@ -437,28 +473,34 @@ fn the_lab(map: &Map, room: u32, floor: i32) -> Result<(usize, DoorAt, i32), Pla
     }
 }
 
-/// The route from the lab to `room` (default: the map's office).
+/// The route from `from` (the lab, or a floor's lobby) to `room` (default: the map's office).
 pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
-    let From::Lab = from;
     let (room, room_leg, _) = the_room(map, room)?;
     let floor = map.legs[room_leg].floor;
-    let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
     let to_room = |pos: Pos, door: Option<CameOut>| {
         room_ahead(map, pos, room, door).map(|side| {
             let faced = map.legs[pos.leg].faced(room);
-            (0, vec![Step::AtTheRoom { room, side, faced }])
+            (0u32, vec![Step::AtTheRoom { room, side, faced }])
         })
     };
-    let steps = between_floors(
-        map,
-        ("the lab", out_of_the_lab(map, lab_leg, lab_at), lab_floor),
-        (format!("room {room}"), &to_room, floor),
-    )?;
+    let to = (format!("room {room}"), &to_room as &Goal<'_>, floor);
+    let steps = match from {
+        From::Lab => {
+            let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
+            between_floors(
+                map,
+                ("the lab", out_of_the_lab(map, lab_leg, lab_at), lab_floor),
+                to,
+            )?
+        }
+        From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
+    };
     Ok(Route {
         building: map.building.clone(),
         room,
         floor,
         trip: Trip::ToTheRoom,
+        from,
         steps,
     })
 }
@@ -487,14 +529,77 @@ pub fn plan_back(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
         room,
         floor,
         trip: Trip::BackToTheLab,
+        from: From::Lab,
         steps,
     })
+}
+
+/// The route back to the lab from floor `lobby`'s lobby, `room` being the room the message
+/// was for (where a car that did not come on the way back left the robot).
+pub fn plan_back_from_lobby(map: &Map, room: u32, lobby: i32) -> Result<Route, PlanError> {
+    let (room, room_leg, _) = the_room(map, Some(room))?;
+    let floor = map.legs[room_leg].floor;
+    let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
+    let to_lab = |pos: Pos, door: Option<CameOut>| {
+        lab_ahead(map, pos, lab_leg, lab_at, door)
+            .map(|(side, doors_before)| (0u32, vec![Step::AtTheLab { side, doors_before }]))
+    };
+    let steps = from_the_lobby(map, lobby, ("the lab".to_string(), &to_lab, lab_floor))?;
+    Ok(Route {
+        building: map.building.clone(),
+        room,
+        floor,
+        trip: Trip::BackToTheLab,
+        from: From::Lobby { floor: lobby },
+        steps,
+    })
+}
+
+/// Where the robot is believed to be when a step of a route failed, as the plan that goes on
+/// from there needs it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Believed {
+    /// The place.
+    pub at: From,
+    /// On the way back to the lab (the message said).
+    pub back: bool,
+}
+
+impl fmt::Display for Believed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.at {
+            From::Lab => write!(f, "in the lab"),
+            From::Lobby { floor } => write!(f, "in the lobby of floor {floor}"),
+        }?;
+        if self.back {
+            write!(f, ", on the way back")?;
+        }
+        Ok(())
+    }
+}
+
+impl Route {
+    /// The route that goes on from where `at` says the robot is: the same destination, and
+    /// the way back too if this route has it.
+    pub fn replanned(&self, map: &Map, at: Believed) -> Result<Route, PlanError> {
+        match (at.back, at.at, self.trip) {
+            (true, From::Lobby { floor }, _) => plan_back_from_lobby(map, self.room, floor),
+            (true, From::Lab, _) => Err(PlanError::NotFrom("lab".into())),
+            (false, from, Trip::RoundTrip) => plan_round_trip_from(map, Some(self.room), from),
+            (false, from, _) => plan(map, Some(self.room), from),
+        }
+    }
 }
 
 /// The route from the lab to `room` (default: the map's office) and back: the message said,
 /// the way back starts at its door.
 pub fn plan_round_trip(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
-    let to = plan(map, room, From::Lab)?;
+    plan_round_trip_from(map, room, From::Lab)
+}
+
+/// The same from `from`: to the room, and back to the lab.
+pub fn plan_round_trip_from(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
+    let to = plan(map, room, from)?;
     let back = plan_back(map, Some(to.room))?;
     Ok(Route {
         trip: Trip::RoundTrip,
@@ -550,8 +655,47 @@ fn between_floors(
         from: from_floor,
         to: floor,
     });
-    let starts = map
-        .lobby(floor)
+    steps.extend(
+        search(map, out_of_the_lobby(map, floor), goal)
+            .ok_or_else(|| no_way("the lobby", to, floor))?,
+    );
+    Ok(steps)
+}
+
+/// The steps from floor `lobby`'s lobby to where `goal` says the destination is on its floor:
+/// a car to that floor first if it is another.
+fn from_the_lobby(
+    map: &Map,
+    lobby: i32,
+    (to, goal, floor): (String, &Goal<'_>, i32),
+) -> Result<Vec<Step>, PlanError> {
+    if map.lobby(lobby).is_none() {
+        return Err(PlanError::NoLobby {
+            building: map.building.clone(),
+            floor: lobby,
+        });
+    }
+    let mut steps = Vec::new();
+    if lobby != floor {
+        steps.push(Step::Ride {
+            from: lobby,
+            to: floor,
+        });
+    }
+    steps.extend(
+        search(map, out_of_the_lobby(map, floor), goal).ok_or_else(|| PlanError::NoWay {
+            from: "the lobby".into(),
+            to,
+            floor,
+        })?,
+    );
+    Ok(steps)
+}
+
+/// The ways out of `floor`'s lobby, the robot in it (out of a car, or where it waited for
+/// one): through each opening.
+fn out_of_the_lobby(map: &Map, floor: i32) -> Vec<Start> {
+    map.lobby(floor)
         .map(|l| l.openings.as_slice())
         .unwrap_or_default()
         .iter()
@@ -577,9 +721,7 @@ fn between_floors(
                 door: None,
             }
         })
-        .collect();
-    steps.extend(search(map, starts, goal).ok_or_else(|| no_way("the lobby", to, floor))?);
-    Ok(steps)
+        .collect()
 }
 
 /// Whether the lab's door (on `lab_leg`, at `lab_at`) is ahead on `pos`'s leg: its side

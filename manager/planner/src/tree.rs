@@ -25,7 +25,7 @@
 //!   door, then `AtTheLabsDoor`; a lab's door at the corridor's end is `ToTheLabAhead`.
 
 use crate::map::{Side, Turn};
-use crate::route::{Route, Step, Trip};
+use crate::route::{Believed, From, Route, Step, Trip};
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
@@ -156,6 +156,9 @@ struct Writer {
     /// (`sign_read` is on with the corridor skills there).
     floor: i32,
     sign_floor: Option<i32>,
+    /// Where the robot is if a node of `out` fails, by its index (the nodes a plan goes on
+    /// from; the others fail the plan).
+    believed: Vec<(usize, Believed)>,
 }
 
 impl Writer {
@@ -255,8 +258,26 @@ impl Route {
         Ok(xml)
     }
 
+    /// Where the robot is believed to be when a child of the route's tree's `Sequence` fails,
+    /// one entry per child: `Some` for the steps the plan can go on from (a car that did not
+    /// come: the robot is in that floor's lobby), `None` for the others. The sequencer's
+    /// runner reads which child failed; [`Route::replanned`] plans from there.
+    pub fn believed(&self) -> Result<Vec<Option<Believed>>, TreeError> {
+        let w = self.written()?;
+        let mut out = vec![None; w.out.len()];
+        for (i, b) in w.believed {
+            out[i] = Some(b);
+        }
+        Ok(out)
+    }
+
     /// The route's tree: the children of its `Sequence`.
     fn nodes(&self) -> Result<Vec<X>, TreeError> {
+        Ok(self.written()?.out)
+    }
+
+    /// The route's tree written, with where each node leaves the robot if it fails.
+    fn written(&self) -> Result<Writer, TreeError> {
         let mut w = Writer {
             out: Vec::new(),
             group: None,
@@ -264,8 +285,9 @@ impl Route {
             turn: None,
             count: 0,
             // The way back starts on the room's floor, the way there on the first ride's.
-            floor: match self.trip {
-                Trip::BackToTheLab => None,
+            floor: match (self.from, self.trip) {
+                (From::Lobby { floor }, _) => Some(floor),
+                (_, Trip::BackToTheLab) => None,
                 _ => self.steps.iter().find_map(|s| match s {
                     Step::Ride { from, .. } => Some(*from),
                     _ => None,
@@ -273,7 +295,13 @@ impl Route {
             }
             .unwrap_or(self.floor),
             sign_floor: (self.trip != Trip::BackToTheLab).then_some(self.floor),
+            believed: Vec::new(),
         };
+        // From a lobby, whatever ran before: the corridor skills off, `avoid` on.
+        if let From::Lobby { .. } = self.from {
+            w.push(X::SubTree("InALobby"));
+        }
+        let mut back = self.trip == Trip::BackToTheLab;
         for (i, step) in self.steps.iter().enumerate() {
             // Junctions still to count on this floor after this step, on this way.
             let junctions_follow = self.steps[i + 1..]
@@ -326,8 +354,11 @@ impl Route {
                         });
                     }
                     // The ride's floor, which its subtree cannot be told: the button
-                    // barcode_track finds, the floor sign_read waits for.
+                    // barcode_track finds, the floor sign_read waits for. No car boarded:
+                    // the robot is still in this floor's lobby.
                     w.push(X::SubTree("BoardACar"));
+                    let at = From::Lobby { floor: *from };
+                    w.believed.push((w.out.len() - 1, Believed { at, back }));
                     w.push(X::SetParam {
                         skill: "barcode_track",
                         param: "id",
@@ -394,6 +425,7 @@ impl Route {
                     }));
                     w.push(X::SubTree("DeliverTheMessage"));
                     w.sign_floor = None;
+                    back = true;
                 }
                 Step::AtTheLab { side, doors_before } => {
                     w.set_turn(Turn::Straight);
@@ -420,7 +452,7 @@ impl Route {
                 }
             }
         }
-        Ok(w.out)
+        Ok(w)
     }
 }
 

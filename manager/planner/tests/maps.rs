@@ -5,7 +5,8 @@
 
 use skillfab_planner::map::{Heading, Side, Turn};
 use skillfab_planner::{
-    From, Library, Map, PlanError, Step, Trip, map_beside, plan, plan_back, plan_round_trip,
+    Believed, From, Library, Map, PlanError, Step, Trip, map_beside, plan, plan_back,
+    plan_back_from_lobby, plan_round_trip, plan_round_trip_from,
 };
 use std::path::Path;
 
@@ -615,4 +616,81 @@ fn every_numbered_room_of_the_shipped_maps_has_a_plan_that_reads() {
             );
         }
     }
+}
+
+/// From a lobby (where a car that did not come left the robot): a car to the room's floor
+/// and the same way out of its lobby as from the lab, or straight out on the room's floor; back
+/// to the lab from the room's floor's lobby. The route's tree says which of its nodes leave
+/// the robot in a lobby when they fail: the boardings, each on its floor and way.
+#[test]
+fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leaves_the_robot() {
+    let map = Map::parse(SMALL, "small.map.toml").unwrap();
+    let there = plan(&map, None, From::Lab).unwrap();
+    let ride = there
+        .steps
+        .iter()
+        .position(|s| matches!(s, Step::Ride { .. }))
+        .unwrap();
+    let lobby0 = plan(&map, None, From::Lobby { floor: 0 }).unwrap();
+    assert_eq!(lobby0.from, From::Lobby { floor: 0 });
+    assert_eq!(lobby0.steps, there.steps[ride..]);
+    let lobby1 = plan(&map, None, From::Lobby { floor: 1 }).unwrap();
+    assert_eq!(lobby1.steps, there.steps[ride + 1..]);
+    assert_eq!(
+        plan(&map, None, From::Lobby { floor: 7 }),
+        Err(PlanError::NoLobby {
+            building: "small".into(),
+            floor: 7
+        })
+    );
+    let both = plan_round_trip_from(&map, None, From::Lobby { floor: 0 }).unwrap();
+    let back = plan_back(&map, None).unwrap();
+    assert_eq!(
+        both.steps,
+        [lobby0.steps.clone(), back.steps.clone()].concat()
+    );
+    let back_ride = back
+        .steps
+        .iter()
+        .position(|s| matches!(s, Step::Ride { .. }))
+        .unwrap();
+    let home = plan_back_from_lobby(&map, 105, 1).unwrap();
+    assert_eq!(home.trip, Trip::BackToTheLab);
+    assert_eq!(home.steps, back.steps[back_ride..]);
+    // Where each node leaves the robot if it fails: only the boardings say.
+    let believed = plan_round_trip(&map, None).unwrap().believed().unwrap();
+    let said: Vec<Believed> = believed.iter().flatten().copied().collect();
+    assert_eq!(
+        said,
+        [
+            Believed {
+                at: From::Lobby { floor: 0 },
+                back: false
+            },
+            Believed {
+                at: From::Lobby { floor: 1 },
+                back: true
+            }
+        ]
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    let xml = lobby0.plan_xml(&library, "small").unwrap();
+    let parsed = skillfab_sequence::Plan::parse(&xml, "planned").unwrap();
+    // One entry per child of the route's tree, the lobby's own first.
+    let seq = skillfab_sequence::Sequencer::new(&parsed, None).unwrap();
+    let children = seq
+        .live()
+        .shape()
+        .iter()
+        .filter(|n| n.parent == Some(0))
+        .count();
+    assert_eq!(children, lobby0.believed().unwrap().len());
+    assert!(xml.contains(
+        "<Sequence>\n      <SubTree ID=\"InALobby\"/>\n      <SubTree ID=\"BoardACar\"/>"
+    ));
+    assert_eq!("lobby:3".parse(), Ok(From::Lobby { floor: 3 }));
+    assert_eq!("lab".parse(), Ok(From::Lab));
+    assert!("lobby".parse::<From>().is_err());
 }

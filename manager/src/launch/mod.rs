@@ -127,6 +127,26 @@ pub struct PlanSection {
     /// First restart delay (ms, default 200; doubles each time).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub backoff_ms: Option<u64>,
+    /// The plan is the planner's route: its runner plans again when a step fails
+    /// (`skillfab sequence --replan`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub replan: Option<ReplanSection>,
+}
+
+/// `[plan.replan]` of a launch file: the route the plan was planned from (docs/maps.md).
+#[derive(Debug, Default, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplanSection {
+    /// The route map (relative to the launch file).
+    pub map: String,
+    /// The room (default: the map's office).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub to: Option<u32>,
+    /// The route goes back to the lab too.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub and_back: bool,
+    /// The subtrees the plans are built from (relative to the launch file).
+    pub library: String,
 }
 
 /// `[bridge]` of a launch file: the options of `skillfab bridge`.
@@ -495,6 +515,17 @@ impl Launch {
             let mut args = vec!["sequence".to_string(), file.to_string_lossy().into_owned()];
             if let Some(t) = &plan.tree {
                 args.extend(["--tree".into(), t.clone()]);
+            }
+            if let Some(r) = &plan.replan {
+                let path = |f: &str| base.join(f).to_string_lossy().into_owned();
+                args.extend(["--replan".into(), path(&r.map)]);
+                args.extend(["--library".into(), path(&r.library)]);
+                if let Some(room) = r.to {
+                    args.extend(["--to".into(), room.to_string()]);
+                }
+                if r.and_back {
+                    args.push("--and-back".into());
+                }
             }
             // It starts once the skills it drives have registered.
             let skills: Vec<&str> = processes

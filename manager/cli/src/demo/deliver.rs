@@ -38,6 +38,9 @@ pub(crate) struct DeliverArgs {
     tree: Option<String>,
     #[command(flatten)]
     run: DemoRuns,
+    /// Do not plan again when a step fails (the planner's plan runs once, as written).
+    #[arg(long, conflicts_with = "tree")]
+    no_replan: bool,
     /// Simulated seconds before a run counts as failed (20 minutes).
     #[arg(long, default_value_t = 1200.0)]
     limit_s: f64,
@@ -66,17 +69,21 @@ fn deliver(args: DeliverArgs, work: &Path) -> anyhow::Result<()> {
         and_back,
         plan,
         tree,
+        no_replan,
         run,
         limit_s,
         faults,
     } = args;
     let json = run.json;
+    let mut replan = None;
     let (plan, room) = match &tree {
         Some(_) => {
             sequence::read_plan(&plan)?;
             (plan, to)
         }
         None => {
+            // The runner plans again with the same map and library, from the run's directory.
+            let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
             let map = map.unwrap_or_else(|| skillfab_planner::map_beside(&building));
             let trip = plan::Trip {
                 from: plan::Place::Lab,
@@ -90,6 +97,14 @@ fn deliver(args: DeliverArgs, work: &Path) -> anyhow::Result<()> {
             }
             let file = work.join(format!("{}.xml", p.route.tree_id()));
             std::fs::write(&file, &p.xml)?;
+            if !no_replan {
+                replan = Some(skillfab_manager::launch::ReplanSection {
+                    map: absolute(&map).to_string_lossy().into_owned(),
+                    to,
+                    and_back,
+                    library: absolute(&plan).to_string_lossy().into_owned(),
+                });
+            }
             (file, Some(p.route.room))
         }
     };
@@ -102,6 +117,7 @@ fn deliver(args: DeliverArgs, work: &Path) -> anyhow::Result<()> {
     opts.faults = faults.faults(opts.lockstep, opts.seed)?;
     opts.tree = tree;
     opts.and_back = and_back;
+    opts.replan = replan;
     let summary = super::demo(&opts)?;
     if and_back {
         report(

@@ -106,6 +106,8 @@ pub struct DemoOptions {
     /// A round trip (deliver `--and-back`): the message delivered does not end the run; it
     /// succeeds when the plan ends with the message delivered and the robot back at the lab.
     pub and_back: bool,
+    /// The plan is the planner's route: its runner plans again when a step fails.
+    pub replan: Option<skillfab_manager::launch::ReplanSection>,
 }
 
 /// One run's outcome.
@@ -336,6 +338,8 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
                     opts.faults.corrupt_rate.to_string(),
                     "--drop-rate".into(),
                     opts.faults.drop_rate.to_string(),
+                    "--cars-out-until".into(),
+                    opts.faults.cars_out_until.to_string(),
                     "--state".into(),
                     text(&robot_state),
                 ],
@@ -399,6 +403,7 @@ fn start(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<(Network, Pa
         tree: opts.tree.clone(),
         max_restarts: Some(restarts),
         backoff_ms: Some(backoff_ms),
+        replan: opts.replan.clone(),
     });
     let launch = toml::to_string(&launch).context("writing the launch file")?;
     let path = dir.join("exit-lab.toml");

@@ -1,0 +1,327 @@
+//! `skillfab sequence --replan MAP`: a planner's plan whose runner plans again when a step
+//! fails. The route's tree says, for each of its steps, where the robot is believed to be if
+//! that step fails ([`Route::believed`]); the runner reads which step failed in the plan's
+//! live tree, says where the robot is believed to be, and runs the plan the planner makes
+//! from there ([`Route::replanned`]), written beside the plan file as
+//! `NAME.replanned-from-PLACE.xml`. A runner that dies while a plan planned again runs is
+//! started again on the first plan's file: it finds the plan planned again kept for it and
+//! resumes that one (docs/maps.md, "Planning again").
+
+use crate::plan::{self, Place, Planned};
+use anyhow::Context;
+use skillfab_planner::{Believed, From, Map, Route};
+use skillfab_proto::control::{NodeStatus, PlanNode};
+use skillfab_sequence::{Kept, PlanStore};
+use std::path::{Path, PathBuf};
+
+/// At most this many plans made again in one run of a plan.
+pub const MAX_REPLANS: u32 = 3;
+
+/// What the runner plans again from: the route's map, destination, trip and library (those
+/// the plan file was planned with: `skillfab plan --map MAP [--to ROOM] [--and-back]`).
+#[derive(Debug, Clone)]
+pub struct Replanning {
+    /// The route map.
+    pub map: PathBuf,
+    /// The room (default: the map's office).
+    pub to: Option<u32>,
+    /// To the room and back to the lab.
+    pub and_back: bool,
+    /// The subtrees the plan is built from.
+    pub library: PathBuf,
+}
+
+/// The route being run, and how to plan again from where one of its steps fails.
+pub struct Replanner {
+    map: Map,
+    args: Replanning,
+    /// The plan file the runner was given (the first route's).
+    file: PathBuf,
+    /// The first route (its destination and trip are every plan's).
+    first: Route,
+    /// The route of the plan running now.
+    route: Route,
+    /// Plans made again so far.
+    pub replans: u32,
+}
+
+/// A plan made again: where from, its route, and its file.
+pub struct Replanned {
+    /// Where the robot is believed to be.
+    pub at: Believed,
+    /// The new route and its plan.
+    pub planned: Planned,
+    /// The file it is written to.
+    pub file: PathBuf,
+}
+
+/// The text of a plan after its leading comment (the route in words, the map's path).
+fn body(xml: &str) -> &str {
+    xml.find("<root").map_or(xml, |i| &xml[i..])
+}
+
+impl Replanner {
+    /// The planner's route for `args` from the lab, checked to be the one `file` (text
+    /// `text`) was planned from: the same tree, node for node.
+    pub fn new(args: &Replanning, file: &Path, text: &str) -> anyhow::Result<Replanner> {
+        let trip = plan::Trip {
+            from: Place::Lab,
+            to: args.to.map(Place::Room),
+            and_back: args.and_back,
+        };
+        let planned = plan::plan(&args.map, trip, &args.library)
+            .with_context(|| format!("--replan: planning on {}", args.map.display()))?;
+        if body(&planned.xml) != body(text) {
+            anyhow::bail!(
+                "--replan: {} is not the plan `skillfab plan --map {}{}{}` writes with {}: the runner could not say where a failed step leaves the robot",
+                file.display(),
+                args.map.display(),
+                args.to.map(|r| format!(" --to {r}")).unwrap_or_default(),
+                if args.and_back { " --and-back" } else { "" },
+                args.library.display()
+            );
+        }
+        Ok(Replanner {
+            map: skillfab_planner::Map::load(&args.map)?,
+            args: args.clone(),
+            file: file.to_path_buf(),
+            first: planned.route.clone(),
+            route: planned.route,
+            replans: 0,
+        })
+    }
+
+    /// The file a plan made again from `at` is written to, beside the first plan's.
+    fn file_for(&self, at: Believed) -> PathBuf {
+        let stem = self
+            .file
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let place = at.at.to_string().replace(':', "-");
+        let back = if at.back { "-back" } else { "" };
+        self.file
+            .with_file_name(format!("{stem}.replanned-from-{place}{back}.xml"))
+    }
+
+    /// Where a file of [`Replanner::file_for`] says the robot was believed to be.
+    fn believed_from_file(&self, file: &Path) -> Option<Believed> {
+        if file.parent() != self.file.parent() {
+            return None;
+        }
+        let stem = self.file.file_stem()?.to_string_lossy().into_owned();
+        let name = file.file_name()?.to_string_lossy().into_owned();
+        let rest = name
+            .strip_prefix(&format!("{stem}.replanned-from-"))?
+            .strip_suffix(".xml")?;
+        let (place, back) = match rest.strip_suffix("-back") {
+            Some(p) => (p, true),
+            None => (rest, false),
+        };
+        let at: From = place.replacen('-', ":", 1).parse().ok()?;
+        Some(Believed { at, back })
+    }
+
+    /// A plan made again that a runner before this one was running (kept in `store`, its
+    /// file still there): it is resumed instead of the first plan.
+    pub fn kept(&mut self, store: &PlanStore) -> anyhow::Result<Option<PathBuf>> {
+        let Kept::State(state) = store.load() else {
+            return Ok(None);
+        };
+        let file = PathBuf::from(&state.file);
+        let Some(at) = self.believed_from_file(&file).filter(|_| file.is_file()) else {
+            return Ok(None);
+        };
+        self.route = self.first.replanned(&self.map, at)?;
+        self.replans = 1;
+        Ok(Some(file))
+    }
+
+    /// The plan failed with its live tree's statuses (`shape` and `status`, as
+    /// [`LiveTree`] has them): where its failed step leaves the robot, and the plan from
+    /// there, written to its file. `Err` when the failed step is not one the plan goes on
+    /// from, or no more plans are made again.
+    pub fn after_failure(
+        &mut self,
+        shape: &[PlanNode],
+        status: &[NodeStatus],
+    ) -> anyhow::Result<Replanned> {
+        // The route's tree's `Sequence` is node 0; its children are the route's nodes.
+        let children: Vec<usize> = shape
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| n.parent == Some(0))
+            .map(|(i, _)| i)
+            .collect();
+        let Some(k) = children
+            .iter()
+            .position(|&i| status.get(i) == Some(&NodeStatus::Failure))
+        else {
+            anyhow::bail!("the plan failed, and no step of its route is marked failed");
+        };
+        let node = &shape[children[k]];
+        let believed = self.route.believed()?;
+        let Some(at) = believed.get(k).copied().flatten() else {
+            anyhow::bail!(
+                "the plan failed at '{}' ({}), a step the planner does not plan on from",
+                node.name,
+                node.detail
+            );
+        };
+        if self.replans >= MAX_REPLANS {
+            anyhow::bail!(
+                "the plan failed at '{}' with the robot {at}, after {MAX_REPLANS} plans made again",
+                node.name
+            );
+        }
+        let route = self.first.replanned(&self.map, at)?;
+        let planned = plan::written(route, &self.args.map, &self.args.library)?;
+        let file = self.file_for(at);
+        let aside = file.with_extension("xml.new");
+        std::fs::write(&aside, &planned.xml)
+            .and_then(|()| std::fs::rename(&aside, &file))
+            .with_context(|| format!("writing {}", file.display()))?;
+        self.route = planned.route.clone();
+        self.replans += 1;
+        Ok(Replanned { at, planned, file })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+
+    use super::*;
+
+    fn repo() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    }
+
+    fn replanner(dir: &Path, and_back: bool) -> Replanner {
+        let args = Replanning {
+            map: repo().join("devices/denning-sim/buildings/building-a.map.toml"),
+            to: Some(405),
+            and_back,
+            library: repo().join("skills/plans/deliver.xml"),
+        };
+        let trip = plan::Trip {
+            from: Place::Lab,
+            to: Some(Place::Room(405)),
+            and_back,
+        };
+        let p = plan::plan(&args.map, trip, &args.library).unwrap();
+        let file = dir.join("plan.xml");
+        std::fs::write(&file, &p.xml).unwrap();
+        Replanner::new(&args, &file, &p.xml).unwrap()
+    }
+
+    /// The live tree of the plan in `file` with its `n`-th route node failed (the others
+    /// before it succeeded).
+    fn failed_at(r: &Replanner, file: &Path, n: usize) -> (Vec<PlanNode>, Vec<NodeStatus>) {
+        let plan = crate::sequence::read_plan(file).unwrap();
+        let seq = skillfab_sequence::Sequencer::new(&plan, None).unwrap();
+        let shape = seq.live().shape().to_vec();
+        let children: Vec<usize> = (0..shape.len())
+            .filter(|&i| shape[i].parent == Some(0))
+            .collect();
+        assert_eq!(children.len(), r.route.believed().unwrap().len());
+        let mut status = vec![NodeStatus::Idle; shape.len()];
+        for &c in &children[..n] {
+            status[c] = NodeStatus::Success;
+        }
+        status[children[n]] = NodeStatus::Failure;
+        status[0] = NodeStatus::Failure;
+        (shape, status)
+    }
+
+    #[test]
+    fn a_car_that_does_not_come_is_planned_on_from_its_lobby_and_the_plan_is_kept_by_name() {
+        let dir = std::env::temp_dir().join(format!("sf-replan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut r = replanner(&dir, true);
+        let believed = r.route.believed().unwrap();
+        let board: Vec<usize> = (0..believed.len())
+            .filter(|&i| believed[i].is_some())
+            .collect();
+        // Building A's round trip rides twice: up from floor 0, down from floor 4.
+        assert_eq!(board.len(), 2);
+        let first = dir.join("plan.xml");
+        let (shape, status) = failed_at(&r, &first, board[0]);
+        let again = r.after_failure(&shape, &status).unwrap();
+        assert_eq!(
+            again.at,
+            Believed {
+                at: From::Lobby { floor: 0 },
+                back: false
+            }
+        );
+        assert_eq!(again.file, dir.join("plan.replanned-from-lobby-0.xml"));
+        assert!(again.planned.xml.contains("<SubTree ID=\"InALobby\"/>"));
+        // Still the round trip: the way back is in it, and its own car's step too.
+        assert_eq!(again.planned.route.trip, skillfab_planner::Trip::RoundTrip);
+        assert_eq!(
+            again
+                .planned
+                .route
+                .believed()
+                .unwrap()
+                .iter()
+                .flatten()
+                .count(),
+            2
+        );
+        // On the way back, a car that does not come on floor 4: back to the lab from there.
+        let believed = again.planned.route.believed().unwrap();
+        let down = (0..believed.len())
+            .rfind(|&i| believed[i].is_some())
+            .unwrap();
+        let (shape, status) = failed_at(&r, &again.file, down);
+        let back = r.after_failure(&shape, &status).unwrap();
+        assert_eq!(
+            back.at,
+            Believed {
+                at: From::Lobby { floor: 4 },
+                back: true
+            }
+        );
+        assert_eq!(
+            back.planned.route.trip,
+            skillfab_planner::Trip::BackToTheLab
+        );
+        assert!(matches!(
+            back.planned.route.steps.last(),
+            Some(skillfab_planner::Step::AtTheLab { .. })
+        ));
+        // The name says where from: a runner started again finds the route.
+        assert_eq!(r.believed_from_file(&back.file), Some(back.at));
+        assert_eq!(r.believed_from_file(&dir.join("other.xml")), None);
+        // A step the plan does not go on from fails the plan, saying which.
+        let (shape, status) = failed_at(&r, &back.file, 0);
+        let e = r.after_failure(&shape, &status).err().unwrap().to_string();
+        assert!(e.contains("does not plan on from"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_plan_file_that_is_not_the_planners_route_is_refused() {
+        let dir = std::env::temp_dir().join(format!("sf-replan-x-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let r = replanner(&dir, false);
+        let other = plan::plan(
+            &r.args.map,
+            plan::Trip {
+                from: Place::Lab,
+                to: Some(Place::Room(403)),
+                and_back: false,
+            },
+            &r.args.library,
+        )
+        .unwrap();
+        let e = Replanner::new(&r.args, &dir.join("plan.xml"), &other.xml)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("is not the plan"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -146,6 +146,8 @@ pub fn run(
     let plan = read_plan(file)?;
     let tree = opts.tree.as_deref();
     if opts.check {
+        // (A tree the plan does not have is refused here too.)
+        Sequencer::new(&plan, tree)?;
         return check(&plan, file, tree, &address, opts);
     }
     let store = PlanStore::of(domain);

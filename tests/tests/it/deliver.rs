@@ -104,3 +104,59 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
     assert!(out.status.success(), "{r}");
     crate::replay::assert_identical_through(&r, &kills);
 }
+
+/// A car that does not come: every car stays where it is and no hall call is answered for
+/// the first 600 simulated seconds, so `BoardACar` fails after its six calls. The plan's
+/// runner says the robot is in floor 0's lobby, plans again from there
+/// (`skillfab sequence --replan`) and runs that plan: a car is called again, and the message
+/// is delivered. With `--no-replan` the same run fails where the boarding failed
+/// (docs/deliver.md measures both).
+#[test]
+fn a_car_that_does_not_come_is_planned_around_from_the_lobby() {
+    let t = TestDomain::new("replan");
+    let root = repo_root();
+    let out = t
+        .command("skillfab")
+        .current_dir(&root)
+        .args(["demo", "deliver", "--lockstep", "--seed", "1", "--json"])
+        .args(["--cars-out-until", "600"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
+    let run = &summary["runs_detail"][0];
+    assert_eq!(summary["successes"], 1, "{run}");
+    assert_eq!(run["collisions"], 0, "{run}");
+    let order = skillfab_tests::steps_at(
+        run,
+        &[
+            "the call button pressed",
+            "board a car: attempt 5 failed",
+            "a step failed with the robot believed to be in the lobby of floor 0: planned again",
+            "a car is open",
+            "out of the car",
+            "the message said",
+        ],
+    );
+    assert!(order.windows(2).all(|w| w[0].0 < w[1].0), "{run}");
+    // No car came before the plan was made again, and the first plan failed only there.
+    let replanned = order[2].0;
+    let steps = run["steps"].as_array().unwrap();
+    assert!(
+        steps[..replanned]
+            .iter()
+            .all(|s| !s[0].as_str().unwrap().starts_with("a car is open")),
+        "{run}"
+    );
+    assert!(
+        steps
+            .iter()
+            .all(|s| !s[0].as_str().unwrap().contains("the plan ended: Failure")),
+        "{run}"
+    );
+}

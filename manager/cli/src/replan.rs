@@ -122,19 +122,55 @@ impl Replanner {
         Some(Believed { at, back })
     }
 
-    /// A plan made again that a runner before this one was running (kept in `store`, its
-    /// file still there): it is resumed instead of the first plan.
+    /// A plan made again that a runner before this one was running: the one its kept state
+    /// (in `store`) names, or, nothing being kept, the newest plan made again beside the
+    /// plan file (a runner killed after its plan failed and before the plan made again was
+    /// first kept; the files are removed when a plan ends, [`Replanner::forget`]). It is run
+    /// instead of the first plan.
     pub fn kept(&mut self, store: &PlanStore) -> anyhow::Result<Option<PathBuf>> {
-        let Kept::State(state) = store.load() else {
-            return Ok(None);
+        let file = match store.load() {
+            Kept::State(state) => PathBuf::from(&state.file),
+            Kept::Nothing => match self.made_again().into_iter().max_by_key(|(t, _)| *t) {
+                Some((_, f)) => f,
+                None => return Ok(None),
+            },
+            Kept::Unreadable(_) => return Ok(None),
         };
-        let file = PathBuf::from(&state.file);
         let Some(at) = self.believed_from_file(&file).filter(|_| file.is_file()) else {
             return Ok(None);
         };
         self.route = self.first.replanned(&self.map, at)?;
         self.replans = 1;
         Ok(Some(file))
+    }
+
+    /// The plans made again beside the plan file, with when each was written.
+    fn made_again(&self) -> Vec<(std::time::SystemTime, PathBuf)> {
+        let Some(dir) = self.file.parent() else {
+            return Vec::new();
+        };
+        let dir = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        };
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return Vec::new();
+        };
+        entries
+            .flatten()
+            .map(|e| self.file.with_file_name(e.file_name()))
+            .filter(|f| self.believed_from_file(f).is_some())
+            .filter_map(|f| Some((std::fs::metadata(&f).ok()?.modified().ok()?, f)))
+            .collect()
+    }
+
+    /// The plan ended (or starts over, `--fresh`): the plans made again are removed, so a
+    /// runner started on the plan file later starts it from its first node.
+    pub fn forget(&self) {
+        for (_, f) in self.made_again() {
+            let _ = std::fs::remove_file(f);
+        }
     }
 
     /// The plan failed with its live tree's statuses (`shape` and `status`, as
@@ -299,6 +335,23 @@ mod tests {
         let (shape, status) = failed_at(&r, &back.file, 0);
         let e = r.after_failure(&shape, &status).err().unwrap().to_string();
         assert!(e.contains("does not plan on from"), "{e}");
+        // A runner killed before the plan made again was first kept: nothing kept, the
+        // newest plan made again is run. Once the plan ended they are gone.
+        let mut next = replanner(&dir, true);
+        let store = PlanStore::at(dir.join("state"));
+        let newest = std::fs::File::options()
+            .append(true)
+            .open(&back.file)
+            .unwrap();
+        newest
+            .set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(1))
+            .unwrap();
+        assert_eq!(next.kept(&store).unwrap(), Some(back.file.clone()));
+        assert_eq!(next.route.trip, skillfab_planner::Trip::BackToTheLab);
+        next.forget();
+        assert!(!back.file.exists() && !again.file.exists() && first.exists());
+        let mut last = replanner(&dir, true);
+        assert_eq!(last.kept(&store).unwrap(), None);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -161,8 +161,12 @@ pub fn run(
         None => None,
     };
     let kept = match replanner.as_mut() {
-        Some(r) if !opts.fresh => r.kept(&store)?,
-        _ => None,
+        Some(r) if opts.fresh => {
+            r.forget();
+            None
+        }
+        Some(r) => r.kept(&store)?,
+        None => None,
     };
     let (plan, file) = match kept {
         Some(f) => (read_plan(&f)?, f),
@@ -191,24 +195,29 @@ pub fn run(
     loop {
         let ended = skillfab_sequence::run(&mut client, &mut seq, &mut stop, &mut print)
             .map_err(|e| Unfinished(e.into()))?;
-        match ended {
-            Some(Status::Success) => {
-                println!("the plan succeeded");
-                return Ok(());
+        let done = match ended {
+            Some(Status::Success) => Some("the plan succeeded"),
+            None => Some("halted"),
+            Some(_) => None,
+        };
+        if let Some(done) = done {
+            if let Some(r) = &replanner {
+                r.forget();
             }
-            None => {
-                println!("halted");
-                return Ok(());
-            }
-            Some(_) => {}
+            println!("{done}");
+            return Ok(());
         }
         let Some(r) = replanner.as_mut() else {
             anyhow::bail!("the plan failed");
         };
         let live = seq.live();
-        let again = r
-            .after_failure(live.shape(), live.status())
-            .context("the plan failed")?;
+        let again = match r.after_failure(live.shape(), live.status()) {
+            Ok(a) => a,
+            Err(e) => {
+                r.forget();
+                return Err(e.context("the plan failed"));
+            }
+        };
         print(
             &client,
             &format!(

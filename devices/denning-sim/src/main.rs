@@ -61,9 +61,12 @@ struct Args {
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
     /// Fault injection, in a building: no car answers a hall call before this simulated
-    /// time (s); the button is pressed, none comes.
+    /// time (s), and none moves with its doors closed; the button is pressed, none comes.
     #[arg(long, default_value_t = 0.0)]
     cars_out_until: f64,
+    /// With --cars-out-until: from this simulated time (s) on.
+    #[arg(long, default_value_t = 0.0)]
+    cars_out_from: f64,
     /// Write the ground-truth trajectory (CSV: t,x,y,theta,v,w,stall,collisions,outside,cmd_age — seconds since the last drive command, driven — a non-zero command in force, floor, said — messages spoken, delivered — spoken at the building's goal, at_lab — in front of the lab's door on its floor).
     #[arg(long)]
     trajectory: Option<PathBuf>,
@@ -162,7 +165,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     println!("{}", slave_path.display());
     let _ = std::io::stdout().flush();
 
-    sim.cars_out_until = args.cars_out_until;
+    (sim.cars_out_from, sim.cars_out_until) = (args.cars_out_from, args.cars_out_until);
     let resumed = args.state.as_deref().and_then(load_state);
     if let Some(p) = resumed {
         tracing::info!(time = p.time, x = p.pose[0], y = p.pose[1], "robot resumed");

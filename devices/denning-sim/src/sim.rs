@@ -103,8 +103,11 @@ pub struct Sim {
     pub said: u16,
     /// When a message was first spoken at the building's goal (s).
     pub delivered: Option<f64>,
-    /// Fault injection: until this simulated time (s) no car answers a hall call (the
-    /// button is pressed, none comes).
+    /// Fault injection: from `cars_out_from` until `cars_out_until` (simulated s) no car
+    /// moves with its doors closed and no hall call is answered (the button is pressed, none
+    /// comes).
+    pub cars_out_from: f64,
+    /// See `cars_out_from`.
     pub cars_out_until: f64,
 }
 
@@ -208,6 +211,7 @@ impl Sim {
             presses: 0,
             said: 0,
             delivered: None,
+            cars_out_from: 0.0,
             cars_out_until: 0.0,
         }
     }
@@ -330,8 +334,9 @@ impl Sim {
             wrap(self.odom[2] + dw),
         ];
         self.time += dt;
+        let out = self.cars_out();
         if let Some(site) = self.site.as_mut() {
-            site.out_of_service(self.time < self.cars_out_until);
+            site.out_of_service(out);
             site.step(dt, [self.pose[0], self.pose[1]]);
             self.refresh();
         }
@@ -374,7 +379,7 @@ impl Sim {
         };
         self.presses = self.presses.saturating_add(1);
         tracing::info!(button = id, floor = self.floor(), "button pressed");
-        if matches!(mark, Mark::Call) && self.time < self.cars_out_until {
+        if matches!(mark, Mark::Call) && self.cars_out() {
             tracing::info!(
                 until = self.cars_out_until,
                 "hall call unanswered: the cars are out of service"
@@ -384,6 +389,11 @@ impl Sim {
             self.refresh();
         }
         id
+    }
+
+    /// Whether the cars are out of service now (fault injection).
+    fn cars_out(&self) -> bool {
+        (self.cars_out_from..self.cars_out_until).contains(&self.time)
     }
 
     /// Speaks `text`; in a building, on the goal floor near the goal, that delivers the

@@ -32,8 +32,9 @@ pub struct Faults {
     pub corrupt_rate: f64,
     /// Share of the simulator's bytes dropped.
     pub drop_rate: f64,
-    /// No car answers a hall call before this simulated time (s).
-    pub cars_out_until: f64,
+    /// While the simulated time (s) is in this range no car answers a hall call, and none
+    /// moves with its doors closed.
+    pub cars_out: std::ops::Range<f64>,
     /// Seed of the killer's choices.
     pub seed: u64,
 }

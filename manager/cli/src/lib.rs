@@ -289,9 +289,13 @@ struct FaultArgs {
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
     /// Fault injection, in a building: no car answers a hall call before this many
-    /// simulated seconds (the button is pressed, none comes).
+    /// simulated seconds, and none moves with its doors closed (the button is pressed, none
+    /// comes).
     #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
     cars_out_until: f64,
+    /// With --cars-out-until: the cars are out from this many simulated seconds on.
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+    cars_out_from: f64,
 }
 
 impl FaultArgs {
@@ -313,11 +317,13 @@ impl FaultArgs {
                 anyhow::bail!("{name} must be in [0, 0.5], got {r}");
             }
         }
-        if !(self.cars_out_until.is_finite() && self.cars_out_until >= 0.0) {
-            anyhow::bail!(
-                "--cars-out-until must be a number of simulated seconds, got {}",
-                self.cars_out_until
-            );
+        for (name, s) in [
+            ("--cars-out-from", self.cars_out_from),
+            ("--cars-out-until", self.cars_out_until),
+        ] {
+            if !(s.is_finite() && s >= 0.0) {
+                anyhow::bail!("{name} must be a number of simulated seconds, got {s}");
+            }
         }
         if lockstep && (self.kill_every.is_some() || self.kill_sim_every.is_some()) {
             anyhow::bail!(
@@ -331,7 +337,7 @@ impl FaultArgs {
             kill_sim_every_s: self.kill_sim_every,
             corrupt_rate: self.corrupt_rate,
             drop_rate: self.drop_rate,
-            cars_out_until: self.cars_out_until,
+            cars_out: self.cars_out_from..self.cars_out_until,
             seed,
         })
     }

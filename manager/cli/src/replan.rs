@@ -196,12 +196,19 @@ impl Replanner {
             anyhow::bail!("the plan failed, and no step of its route is marked failed");
         };
         let node = &shape[children[k]];
+        let step = self.route.node_steps()?.get(k).copied().unwrap_or(0);
+        let words = self
+            .route
+            .steps
+            .get(step)
+            .map(ToString::to_string)
+            .unwrap_or_default();
         let believed = self.route.believed()?;
         let Some(at) = believed.get(k).copied().flatten() else {
             anyhow::bail!(
-                "the plan failed at '{}' ({}), a step the planner does not plan on from",
-                node.name,
-                node.detail
+                "step {} of the route ({words}) failed, in its node '{}': the planner does not plan on from there",
+                step + 1,
+                node.name
             );
         };
         if self.replans >= MAX_REPLANS {
@@ -334,7 +341,11 @@ mod tests {
         // A step the plan does not go on from fails the plan, saying which.
         let (shape, status) = failed_at(&r, &back.file, 0);
         let e = r.after_failure(&shape, &status).err().unwrap().to_string();
-        assert!(e.contains("does not plan on from"), "{e}");
+        assert!(e.contains("does not plan on from there"), "{e}");
+        assert!(
+            e.starts_with("step 1 of the route (a car from floor 4 to floor 0)"),
+            "{e}"
+        );
         // A runner killed before the plan made again was first kept: nothing kept, the
         // newest plan made again is run. Once the plan ended they are gone.
         let mut next = replanner(&dir, true);

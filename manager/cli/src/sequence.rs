@@ -215,7 +215,9 @@ pub fn run(
             Ok(a) => a,
             Err(e) => {
                 r.forget();
-                return Err(e.context("the plan failed"));
+                print(&client, &format!("not planned again: {e:#}"));
+                // (The last line a plan's runner writes when its plan failed.)
+                anyhow::bail!("the plan failed");
             }
         };
         print(

@@ -159,13 +159,19 @@ struct Writer {
     /// Where the robot is if a node of `out` fails, by its index (the nodes a plan goes on
     /// from; the others fail the plan).
     believed: Vec<(usize, Believed)>,
+    /// The step being written, and the step each node of `out` was written for.
+    step: usize,
+    step_of: Vec<usize>,
 }
 
 impl Writer {
     fn push(&mut self, x: X) {
         match &mut self.group {
             Some((.., children)) => children.push(x),
-            None => self.out.push(x),
+            None => {
+                self.out.push(x);
+                self.step_of.push(self.step);
+            }
         }
     }
 
@@ -271,6 +277,12 @@ impl Route {
         Ok(out)
     }
 
+    /// The step of the route (an index into `steps`) each child of the route's tree's
+    /// `Sequence` was written for (a plan from a lobby: its first node, too, the first step's).
+    pub fn node_steps(&self) -> Result<Vec<usize>, TreeError> {
+        Ok(self.written()?.step_of)
+    }
+
     /// The route's tree: the children of its `Sequence`.
     fn nodes(&self) -> Result<Vec<X>, TreeError> {
         Ok(self.written()?.out)
@@ -296,6 +308,8 @@ impl Route {
             .unwrap_or(self.floor),
             sign_floor: (self.trip != Trip::BackToTheLab).then_some(self.floor),
             believed: Vec::new(),
+            step: 0,
+            step_of: Vec::new(),
         };
         // From a lobby, whatever ran before: the corridor skills off, `avoid` on.
         if let From::Lobby { .. } = self.from {
@@ -303,6 +317,7 @@ impl Route {
         }
         let mut back = self.trip == Trip::BackToTheLab;
         for (i, step) in self.steps.iter().enumerate() {
+            w.step = i;
             // Junctions still to count on this floor after this step, on this way.
             let junctions_follow = self.steps[i + 1..]
                 .iter()

@@ -10,6 +10,21 @@
 
 use skillfab_tests::{TestDomain, repo_root};
 
+/// The demo's one run (`--json`), which must have delivered the message with no collision.
+fn the_delivered_run(out: &std::process::Output) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
+    let run = summary["runs_detail"][0].clone();
+    assert_eq!(summary["successes"], 1, "{run}");
+    assert_eq!(run["collisions"], 0, "{run}");
+    run
+}
+
 #[test]
 fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delivered() {
     let t = TestDomain::new("deliver");
@@ -32,16 +47,7 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
         .arg(&rec)
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "demo failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
-    let run = &summary["runs_detail"][0];
-    assert_eq!(summary["successes"], 1, "{run}");
-    assert_eq!(run["collisions"], 0, "{run}");
+    let run = &the_delivered_run(&out);
     // It ended on the fourth floor, at the office door (goal: (9.5, 18.2), radius 2 m).
     let end = &run["end"];
     assert_eq!(end[0], 4, "{run}");
@@ -122,16 +128,7 @@ fn a_car_that_does_not_come_is_planned_around_from_the_lobby() {
         .args(["--cars-out-until", "600"])
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "demo failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
-    let run = &summary["runs_detail"][0];
-    assert_eq!(summary["successes"], 1, "{run}");
-    assert_eq!(run["collisions"], 0, "{run}");
+    let run = &the_delivered_run(&out);
     let order = skillfab_tests::steps_at(
         run,
         &[

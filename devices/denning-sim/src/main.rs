@@ -165,7 +165,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     println!("{}", slave_path.display());
     let _ = std::io::stdout().flush();
 
-    (sim.cars_out_from, sim.cars_out_until) = (args.cars_out_from, args.cars_out_until);
+    sim.cars_out = args.cars_out_from..args.cars_out_until;
     let resumed = args.state.as_deref().and_then(load_state);
     if let Some(p) = resumed {
         tracing::info!(time = p.time, x = p.pose[0], y = p.pose[1], "robot resumed");

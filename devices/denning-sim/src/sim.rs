@@ -103,12 +103,9 @@ pub struct Sim {
     pub said: u16,
     /// When a message was first spoken at the building's goal (s).
     pub delivered: Option<f64>,
-    /// Fault injection: from `cars_out_from` until `cars_out_until` (simulated s) no car
-    /// moves with its doors closed and no hall call is answered (the button is pressed, none
-    /// comes).
-    pub cars_out_from: f64,
-    /// See `cars_out_from`.
-    pub cars_out_until: f64,
+    /// Fault injection: while the simulated time (s) is in this range no car moves with its
+    /// doors closed and no hall call is answered (the button is pressed, none comes).
+    pub cars_out: std::ops::Range<f64>,
 }
 
 /// What the robot keeps when the process that simulates its serial side restarts: its body
@@ -211,8 +208,7 @@ impl Sim {
             presses: 0,
             said: 0,
             delivered: None,
-            cars_out_from: 0.0,
-            cars_out_until: 0.0,
+            cars_out: 0.0..0.0,
         }
     }
 
@@ -381,7 +377,7 @@ impl Sim {
         tracing::info!(button = id, floor = self.floor(), "button pressed");
         if matches!(mark, Mark::Call) && self.cars_out() {
             tracing::info!(
-                until = self.cars_out_until,
+                until = self.cars_out.end,
                 "hall call unanswered: the cars are out of service"
             );
         } else if let Some(site) = self.site.as_mut() {
@@ -393,7 +389,7 @@ impl Sim {
 
     /// Whether the cars are out of service now (fault injection).
     fn cars_out(&self) -> bool {
-        (self.cars_out_from..self.cars_out_until).contains(&self.time)
+        self.cars_out.contains(&self.time)
     }
 
     /// Speaks `text`; in a building, on the goal floor near the goal, that delivers the

@@ -4,7 +4,8 @@
 //! Layout: [`map`] reads a route map (TOML, docs/maps.md) and refuses one that contradicts
 //! itself, each problem one sentence naming the place; [`route`] finds the way from the lab to
 //! a room, from a room back to the lab, or both (corridor legs, junctions and their turns, the
-//! lobbies, the elevator); [`tree`] writes
+//! lobbies, the elevator); [`replan`] says where a failed step leaves the robot and plans
+//! on from there; [`tree`] writes
 //! that route as a BehaviorTree.CPP v4 plan built from the delivery library's subtrees
 //! (`skills/plans/deliver.xml`). Pure code: no fabric, no files but what [`Map::load`] reads.
 //!
@@ -24,13 +25,15 @@
 #![warn(missing_docs)]
 
 pub mod map;
+pub mod replan;
 pub mod route;
 pub mod tree;
 
 pub use map::{LoadError, Map, MapError, Problem};
+pub use replan::Believed;
 pub use route::{
-    Believed, From, PlanError, Route, Step, Trip, plan, plan_back, plan_back_from_lobby,
-    plan_round_trip, plan_round_trip_from,
+    From, PlanError, Route, Step, Trip, plan, plan_back, plan_back_from_lobby, plan_round_trip,
+    plan_round_trip_from,
 };
 pub use tree::{Library, TreeError};
 

@@ -174,10 +174,7 @@ pub struct Route {
 impl fmt::Display for Route {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let (b, r, fl) = (&self.building, self.room, self.floor);
-        let from = match self.from {
-            From::Lab => "the lab".to_string(),
-            From::Lobby { floor } => format!("the lobby of floor {floor}"),
-        };
+        let from = self.from.place();
         match self.trip {
             Trip::ToTheRoom => write!(f, "{b}: to room {r} (floor {fl}) from {from}"),
             Trip::BackToTheLab => write!(f, "{b}: from room {r} (floor {fl}) back to the lab"),
@@ -214,6 +211,16 @@ impl std::str::FromStr for From {
         match s.strip_prefix("lobby:").map(str::parse) {
             Some(Ok(floor)) => Ok(From::Lobby { floor }),
             _ => Err(PlanError::NotFrom(s.to_string())),
+        }
+    }
+}
+
+impl From {
+    /// The place in words: "the lab", "the lobby of floor F".
+    pub fn place(self) -> String {
+        match self {
+            From::Lab => "the lab".to_string(),
+            From::Lobby { floor } => format!("the lobby of floor {floor}"),
         }
     }
 }
@@ -508,87 +515,45 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
 /// The route back to the lab from `room`'s door (default: the map's office), the robot
 /// standing at it facing it, as a route to the room leaves it.
 pub fn plan_back(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
-    let (room, room_leg, room_at) = the_room(map, room)?;
-    let floor = map.legs[room_leg].floor;
-    let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
-    let to_lab = |pos: Pos, door: Option<CameOut>| {
-        lab_ahead(map, pos, lab_leg, lab_at, door)
-            .map(|(side, doors_before)| (0, vec![Step::AtTheLab { side, doors_before }]))
-    };
-    let steps = between_floors(
-        map,
-        (
-            &format!("room {room}"),
-            out_of_the_room(map, room, room_leg, room_at)?,
-            floor,
-        ),
-        ("the lab".to_string(), &to_lab, lab_floor),
-    )?;
-    Ok(Route {
-        building: map.building.clone(),
-        room,
-        floor,
-        trip: Trip::BackToTheLab,
-        from: From::Lab,
-        steps,
-    })
+    back_to_the_lab(map, room, None)
 }
 
 /// The route back to the lab from floor `lobby`'s lobby, `room` being the room the message
 /// was for (where a car that did not come on the way back left the robot).
 pub fn plan_back_from_lobby(map: &Map, room: u32, lobby: i32) -> Result<Route, PlanError> {
-    let (room, room_leg, _) = the_room(map, Some(room))?;
+    back_to_the_lab(map, Some(room), Some(lobby))
+}
+
+/// The way back to the lab from `room`'s door, or from floor `lobby`'s lobby.
+fn back_to_the_lab(map: &Map, room: Option<u32>, lobby: Option<i32>) -> Result<Route, PlanError> {
+    let (room, room_leg, room_at) = the_room(map, room)?;
     let floor = map.legs[room_leg].floor;
     let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
     let to_lab = |pos: Pos, door: Option<CameOut>| {
         lab_ahead(map, pos, lab_leg, lab_at, door)
             .map(|(side, doors_before)| (0u32, vec![Step::AtTheLab { side, doors_before }]))
     };
-    let steps = from_the_lobby(map, lobby, ("the lab".to_string(), &to_lab, lab_floor))?;
+    let to = ("the lab".to_string(), &to_lab as &Goal<'_>, lab_floor);
+    let steps = match lobby {
+        None => between_floors(
+            map,
+            (
+                &format!("room {room}"),
+                out_of_the_room(map, room, room_leg, room_at)?,
+                floor,
+            ),
+            to,
+        )?,
+        Some(lobby) => from_the_lobby(map, lobby, to)?,
+    };
     Ok(Route {
         building: map.building.clone(),
         room,
         floor,
         trip: Trip::BackToTheLab,
-        from: From::Lobby { floor: lobby },
+        from: lobby.map_or(From::Lab, |floor| From::Lobby { floor }),
         steps,
     })
-}
-
-/// Where the robot is believed to be when a step of a route failed, as the plan that goes on
-/// from there needs it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Believed {
-    /// The place.
-    pub at: From,
-    /// On the way back to the lab (the message said).
-    pub back: bool,
-}
-
-impl fmt::Display for Believed {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.at {
-            From::Lab => write!(f, "in the lab"),
-            From::Lobby { floor } => write!(f, "in the lobby of floor {floor}"),
-        }?;
-        if self.back {
-            write!(f, ", on the way back")?;
-        }
-        Ok(())
-    }
-}
-
-impl Route {
-    /// The route that goes on from where `at` says the robot is: the same destination, and
-    /// the way back too if this route has it.
-    pub fn replanned(&self, map: &Map, at: Believed) -> Result<Route, PlanError> {
-        match (at.back, at.at, self.trip) {
-            (true, From::Lobby { floor }, _) => plan_back_from_lobby(map, self.room, floor),
-            (true, From::Lab, _) => Err(PlanError::NotFrom("lab".into())),
-            (false, from, Trip::RoundTrip) => plan_round_trip_from(map, Some(self.room), from),
-            (false, from, _) => plan(map, Some(self.room), from),
-        }
-    }
 }
 
 /// The route from the lab to `room` (default: the map's office) and back: the message said,

@@ -25,7 +25,8 @@
 //!   door, then `AtTheLabsDoor`; a lab's door at the corridor's end is `ToTheLabAhead`.
 
 use crate::map::{Side, Turn};
-use crate::route::{Believed, From, Route, Step, Trip};
+use crate::replan::Believed;
+use crate::route::{From, Route, Step, Trip};
 use std::collections::BTreeSet;
 use std::fmt::Write;
 

@@ -290,10 +290,15 @@ fn waits_for_the_manager_and_reconnects() {
     // A skill is killed: the manager restarts it (`on-failure`), the console follows.
     let board = t.board();
     let slot = skillfab_tests::registered(&board, "smooth").unwrap().slot;
-    let pid = board
-        .slot(slot)
-        .pid
-        .load(std::sync::atomic::Ordering::Acquire);
+    // (A slot is registered a moment before its pid is stored: 0 until then.)
+    let mut pid = 0;
+    t.wait_until("smooth's pid on the board", || {
+        pid = board
+            .slot(slot)
+            .pid
+            .load(std::sync::atomic::Ordering::Acquire);
+        pid != 0
+    });
     // Select smooth (the detail pane's title shows its pid).
     let order: Vec<String> = Client::connect(&t.domain)
         .unwrap()

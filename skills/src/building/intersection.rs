@@ -21,6 +21,14 @@ pub struct IntersectionParams {
     /// there would count again when the turn is over.
     #[param(default = 0.3, min = 0.0, max = 5.0)]
     pub leave: f64,
+    /// Once the robot has been between walls, a side opens an intersection only after it has
+    /// been open over this much travel (m), or with a wall across the way (the sonar straight
+    /// ahead within `open`: a T's bar): a 1 m door beside a robot 0.2 to 0.4 m off the
+    /// centre line toward it opens all three cones of that side for 0.03 to 0.25 m of
+    /// travel, a 2.4 m corridor's mouth for 0.45 to 0.55 m, wherever the robot is across
+    /// the corridor.
+    #[param(default = 0.3, min = 0.0, max = 5.0)]
+    pub width: f64,
 }
 
 /// Inputs of [`Intersection`].
@@ -43,7 +51,9 @@ pub struct JunctionOut<'a> {
 /// right) reads farther than `open`: the sonars at 75°, 90° and 105°, whose cones fill that
 /// arc. Ahead is open when the sonars within ±20° (cones over ±30°) read farther than `open`.
 ///
-/// `inside` turns true when a side has been open for `hold` cycles, and false only when both
+/// `inside` turns true when a side has been open for `hold` cycles (and, once the robot has
+/// been between walls since activation, over `width` metres of travel or with a wall across
+/// the way: a door beside is not a junction), and false only when both
 /// sides are closed along their whole arcs (60°..120°, −120°..−60°: walls beside again) for
 /// `hold` cycles and over `leave` metres of travel: turning on the spot in a crossing, the
 /// side sonars look into its corners, which must not end the intersection (and count it
@@ -62,6 +72,9 @@ pub struct Intersection {
     differs: u64,
     /// Where the raw reading began to disagree with `inside` (odometry).
     since: Option<(f64, f64)>,
+    /// Walls on both sides seen since activation (from then on a side must open over `width`).
+    #[serde(default)]
+    walled_once: bool,
 }
 
 impl Skill for Intersection {
@@ -81,6 +94,7 @@ impl Skill for Intersection {
             self.count = 0;
             self.differs = 0;
             self.since = None;
+            self.walled_once = false;
         }
         // Open: every reading of the arc beyond `open`; closed: every reading within it.
         let open = |a: Option<(f64, f64)>| a.is_some_and(|(near, _)| near > p.open);
@@ -89,6 +103,8 @@ impl Skill for Intersection {
         let right = open(arc(s, -120.0 + 15.0, -60.0 - 15.0));
         let ahead = open(arc(s, -20.0, 20.0));
         let walled = closed(arc(s, 60.0, 120.0)) && closed(arc(s, -120.0, -60.0));
+        self.walled_once |= walled;
+        let wall_across = at(s, 0.0).is_some_and(|r| r <= p.open);
         let raw = if self.inside { !walled } else { left || right };
         if raw == self.inside {
             self.differs = 0;
@@ -97,7 +113,12 @@ impl Skill for Intersection {
             self.differs += 1;
             let (x0, y0) = *self.since.get_or_insert((od.x, od.y));
             let moved = (od.x - x0).hypot(od.y - y0);
-            if self.differs >= p.hold && (raw || moved >= p.leave) {
+            let far_enough = if raw {
+                !self.walled_once || moved >= p.width || wall_across
+            } else {
+                moved >= p.leave
+            };
+            if self.differs >= p.hold && far_enough {
                 self.differs = 0;
                 self.since = None;
                 self.inside = raw;

@@ -129,6 +129,49 @@ fn a_side_corridor_opens_a_side_and_a_door_does_not() {
 }
 
 #[test]
+fn a_door_beside_a_robot_off_the_centre_line_is_not_a_junction() {
+    // As above, the robot up to 0.4 m off the centre line toward the door (building E's seed
+    // 19 went past room 401's door 0.19 m toward it, and the door counted as the crossing),
+    // and 0.3 m away from it: the door opens all three cones of its side for up to 0.25 m of
+    // travel from 0.2 m off on, the side corridor for 0.45 to 0.55 m from everywhere here.
+    let walls = corridor(20.0, &[(5.0, 6.0, false), (10.0, 12.4, true)], &[]);
+    for (off, seed) in [
+        (-0.3, 1),
+        (0.1, 2),
+        (0.19, 3),
+        (0.25, 4),
+        (0.3, 5),
+        (0.4, 6),
+    ] {
+        let mut r = Robot::new(&world([1.5, off, 0.0], &walls, ""), seed);
+        let mut h = Harness::<Intersection>::new();
+        let mut counted_at = Vec::new();
+        let mut j = Junction::default();
+        while r.sim.pose[0] < 16.0 {
+            h.input("sonar", r.sonar).input("odometry", r.odometry);
+            let last = j.count;
+            j = *h.step().unwrap().output::<Junction>("junction").unwrap();
+            if j.count > last {
+                counted_at.push(r.sim.pose[0]);
+            }
+            r.drive(Drive {
+                translate: 0.35,
+                rotate: 0.0,
+            });
+        }
+        assert_eq!(
+            counted_at.len(),
+            1,
+            "{off} m off the centre line: one junction, the side corridor: counted at {counted_at:?}"
+        );
+        assert!(
+            (10.0..12.4).contains(&counted_at[0]),
+            "{off} m off: counted beside the side corridor: {counted_at:?}"
+        );
+    }
+}
+
+#[test]
 fn hall_follow_turns_left_at_a_junction_and_stops_at_the_end_without_a_collision() {
     // A T: the main corridor along x, a side corridor to the left at x 12..14.4, up to y 12.
     let walls = corridor(24.0, &[(12.0, 14.4, true)], &[]);

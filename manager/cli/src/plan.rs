@@ -13,20 +13,22 @@ pub enum Place {
     Lab,
     /// A room, by its number.
     Room(u32),
-    /// A floor's lobby (`lobby:F`).
-    Lobby(i32),
+    /// Where a route to a room may start besides the lab: a floor's lobby (`lobby:F`), a
+    /// leg's dead end (`end:N`).
+    At(From),
 }
 
 impl std::str::FromStr for Place {
     type Err = String;
     fn from_str(s: &str) -> Result<Place, String> {
-        if let Ok(From::Lobby { floor }) = s.parse() {
-            return Ok(Place::Lobby(floor));
-        }
         match s {
             "lab" => Ok(Place::Lab),
-            n => n.parse().map(Place::Room).map_err(|_| {
-                format!("'{n}' is neither `lab`, a room's number nor a lobby (`lobby:F`)")
+            n => n.parse().map(Place::Room).or_else(|_| {
+                n.parse().map(Place::At).map_err(|_| {
+                    format!(
+                        "'{n}' is neither `lab`, a room's number, a lobby (`lobby:F`) nor a leg's dead end (`end:N`, the map's N-th leg)"
+                    )
+                })
             }),
         }
     }
@@ -55,10 +57,10 @@ pub struct Planned {
 pub fn plan(map: &Path, trip: Trip, library: &Path) -> anyhow::Result<Planned> {
     let m = Map::load(map)?;
     let route = match (trip.from, trip.to, trip.and_back) {
-        (_, Some(Place::Lobby(_)), _) => anyhow::bail!("a route ends at a room or the lab"),
+        (_, Some(Place::At(_)), _) => anyhow::bail!("a route ends at a room or the lab"),
         (Place::Lab, Some(Place::Lab), _) => anyhow::bail!("from the lab to the lab: no route"),
-        (Place::Lobby(_), Some(Place::Lab), _) => {
-            anyhow::bail!("--from lobby:F: from a lobby the planner plans to a room (--to ROOM)")
+        (Place::At(from), Some(Place::Lab), _) => {
+            anyhow::bail!("--from {from}: from there the planner plans to a room (--to ROOM)")
         }
         (Place::Lab, to, false) => skillfab_planner::plan(&m, room(to), From::Lab)?,
         (Place::Lab, to, true) => skillfab_planner::plan_round_trip(&m, room(to))?,
@@ -67,12 +69,8 @@ pub fn plan(map: &Path, trip: Trip, library: &Path) -> anyhow::Result<Planned> {
             anyhow::bail!("--from {r}: from a room the planner plans the way back (--to lab)")
         }
         (Place::Room(_), _, true) => anyhow::bail!("--and-back starts at the lab"),
-        (Place::Lobby(floor), to, false) => {
-            skillfab_planner::plan(&m, room(to), From::Lobby { floor })?
-        }
-        (Place::Lobby(floor), to, true) => {
-            skillfab_planner::plan_round_trip_from(&m, room(to), From::Lobby { floor })?
-        }
+        (Place::At(from), to, false) => skillfab_planner::plan(&m, room(to), from)?,
+        (Place::At(from), to, true) => skillfab_planner::plan_round_trip_from(&m, room(to), from)?,
     };
     written(route, map, library)
 }

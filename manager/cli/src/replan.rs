@@ -241,15 +241,19 @@ mod tests {
     }
 
     fn replanner(dir: &Path, and_back: bool) -> Replanner {
+        replanner_on(dir, "building-a", 405, and_back)
+    }
+
+    fn replanner_on(dir: &Path, building: &str, room: u32, and_back: bool) -> Replanner {
         let args = Replanning {
-            map: repo().join("devices/denning-sim/buildings/building-a.map.toml"),
-            to: Some(405),
+            map: repo().join(format!("devices/denning-sim/buildings/{building}.map.toml")),
+            to: Some(room),
             and_back,
             library: repo().join("skills/plans/deliver.xml"),
         };
         let trip = plan::Trip {
             from: Place::Lab,
-            to: Some(Place::Room(405)),
+            to: Some(Place::Room(room)),
             and_back,
         };
         let p = plan::plan(&args.map, trip, &args.library).unwrap();
@@ -283,9 +287,20 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let mut r = replanner(&dir, true);
         let believed = r.route.believed().unwrap();
-        let board: Vec<usize> = (0..believed.len())
-            .filter(|&i| believed[i].is_some())
-            .collect();
+        let boards = |b: &[Option<Believed>]| -> Vec<usize> {
+            (0..b.len())
+                .filter(|&i| {
+                    matches!(
+                        b[i],
+                        Some(Believed {
+                            at: From::Lobby { .. },
+                            ..
+                        })
+                    )
+                })
+                .collect()
+        };
+        let board = boards(&believed);
         // Building A's round trip rides twice: up from floor 0, down from floor 4.
         assert_eq!(board.len(), 2);
         let first = dir.join("plan.xml");
@@ -302,22 +317,10 @@ mod tests {
         assert!(again.planned.xml.contains("<SubTree ID=\"InALobby\"/>"));
         // Still the round trip: the way back is in it, and its own car's step too.
         assert_eq!(again.planned.route.trip, skillfab_planner::Trip::RoundTrip);
-        assert_eq!(
-            again
-                .planned
-                .route
-                .believed()
-                .unwrap()
-                .iter()
-                .flatten()
-                .count(),
-            2
-        );
-        // On the way back, a car that does not come on floor 4: back to the lab from there.
         let believed = again.planned.route.believed().unwrap();
-        let down = (0..believed.len())
-            .rfind(|&i| believed[i].is_some())
-            .unwrap();
+        assert_eq!(boards(&believed).len(), 2);
+        // On the way back, a car that does not come on floor 4: back to the lab from there.
+        let down = boards(&believed)[1];
         let (shape, status) = failed_at(&r, &again.file, down);
         let back = r.after_failure(&shape, &status).unwrap();
         assert_eq!(
@@ -363,6 +366,49 @@ mod tests {
         assert!(!back.file.exists() && !again.file.exists() && first.exists());
         let mut last = replanner(&dir, true);
         assert_eq!(last.kept(&store).unwrap(), None);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Building E: 'the crossing: left' counted at a door before it, the robot went straight
+    /// on into the east arm and stopped at its end; the wait for 407's sign fails there.
+    #[test]
+    fn a_missed_turn_is_planned_on_from_the_dead_end_straight_on() {
+        let dir = std::env::temp_dir().join(format!("sf-replan-end-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut r = replanner_on(&dir, "heldout/building-e", 407, false);
+        let believed = r.route.believed().unwrap();
+        let office = (0..believed.len())
+            .rfind(|&i| believed[i].is_some())
+            .unwrap();
+        let (shape, status) = failed_at(&r, &dir.join("plan.xml"), office);
+        let again = r.after_failure(&shape, &status).unwrap();
+        let east = r
+            .map
+            .legs
+            .iter()
+            .position(|l| l.name == "the east arm")
+            .unwrap();
+        assert_eq!(
+            again.at,
+            Believed {
+                at: From::DeadEnd { leg: east },
+                back: false
+            }
+        );
+        assert_eq!(
+            again.at.to_string(),
+            format!("at the dead end of the map's leg {}", east + 1)
+        );
+        assert_eq!(
+            again.file,
+            dir.join(format!("plan.replanned-from-end-{}.xml", east + 1))
+        );
+        assert_eq!(r.believed_from_file(&again.file), Some(again.at));
+        assert!(again.planned.xml.contains("<SubTree ID=\"AtADeadEnd\"/>"));
+        assert_eq!(
+            again.planned.route.steps[0].to_string(),
+            "turned round at the end of 'the east arm'"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

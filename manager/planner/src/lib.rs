@@ -32,7 +32,7 @@ pub mod tree;
 pub use map::{LoadError, Map, MapError, Problem};
 pub use replan::Believed;
 pub use route::{
-    From, PlanError, Route, Step, Trip, plan, plan_back, plan_back_from_lobby, plan_round_trip,
+    From, PlanError, Route, Step, Trip, plan, plan_back, plan_back_from, plan_round_trip,
     plan_round_trip_from,
 };
 pub use tree::{Library, TreeError};

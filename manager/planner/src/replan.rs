@@ -3,9 +3,7 @@
 //! there ([`Route::replanned`]).
 
 use crate::map::Map;
-use crate::route::{
-    From, PlanError, Route, Trip, plan, plan_back_from_lobby, plan_round_trip_from,
-};
+use crate::route::{From, PlanError, Route, Trip, plan, plan_back_from, plan_round_trip_from};
 use std::fmt;
 
 /// Where the robot is believed to be when a step of a route failed, as the plan that goes on
@@ -20,7 +18,11 @@ pub struct Believed {
 
 impl fmt::Display for Believed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "in {}", self.at.place())?;
+        let on = match self.at {
+            From::DeadEnd { .. } => "at",
+            _ => "in",
+        };
+        write!(f, "{on} {}", self.at.place())?;
         if self.back {
             write!(f, ", on the way back")?;
         }
@@ -33,8 +35,8 @@ impl Route {
     /// the way back too if this route has it.
     pub fn replanned(&self, map: &Map, at: Believed) -> Result<Route, PlanError> {
         match (at.back, at.at, self.trip) {
-            (true, From::Lobby { floor }, _) => plan_back_from_lobby(map, self.room, floor),
             (true, From::Lab, _) => Err(PlanError::NotFrom("lab".into())),
+            (true, from, _) => plan_back_from(map, self.room, from),
             (false, from, Trip::RoundTrip) => plan_round_trip_from(map, Some(self.room), from),
             (false, from, _) => plan(map, Some(self.room), from),
         }

@@ -32,6 +32,15 @@ pub enum Step {
         name: String,
         /// What to do there.
         turn: Turn,
+        /// The leg straight on, when it ends in a dead end (by its index in [`Map::legs`]):
+        /// where a robot that missed this turn, or took it at a door before, stops.
+        overshoot: Option<usize>,
+    },
+    /// Turned round at a leg's dead end (where a missed turn left the robot), square to the
+    /// corridor: the leg is then travelled back.
+    TurnRound {
+        /// The leg.
+        leg: String,
     },
     /// Into a floor's lobby: straight in with the bank wall ahead, or turning to face it where
     /// the corridor opens into the lobby's side (counted as a junction).
@@ -92,7 +101,8 @@ impl fmt::Display for Step {
             Step::LeaveTheLab => write!(f, "out through the lab's door"),
             Step::IntoTheCorridor { turn } => write!(f, "{turn} into the corridor"),
             Step::Along { leg, heading } => write!(f, "along '{leg}' ({heading})"),
-            Step::Junction { name, turn } => write!(f, "at '{name}': {turn}"),
+            Step::Junction { name, turn, .. } => write!(f, "at '{name}': {turn}"),
+            Step::TurnRound { leg } => write!(f, "turned round at the end of '{leg}'"),
             Step::IntoTheLobby { floor, turn } => match turn {
                 Turn::Straight => write!(f, "into the lobby of floor {floor}, the bank wall ahead"),
                 t => write!(
@@ -199,17 +209,27 @@ pub enum From {
         /// The floor.
         floor: i32,
     },
+    /// A leg's dead end, the robot stopped facing it (where a missed turn left it): the
+    /// route turns round and goes back along the leg. Written `end:N`, N the leg's place
+    /// among the map's `[[leg]]`s, from 1.
+    DeadEnd {
+        /// The leg, by its index in [`Map::legs`].
+        leg: usize,
+    },
 }
 
 impl std::str::FromStr for From {
     type Err = PlanError;
-    /// `lab`, or `lobby:F` (floor F's lobby).
+    /// `lab`, `lobby:F` (floor F's lobby) or `end:N` (the dead end of the map's N-th leg).
     fn from_str(s: &str) -> Result<From, PlanError> {
         if s == "lab" {
             return Ok(From::Lab);
         }
-        match s.strip_prefix("lobby:").map(str::parse) {
-            Some(Ok(floor)) => Ok(From::Lobby { floor }),
+        if let Some(Ok(floor)) = s.strip_prefix("lobby:").map(str::parse) {
+            return Ok(From::Lobby { floor });
+        }
+        match s.strip_prefix("end:").map(str::parse::<usize>) {
+            Some(Ok(n)) if n >= 1 => Ok(From::DeadEnd { leg: n - 1 }),
             _ => Err(PlanError::NotFrom(s.to_string())),
         }
     }
@@ -221,6 +241,7 @@ impl From {
         match self {
             From::Lab => "the lab".to_string(),
             From::Lobby { floor } => format!("the lobby of floor {floor}"),
+            From::DeadEnd { leg } => format!("the dead end of the map's leg {}", leg + 1),
         }
     }
 }
@@ -231,6 +252,7 @@ impl fmt::Display for From {
         match self {
             From::Lab => write!(f, "lab"),
             From::Lobby { floor } => write!(f, "lobby:{floor}"),
+            From::DeadEnd { leg } => write!(f, "end:{}", leg + 1),
         }
     }
 }
@@ -254,7 +276,7 @@ pub enum PlanError {
     NoDestination(String),
     /// A start the planner does not plan from.
     #[error(
-        "--from {0}: a route starts at the lab, at a floor's lobby (`lobby:F`) or, back to the lab, at a room (its number)"
+        "--from {0}: a route starts at the lab, at a floor's lobby (`lobby:F`), at a leg's dead end (`end:N`, the map's N-th leg) or, back to the lab, at a room (its number)"
     )]
     NotFrom(String),
     /// A lobby the map does not have.
@@ -264,6 +286,18 @@ pub enum PlanError {
         building: String,
         /// The floor.
         floor: i32,
+    },
+    /// A dead end to start from that the map does not have.
+    #[error("--from end:{n}: the map of {building} has {legs} legs{what}")]
+    NoDeadEnd {
+        /// The building.
+        building: String,
+        /// The leg asked for (from 1).
+        n: usize,
+        /// The legs it has.
+        legs: usize,
+        /// What that leg is, when it is one.
+        what: String,
     },
     /// The way back from a door at a corridor's end: the robot would have to turn round.
     #[error(
@@ -396,6 +430,7 @@ fn search(map: &Map, starts: Vec<Start>, goal: &Goal<'_>) -> Option<Vec<Step>> {
                     Step::Junction {
                         name: junction.name.clone(),
                         turn,
+                        overshoot: straight_on_to_a_dead_end(map, pos, *j),
                     },
                     next.along(map),
                 ];
@@ -411,6 +446,18 @@ fn search(map: &Map, starts: Vec<Start>, goal: &Goal<'_>) -> Option<Vec<Step>> {
         }
     }
     None
+}
+
+/// The leg straight on at junction `j` arriving on `pos`, when it ends in a dead end.
+fn straight_on_to_a_dead_end(map: &Map, pos: Pos, j: usize) -> Option<usize> {
+    let heading = pos.heading(map);
+    map.junctions[j]
+        .arms
+        .iter()
+        .filter(|&&(leg, leaves)| leg != pos.leg && heading.turn_to(leaves) == Some(Turn::Straight))
+        .map(|&(leg, _)| Pos::leaving(map, leg, &End::Junction(j)))
+        .find(|next| *next.ahead(map) == End::DeadEnd)
+        .map(|next| next.leg)
 }
 
 /// The steps from a start to node `n`.
@@ -501,6 +548,10 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
             )?
         }
         From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
+        From::DeadEnd { leg } => {
+            let (start, leg_floor) = from_a_dead_end(map, leg)?;
+            between_floors(map, (&from.place(), vec![start], leg_floor), to)?
+        }
     };
     Ok(Route {
         building: map.building.clone(),
@@ -515,17 +566,19 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
 /// The route back to the lab from `room`'s door (default: the map's office), the robot
 /// standing at it facing it, as a route to the room leaves it.
 pub fn plan_back(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
-    back_to_the_lab(map, room, None)
+    back_to_the_lab(map, room, From::Lab)
 }
 
-/// The route back to the lab from floor `lobby`'s lobby, `room` being the room the message
-/// was for (where a car that did not come on the way back left the robot).
-pub fn plan_back_from_lobby(map: &Map, room: u32, lobby: i32) -> Result<Route, PlanError> {
-    back_to_the_lab(map, Some(room), Some(lobby))
+/// The route back to the lab from `from` (a floor's lobby, where a car that did not come on
+/// the way back left the robot, or a leg's dead end), `room` being the room the message was
+/// for. `From::Lab` is the room's door, as [`plan_back`].
+pub fn plan_back_from(map: &Map, room: u32, from: From) -> Result<Route, PlanError> {
+    back_to_the_lab(map, Some(room), from)
 }
 
-/// The way back to the lab from `room`'s door, or from floor `lobby`'s lobby.
-fn back_to_the_lab(map: &Map, room: Option<u32>, lobby: Option<i32>) -> Result<Route, PlanError> {
+/// The way back to the lab from `room`'s door (`from` [`From::Lab`]), from a floor's lobby or
+/// from a leg's dead end.
+fn back_to_the_lab(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
     let (room, room_leg, room_at) = the_room(map, room)?;
     let floor = map.legs[room_leg].floor;
     let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
@@ -534,8 +587,8 @@ fn back_to_the_lab(map: &Map, room: Option<u32>, lobby: Option<i32>) -> Result<R
             .map(|(side, doors_before)| (0u32, vec![Step::AtTheLab { side, doors_before }]))
     };
     let to = ("the lab".to_string(), &to_lab as &Goal<'_>, lab_floor);
-    let steps = match lobby {
-        None => between_floors(
+    let steps = match from {
+        From::Lab => between_floors(
             map,
             (
                 &format!("room {room}"),
@@ -544,14 +597,18 @@ fn back_to_the_lab(map: &Map, room: Option<u32>, lobby: Option<i32>) -> Result<R
             ),
             to,
         )?,
-        Some(lobby) => from_the_lobby(map, lobby, to)?,
+        From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
+        From::DeadEnd { leg } => {
+            let (start, leg_floor) = from_a_dead_end(map, leg)?;
+            between_floors(map, (&from.place(), vec![start], leg_floor), to)?
+        }
     };
     Ok(Route {
         building: map.building.clone(),
         room,
         floor,
         trip: Trip::BackToTheLab,
-        from: lobby.map_or(From::Lab, |floor| From::Lobby { floor }),
+        from,
         steps,
     })
 }
@@ -655,6 +712,38 @@ fn from_the_lobby(
         })?,
     );
     Ok(steps)
+}
+
+/// From leg `leg`'s dead end, the robot facing it: turned round, back along the leg (the
+/// leg's `to` end when both ends are dead). With the leg's floor.
+fn from_a_dead_end(map: &Map, leg: usize) -> Result<(Start, i32), PlanError> {
+    let no = |what: String| PlanError::NoDeadEnd {
+        building: map.building.clone(),
+        n: leg + 1,
+        legs: map.legs.len(),
+        what,
+    };
+    let l = map.legs.get(leg).ok_or_else(|| no(String::new()))?;
+    let forward = match (&l.from, &l.to) {
+        (_, End::DeadEnd) => false,
+        (End::DeadEnd, _) => true,
+        _ => return Err(no(format!(": '{}' has no dead end", l.name))),
+    };
+    let pos = Pos { leg, forward };
+    Ok((
+        Start {
+            pos,
+            cost: 0,
+            steps: vec![
+                Step::TurnRound {
+                    leg: l.name.clone(),
+                },
+                pos.along(map),
+            ],
+            door: None,
+        },
+        l.floor,
+    ))
 }
 
 /// The ways out of `floor`'s lobby, the robot in it (out of a car, or where it waited for

@@ -140,6 +140,8 @@ enum X {
         value: String,
         children: Vec<X>,
     },
+    /// A wait that fails when the robot stops at a dead end (`NotAtADeadEnd` beside it).
+    UnlessAtADeadEnd(Box<X>),
 }
 
 /// Writes the steps, keeping what the plan has set so far.
@@ -163,6 +165,11 @@ struct Writer {
     /// The step being written, and the step each node of `out` was written for.
     step: usize,
     step_of: Vec<usize>,
+    /// Where a missed turn at the last junction leaves the robot (the leg straight on, a
+    /// dead end), until the next junction: the waits up to there fail when it stops there.
+    dead_end: Option<usize>,
+    /// On the way back to the lab (the message said).
+    back: bool,
 }
 
 impl Writer {
@@ -196,6 +203,21 @@ impl Writer {
         s
     }
 
+    /// A wait a missed turn could leave waiting at a dead end: failing there, with the dead
+    /// end believed, when the last junction says where it is (and not inside a group).
+    fn wait(&mut self, x: X) {
+        match self.dead_end {
+            Some(leg) if self.group.is_none() => {
+                self.push(X::UnlessAtADeadEnd(Box::new(x)));
+                let at = From::DeadEnd { leg };
+                let back = self.back;
+                self.believed
+                    .push((self.out.len() - 1, Believed { at, back }));
+            }
+            _ => self.push(x),
+        }
+    }
+
     /// A junction (or a lobby's side) where the robot does `turn`: counted.
     fn junction(&mut self, name: &str, turn: Turn) {
         self.set_turn(turn);
@@ -204,7 +226,7 @@ impl Writer {
             (self.active, self.count) = (true, 0);
         }
         self.count += 1;
-        self.push(X::WaitFor {
+        self.wait(X::WaitFor {
             name: format!("{name}: {turn}"),
             condition: format!("intersection.junction.count >= {}", self.count),
         });
@@ -311,12 +333,13 @@ impl Route {
             believed: Vec::new(),
             step: 0,
             step_of: Vec::new(),
+            dead_end: None,
+            back: self.trip == Trip::BackToTheLab,
         };
         // From a lobby, whatever ran before: the corridor skills off, `avoid` on.
         if let From::Lobby { .. } = self.from {
             w.push(X::SubTree("InALobby"));
         }
-        let mut back = self.trip == Trip::BackToTheLab;
         for (i, step) in self.steps.iter().enumerate() {
             w.step = i;
             // Junctions still to count on this floor after this step, on this way.
@@ -349,7 +372,26 @@ impl Route {
                     (w.active, w.turn, w.count) = (true, Some(Turn::Straight), 0);
                 }
                 Step::Along { .. } => {}
-                Step::Junction { name, turn } => w.junction(name, *turn),
+                Step::Junction {
+                    name,
+                    turn,
+                    overshoot,
+                } => {
+                    // Missed here (not counted, or counted at a door before), the robot goes
+                    // straight on: to a dead end, or somewhere the route cannot say.
+                    w.dead_end = (*turn != Turn::Straight).then_some(*overshoot).flatten();
+                    w.junction(name, *turn);
+                }
+                // Stopped facing the dead end: turned round along the corridor on the spot,
+                // square to it; the corridor skills start, hall_follow straight on, and
+                // junctions are counted from 0 once the robot is between the walls.
+                Step::TurnRound { .. } => {
+                    w.push(X::SubTree("AtADeadEnd"));
+                    (w.active, w.turn, w.count) = (true, Some(Turn::Straight), 0);
+                    if Some(w.floor) == w.sign_floor {
+                        w.push(X::Activate(vec!["sign_read"]));
+                    }
+                }
                 Step::IntoTheLobby { turn, .. } => {
                     if *turn != Turn::Straight {
                         w.junction("the lobby", *turn);
@@ -360,7 +402,7 @@ impl Route {
                     }
                     w.set_turn(Turn::Straight);
                     w.push(X::SubTree("IntoTheLobby"));
-                    w.active = false;
+                    (w.active, w.dead_end) = (false, None);
                 }
                 Step::Ride { from, to } => {
                     if !(0..=9).contains(to) {
@@ -374,6 +416,7 @@ impl Route {
                     // the robot is still in this floor's lobby.
                     w.push(X::SubTree("BoardACar"));
                     let at = From::Lobby { floor: *from };
+                    let back = w.back;
                     w.believed.push((w.out.len() - 1, Believed { at, back }));
                     w.push(X::SetParam {
                         skill: "barcode_track",
@@ -433,15 +476,18 @@ impl Route {
                     }
                     // `door_detect` says left when both sides open at once: a door on the
                     // right with one facing it is waited for on either side.
-                    w.push(X::SubTree(match (side, faced) {
-                        (Some(Side::Left), _) => "ToTheOfficeOnTheLeft",
-                        (Some(Side::Right), false) => "ToTheOfficeOnTheRight",
-                        (Some(Side::Right), true) => "ToTheOfficeOnTheRightFacingADoor",
-                        (None, _) => "ToTheOfficeAhead",
-                    }));
+                    // (At the corridor's end the room's door is where hall_follow stops.)
+                    match (side, faced) {
+                        (Some(Side::Left), _) => w.wait(X::SubTree("ToTheOfficeOnTheLeft")),
+                        (Some(Side::Right), false) => w.wait(X::SubTree("ToTheOfficeOnTheRight")),
+                        (Some(Side::Right), true) => {
+                            w.wait(X::SubTree("ToTheOfficeOnTheRightFacingADoor"));
+                        }
+                        (None, _) => w.push(X::SubTree("ToTheOfficeAhead")),
+                    }
                     w.push(X::SubTree("DeliverTheMessage"));
                     w.sign_floor = None;
-                    back = true;
+                    (w.back, w.dead_end) = (true, None);
                 }
                 Step::AtTheLab { side, doors_before } => {
                     w.set_turn(Turn::Straight);
@@ -454,7 +500,7 @@ impl Route {
                                 Side::Left => "left",
                                 Side::Right => "right",
                             };
-                            w.push(X::WaitFor {
+                            w.wait(X::WaitFor {
                                 name: format!("past the lab's door on the {s}"),
                                 condition: format!(
                                     "door_detect.doors.{field} >= {}",
@@ -480,6 +526,10 @@ fn subtrees(nodes: &[X], out: &mut BTreeSet<&'static str>) {
                 out.insert(id);
             }
             X::WithParam { children, .. } => subtrees(children, out),
+            X::UnlessAtADeadEnd(x) => {
+                out.insert("NotAtADeadEnd");
+                subtrees(std::slice::from_ref(x), out);
+            }
             _ => {}
         }
     }
@@ -528,6 +578,15 @@ fn write_node(xml: &mut String, x: &X, depth: usize) {
                 write_node(xml, c, depth + 2);
             }
             writeln!(xml, "{pad}  </Sequence>\n{pad}</WithParam>")
+        }
+        X::UnlessAtADeadEnd(x) => {
+            let _ = writeln!(
+                xml,
+                "{pad}<Parallel name=\"unless stopped at a dead end\" success_count=\"1\" failure_count=\"1\">"
+            );
+            write_node(xml, x, depth + 1);
+            let _ = writeln!(xml, "{pad}  <SubTree ID=\"NotAtADeadEnd\"/>");
+            writeln!(xml, "{pad}</Parallel>")
         }
     };
 }

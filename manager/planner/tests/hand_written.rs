@@ -3,8 +3,9 @@
 //! `skills/plans/deliver.xml` as it was): both read as the sequencer reads them and expanded
 //! — sub-trees inlined, a `Sequence` inside a `Sequence` flattened (the same run: a sequence
 //! goes on into its next child in the same tick, and both start over from the first after a
-//! failure), `Log` lines and node names dropped (they only write the step log) — and
-//! compared node for node. Equal expansions give identical lock-step runs.
+//! failure), `Log` lines and node names dropped (they only write the step log), a wait
+//! guarded against a dead end taken as the wait — and compared node for node. Equal
+//! expansions give identical lock-step runs (up to where a guard fires).
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -22,6 +23,12 @@ fn expand(plan: &Plan, spec: &Spec, depth: usize, in_sequence: bool, out: &mut V
     match &spec.kind {
         Kind::SubTree(id) => expand(plan, &plan.trees[id], depth, in_sequence, out),
         Kind::Log(_) => {}
+        // A wait the planner guards against a dead end (a missed turn): the same run until
+        // the guard fires, where the hand-written tree waited until the run's limit.
+        Kind::Parallel { children, .. } if matches!(children.get(1).map(|c| &c.kind), Some(Kind::SubTree(id)) if id == "NotAtADeadEnd") =>
+        {
+            expand(plan, &children[0], depth, in_sequence, out);
+        }
         Kind::Sequence(children) if in_sequence => {
             for c in children {
                 expand(plan, c, depth, true, out);

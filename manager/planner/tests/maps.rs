@@ -6,7 +6,7 @@
 use skillfab_planner::map::{Heading, Side, Turn};
 use skillfab_planner::{
     Believed, From, Library, Map, PlanError, Step, Trip, map_beside, plan, plan_back,
-    plan_back_from_lobby, plan_round_trip, plan_round_trip_from,
+    plan_back_from, plan_round_trip, plan_round_trip_from,
 };
 use std::path::Path;
 
@@ -271,7 +271,7 @@ fn junctions(steps: &[Step]) -> Vec<(String, Turn)> {
     steps
         .iter()
         .filter_map(|s| match s {
-            Step::Junction { name, turn } => Some((name.clone(), *turn)),
+            Step::Junction { name, turn, .. } => Some((name.clone(), *turn)),
             _ => None,
         })
         .collect()
@@ -654,7 +654,7 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
         .iter()
         .position(|s| matches!(s, Step::Ride { .. }))
         .unwrap();
-    let home = plan_back_from_lobby(&map, 105, 1).unwrap();
+    let home = plan_back_from(&map, 105, From::Lobby { floor: 1 }).unwrap();
     assert_eq!(home.trip, Trip::BackToTheLab);
     assert_eq!(home.steps, back.steps[back_ride..]);
     // Where each node leaves the robot if it fails: only the boardings say.
@@ -693,4 +693,109 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
     assert_eq!("lobby:3".parse(), Ok(From::Lobby { floor: 3 }));
     assert_eq!("lab".parse(), Ok(From::Lab));
     assert!("lobby".parse::<From>().is_err());
+}
+
+/// A missed turn: where the leg straight on ends in a dead end, the waits from that junction
+/// to the next are guarded by `NotAtADeadEnd` and say the robot is at that dead end when they
+/// fail (building E: at 'the crossing' a turn left, straight on 'the east arm', a dead end;
+/// 407's door counted as the crossing once). From a dead end the route turns round and goes
+/// back along the leg.
+#[test]
+fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let building = root.join("devices/denning-sim/buildings/heldout/building-e.toml");
+    let map = Map::load(&map_beside(&building)).unwrap();
+    let leg = |name: &str| map.legs.iter().position(|l| l.name == name).unwrap();
+    let (south, east) = (leg("the dead end south"), leg("the east arm"));
+    let route = plan(&map, None, From::Lab).unwrap();
+    let at = |leg| Believed {
+        at: From::DeadEnd { leg },
+        back: false,
+    };
+    let said: Vec<Believed> = route.believed().unwrap().into_iter().flatten().collect();
+    assert_eq!(
+        said,
+        [
+            // 'the first intersection': right, or straight on to the dead end south.
+            at(south),
+            Believed {
+                at: From::Lobby { floor: 0 },
+                back: false
+            },
+            // 'the crossing': left, then 407's door on the left.
+            at(east),
+            at(east),
+        ]
+    );
+    let again = route.replanned(&map, at(east)).unwrap();
+    assert_eq!(
+        again,
+        plan(&map, None, From::DeadEnd { leg: east }).unwrap()
+    );
+    assert_eq!(
+        again.steps,
+        [
+            Step::TurnRound {
+                leg: "the east arm".into()
+            },
+            Step::Along {
+                leg: "the east arm".into(),
+                heading: Heading::West
+            },
+            Step::Junction {
+                name: "the crossing".into(),
+                turn: Turn::Right,
+                overshoot: None,
+            },
+            Step::Along {
+                leg: "the north arm".into(),
+                heading: Heading::North
+            },
+            Step::AtTheRoom {
+                room: 407,
+                side: Some(Side::Left),
+                faced: false
+            },
+        ]
+    );
+    // From floor 0's dead end: back to the junction, left there, and on as from the lab.
+    let south_again = plan(&map, None, From::DeadEnd { leg: south }).unwrap();
+    let ride = |r: &skillfab_planner::Route| {
+        r.steps
+            .iter()
+            .position(|s| matches!(s, Step::Ride { .. }))
+            .unwrap()
+    };
+    assert_eq!(
+        south_again.steps[ride(&south_again)..],
+        route.steps[ride(&route)..]
+    );
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    let xml = again.plan_xml(&library, "building-e").unwrap();
+    assert!(
+        xml.contains(
+            "<Sequence>\n      <SubTree ID=\"AtADeadEnd\"/>\n      <Activate skills=\"sign_read\"/>"
+        ),
+        "{xml}"
+    );
+    let planned = route.plan_xml(&library, "building-e").unwrap();
+    assert!(planned.contains(
+        "<Parallel name=\"unless stopped at a dead end\" success_count=\"1\" failure_count=\"1\">\n        <WaitFor name=\"the crossing: left\""
+    ));
+    // The text form, and the legs with no dead end.
+    assert_eq!(
+        format!("end:{}", east + 1).parse(),
+        Ok(From::DeadEnd { leg: east })
+    );
+    assert!("end:0".parse::<From>().is_err());
+    let corridor = leg("to the crossing");
+    assert!(matches!(
+        plan(&map, None, From::DeadEnd { leg: corridor }),
+        Err(PlanError::NoDeadEnd { what, .. }) if what.contains("'to the crossing' has no dead end")
+    ));
+    assert!(matches!(
+        plan(&map, None, From::DeadEnd { leg: 99 }),
+        Err(PlanError::NoDeadEnd { n: 100, .. })
+    ));
 }

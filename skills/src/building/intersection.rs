@@ -21,7 +21,7 @@ pub struct IntersectionParams {
     /// there would count again when the turn is over.
     #[param(default = 0.3, min = 0.0, max = 5.0)]
     pub leave: f64,
-    /// Once the robot has been between walls, a side opens an intersection only after it has
+    /// Once the robot has had a wall beside, a side opens an intersection only after it has
     /// been open over this much travel (m), or with a wall across the way (the sonar straight
     /// ahead within `open`: a T's bar): a 1 m door beside a robot 0.2 to 0.4 m off the
     /// centre line toward it opens all three cones of that side for 0.03 to 0.25 m of
@@ -52,7 +52,7 @@ pub struct JunctionOut<'a> {
 /// arc. Ahead is open when the sonars within ±20° (cones over ±30°) read farther than `open`.
 ///
 /// `inside` turns true when a side has been open for `hold` cycles (and, once the robot has
-/// been between walls since activation, over `width` metres of travel or with a wall across
+/// had a wall beside since activation, over `width` metres of travel or with a wall across
 /// the way: a door beside is not a junction), and false only when both
 /// sides are closed along their whole arcs (60°..120°, −120°..−60°: walls beside again) for
 /// `hold` cycles and over `leave` metres of travel: turning on the spot in a crossing, the
@@ -72,7 +72,8 @@ pub struct Intersection {
     differs: u64,
     /// Where the raw reading began to disagree with `inside` (odometry).
     since: Option<(f64, f64)>,
-    /// Walls on both sides seen since activation (from then on a side must open over `width`).
+    /// A wall beside seen since activation (from then on a side must open over `width`):
+    /// activated in the open (a lobby, a doorway's exit) an open side counts at once.
     #[serde(default)]
     walled_once: bool,
 }
@@ -102,8 +103,9 @@ impl Skill for Intersection {
         let left = open(arc(s, 60.0 + 15.0, 120.0 - 15.0));
         let right = open(arc(s, -120.0 + 15.0, -60.0 - 15.0));
         let ahead = open(arc(s, -20.0, 20.0));
-        let walled = closed(arc(s, 60.0, 120.0)) && closed(arc(s, -120.0, -60.0));
-        self.walled_once |= walled;
+        let (wall_left, wall_right) = (closed(arc(s, 60.0, 120.0)), closed(arc(s, -120.0, -60.0)));
+        let walled = wall_left && wall_right;
+        self.walled_once |= wall_left || wall_right;
         let wall_across = at(s, 0.0).is_some_and(|r| r <= p.open);
         let raw = if self.inside { !walled } else { left || right };
         if raw == self.inside {

@@ -134,16 +134,20 @@ fn a_door_beside_a_robot_off_the_centre_line_is_not_a_junction() {
     // 19 went past room 401's door 0.19 m toward it, and the door counted as the crossing),
     // and 0.3 m away from it: the door opens all three cones of its side for up to 0.25 m of
     // travel from 0.2 m off on, the side corridor for 0.45 to 0.55 m from everywhere here.
+    // Started at the door's near edge too (seed 13: the count started again there).
     let walls = corridor(20.0, &[(5.0, 6.0, false), (10.0, 12.4, true)], &[]);
-    for (off, seed) in [
-        (-0.3, 1),
-        (0.1, 2),
-        (0.19, 3),
-        (0.25, 4),
-        (0.3, 5),
-        (0.4, 6),
-    ] {
-        let mut r = Robot::new(&world([1.5, off, 0.0], &walls, ""), seed);
+    for (start, off, seed) in [(5.0, 0.18, 7), (5.3, 0.25, 8)].into_iter().chain(
+        [
+            (-0.3, 1),
+            (0.1, 2),
+            (0.19, 3),
+            (0.25, 4),
+            (0.3, 5),
+            (0.4, 6),
+        ]
+        .map(|(off, seed)| (1.5, off, seed)),
+    ) {
+        let mut r = Robot::new(&world([start, off, 0.0], &walls, ""), seed);
         let mut h = Harness::<Intersection>::new();
         let mut counted_at = Vec::new();
         let mut j = Junction::default();
@@ -162,7 +166,7 @@ fn a_door_beside_a_robot_off_the_centre_line_is_not_a_junction() {
         assert_eq!(
             counted_at.len(),
             1,
-            "{off} m off the centre line: one junction, the side corridor: counted at {counted_at:?}"
+            "{off} m off the centre line from {start}: one junction, the side corridor: counted at {counted_at:?}"
         );
         assert!(
             (10.0..12.4).contains(&counted_at[0]),

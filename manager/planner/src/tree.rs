@@ -401,7 +401,7 @@ impl Route {
                         w.active = true;
                     }
                     w.set_turn(Turn::Straight);
-                    w.push(X::SubTree("IntoTheLobby"));
+                    w.wait(X::SubTree("IntoTheLobby"));
                     (w.active, w.dead_end) = (false, None);
                 }
                 Step::Ride { from, to } => {

@@ -716,7 +716,9 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
     assert_eq!(
         said,
         [
-            // 'the first intersection': right, or straight on to the dead end south.
+            // 'the first intersection': right, or straight on to the dead end south; then
+            // the lobby's call button in view.
+            at(south),
             at(south),
             Believed {
                 at: From::Lobby { floor: 0 },

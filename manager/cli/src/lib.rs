@@ -195,8 +195,8 @@ enum Cmd {
         wait_timeout_s: f64,
         /// The plan is the planner's route on this map (`skillfab plan --map MAP [--to ROOM]
         /// [--and-back]`): when a step fails where the route says the robot still is
-        /// (a car that does not come: its floor's lobby), plan again from there and run that
-        /// plan (docs/maps.md, "Planning again").
+        /// (a car that does not come: its floor's lobby; a missed turn: the dead end straight
+        /// on), plan again from there and run that plan (docs/maps.md, "Planning again").
         #[arg(long, value_name = "FILE.map.toml", conflicts_with_all = ["tree", "check"])]
         replan: Option<PathBuf>,
         /// With --replan: the route's room (default: the map's office).
@@ -228,9 +228,10 @@ enum Cmd {
         /// Where the route goes: a room (default: the map's office), or `lab` from a room.
         #[arg(long, value_name = "ROOM|lab")]
         to: Option<plan::Place>,
-        /// Where the route starts: `lab`, or a room (its number) with `--to lab`: the way
-        /// back, from the room's door where the message was said.
-        #[arg(long, value_name = "lab|ROOM", default_value = "lab")]
+        /// Where the route starts: `lab`; a room (its number) with `--to lab`: the way
+        /// back, from the room's door where the message was said; to a room, `lobby:F` (floor
+        /// F's lobby) or `end:N` (the dead end of the map's N-th leg, the robot facing it).
+        #[arg(long, value_name = "lab|ROOM|lobby:F|end:N", default_value = "lab")]
         from: plan::Place,
         /// To the room and back to the lab: one tree with both ways.
         #[arg(long)]

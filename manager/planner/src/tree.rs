@@ -23,6 +23,14 @@
 //!   the corridor's walls; at the lab's leg, doors counted again from the corridor
 //!   (`DoorsCountedFromHere`) and `door_detect.doors.<side>` waited for to pass the lab's
 //!   door, then `AtTheLabsDoor`; a lab's door at the corridor's end is `ToTheLabAhead`.
+//! - A missed turn: after a junction where the route turns and the leg straight on ends in
+//!   a dead end, the waits up to the next junction (the lobby's call button, the room's
+//!   door, the lab's door count) and the junction's own count are each in a `Parallel`
+//!   beside `NotAtADeadEnd` — a junction's own count only when the junction before says no
+//!   dead end (else the robot could be at either) —; the route says
+//!   the robot is at that dead end when one fails ([`Route::believed`]). From a dead end
+//!   (`From::DeadEnd`) the route starts with `AtADeadEnd`: turned round, the corridor
+//!   skills straight on.
 
 use crate::map::{Side, Turn};
 use crate::replan::Believed;
@@ -379,8 +387,17 @@ impl Route {
                 } => {
                     // Missed here (not counted, or counted at a door before), the robot goes
                     // straight on: to a dead end, or somewhere the route cannot say.
-                    w.dead_end = (*turn != Turn::Straight).then_some(*overshoot).flatten();
+                    let own = (*turn != Turn::Straight).then_some(*overshoot).flatten();
+                    // Its own count, failing at a dead end: this junction missed, or the one
+                    // before counted early and missed. Guarded only when both say the same
+                    // place (or the one before says none).
+                    w.dead_end = match w.dead_end {
+                        None => own,
+                        before if before == own => own,
+                        _ => None,
+                    };
                     w.junction(name, *turn);
+                    w.dead_end = own;
                 }
                 // Stopped facing the dead end: turned round along the corridor on the spot,
                 // square to it; the corridor skills start, hall_follow straight on, and

@@ -801,3 +801,74 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
         Err(PlanError::NoDeadEnd { n: 100, .. })
     ));
 }
+
+/// Two turns in a row, each with a dead end straight on: failing at a dead end while the
+/// second junction's count is awaited, the robot may have missed either turn (the first
+/// counted early at a door, or the second missed), so that wait is not guarded; the waits
+/// after the second junction say its dead end.
+#[test]
+fn a_junctions_count_after_another_dead_end_is_not_guarded() {
+    let text = SMALL.replacen(
+        r#"[[leg]]
+name = "west arm"
+floor = 1
+from = "the crossing"
+to = "end"
+heading = "west"
+"#,
+        r#"[[leg]]
+name = "west arm"
+floor = 1
+from = "the crossing"
+to = "the corner"
+heading = "west"
+
+[[junction]]
+name = "the corner"
+floor = 1
+arriving = "west arm"
+straight = "far west"
+left = "south lane"
+
+[[leg]]
+name = "far west"
+floor = 1
+from = "the corner"
+to = "end"
+heading = "west"
+
+[[leg]]
+name = "south lane"
+floor = 1
+from = "the corner"
+to = "end"
+heading = "south"
+left = [107]
+"#,
+        1,
+    );
+    assert_ne!(text, SMALL);
+    let map = Map::parse(&text, "small.map.toml").unwrap();
+    let leg = |name: &str| map.legs.iter().position(|l| l.name == name).unwrap();
+    let route = plan(&map, Some(107), From::Lab).unwrap();
+    // The nodes that say a place, with their route step: the boarding's lobby left out.
+    let guarded: Vec<(String, Believed)> = route
+        .node_steps()
+        .unwrap()
+        .into_iter()
+        .zip(route.believed().unwrap())
+        .filter_map(|(step, b)| Some((route.steps[step].to_string(), b?)))
+        .filter(|(_, b)| matches!(b.at, From::DeadEnd { .. }))
+        .collect();
+    let at = |name| Believed {
+        at: From::DeadEnd { leg: leg(name) },
+        back: false,
+    };
+    assert_eq!(
+        guarded,
+        [
+            ("at 'the crossing': left".to_string(), at("on")),
+            ("room 107: its door on the left".to_string(), at("far west")),
+        ]
+    );
+}

@@ -548,10 +548,7 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
             )?
         }
         From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
-        From::DeadEnd { leg } => {
-            let (start, leg_floor) = from_a_dead_end(map, leg)?;
-            between_floors(map, (&from.place(), vec![start], leg_floor), to)?
-        }
+        From::DeadEnd { leg } => from_a_dead_end(map, leg, to)?,
     };
     Ok(Route {
         building: map.building.clone(),
@@ -598,10 +595,7 @@ fn back_to_the_lab(map: &Map, room: Option<u32>, from: From) -> Result<Route, Pl
             to,
         )?,
         From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
-        From::DeadEnd { leg } => {
-            let (start, leg_floor) = from_a_dead_end(map, leg)?;
-            between_floors(map, (&from.place(), vec![start], leg_floor), to)?
-        }
+        From::DeadEnd { leg } => from_a_dead_end(map, leg, to)?,
     };
     Ok(Route {
         building: map.building.clone(),
@@ -714,9 +708,14 @@ fn from_the_lobby(
     Ok(steps)
 }
 
-/// From leg `leg`'s dead end, the robot facing it: turned round, back along the leg (the
-/// leg's `to` end when both ends are dead). With the leg's floor.
-fn from_a_dead_end(map: &Map, leg: usize) -> Result<(Start, i32), PlanError> {
+/// The steps from leg `leg`'s dead end, the robot facing it, to where `goal` says the
+/// destination is: turned round, back along the leg (the leg's `to` end when both ends are
+/// dead), and on, through a car if the destination is on another floor.
+fn from_a_dead_end(
+    map: &Map,
+    leg: usize,
+    to: (String, &Goal<'_>, i32),
+) -> Result<Vec<Step>, PlanError> {
     let no = |what: String| PlanError::NoDeadEnd {
         building: map.building.clone(),
         n: leg + 1,
@@ -730,20 +729,19 @@ fn from_a_dead_end(map: &Map, leg: usize) -> Result<(Start, i32), PlanError> {
         _ => return Err(no(format!(": '{}' has no dead end", l.name))),
     };
     let pos = Pos { leg, forward };
-    Ok((
-        Start {
-            pos,
-            cost: 0,
-            steps: vec![
-                Step::TurnRound {
-                    leg: l.name.clone(),
-                },
-                pos.along(map),
-            ],
-            door: None,
-        },
-        l.floor,
-    ))
+    let start = Start {
+        pos,
+        cost: 0,
+        steps: vec![
+            Step::TurnRound {
+                leg: l.name.clone(),
+            },
+            pos.along(map),
+        ],
+        door: None,
+    };
+    let place = From::DeadEnd { leg }.place();
+    between_floors(map, (&place, vec![start], l.floor), to)
 }
 
 /// The ways out of `floor`'s lobby, the robot in it (out of a car, or where it waited for

@@ -79,3 +79,72 @@ fn go_through_reports_lining_up_passing_and_through() {
         "{p:?}"
     );
 }
+
+/// The search along the lab's wall (`SearchAlongTheWall` in skills/plans/deliver.xml):
+/// wall_follow with the wall on the left goes north past the lab's door, a 1.2 m gap with a
+/// corridor beyond, with avoid and door_locate beside it, as building E's lab (seed 18
+/// walked out through its door: the 60° cone looking through the gap read as heading away
+/// from the wall and turned the robot into it).
+#[test]
+fn wall_follow_passes_a_door_beside_it_and_door_locate_finds_the_door() {
+    use crate::nav::{Avoid, DoorIn, DoorLocate, DoorOut, WallFollow, WallFollowParams};
+    // The lab's west wall (x = 0) with its door (y 4.8-6.0), the corridor's far wall at
+    // x = -2.4, the barcode south of the door.
+    let walls = [
+        [0.0, -1.0, 0.0, 4.8],
+        [0.0, 6.0, 0.0, 12.0],
+        [-2.4, -1.0, -2.4, 12.0],
+        [0.0, -1.0, 6.0, -1.0],
+    ];
+    for (x, seed) in [(0.8, 1), (1.0, 2), (1.2, 3)] {
+        let mut r = Robot::new(
+            &world([x, 1.0, PI / 2.0], &walls, &barcode(7, 0.05, 4.2)),
+            seed,
+        );
+        let mut track = Harness::<BarcodeTrack>::new();
+        track.set(TrackParams::ID, 7).unwrap();
+        let mut follow = Harness::<WallFollow>::new();
+        follow.set(WallFollowParams::SIDE, -1).unwrap();
+        let mut avoid = Harness::<Avoid>::new();
+        let mut locate = Harness::<DoorLocate>::new();
+        let mut found = None;
+        for _ in 0..3000 {
+            let target = r.track(&mut track);
+            locate
+                .input(DoorIn::SONAR, r.sonar)
+                .input(DoorIn::ODOMETRY, r.odometry)
+                .input(DoorIn::TARGET, target);
+            let door = *locate.step().unwrap().output(DoorOut::DOOR).unwrap();
+            if door.found && found.is_none() {
+                found = Some((door, r.sim.pose));
+            }
+            follow.input("sonar", r.sonar);
+            let along = follow.step().unwrap().output::<Drive>("drive").copied();
+            avoid.input("sonar", r.sonar);
+            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+            r.drive(arbitrate(&[(8, away), (3, along)]));
+            // Beside the door: on along the wall, not drawn toward the gap (the code before
+            // turned 35° toward it and came to 0.54 m of the wall's line here).
+            let [px, py, th] = r.sim.pose;
+            if (4.0..6.5).contains(&py) {
+                assert!(
+                    px > 0.65 && th - PI / 2.0 < 0.45,
+                    "from x = {x}: drawn toward the door at {:?}",
+                    r.sim.pose
+                );
+            }
+        }
+        assert!(
+            r.sim.pose[1] > 7.0,
+            "from x = {x}: on past the door: {:?}",
+            r.sim.pose
+        );
+        let (door, at) = found.unwrap_or_else(|| panic!("from x = {x}: no door found"));
+        // The odometry frame starts at the start pose, heading as the world's.
+        let (dx, dy) = r.to_odom(0.0, 5.4);
+        assert!(
+            (door.x - dx).abs() < 0.4 && (door.y - dy).abs() < 0.4,
+            "from x = {x}: the door at ({dx:.2}, {dy:.2}), found at {door:?} from {at:?}"
+        );
+    }
+}

@@ -26,10 +26,11 @@ pub struct WallFollowParams {
 /// Hallway following: keeps `distance` from the wall on the right (or left). The sonars 60°
 /// and 120° off the heading on the wall's side give the heading relative to the wall (equal
 /// ranges: parallel); the nearest side reading gives the distance, corrected by approaching
-/// or leaving the wall at up to 30°; while the 60° or 120° cone looks through an opening, the
-/// heading is held (steered by the distance alone), so an open door beside does not draw the
-/// robot in. A wall ahead turns it away. Where the wall beside stops, it holds its heading for
-/// `gap` cycles (past an open door), then curves toward the side (around a corner).
+/// or leaving the wall at up to 30°. Beside a wall, while the 60° or 120° cone looks through
+/// an opening, the heading is held (steered by the distance alone): an open door ahead or
+/// behind does not draw the robot in. A wall ahead turns it away. Where the wall beside
+/// stops, it holds its heading for `gap` cycles (past an open door), then curves toward the
+/// side (around a corner).
 #[derive(Default, Serialize, Deserialize)]
 pub struct WallFollow {
     /// Cycles since the wall was last beside.
@@ -73,10 +74,11 @@ impl Skill for WallFollow {
             // No wall: curve toward the side.
             (p.speed, -0.3 / p.gain.max(0.1))
         } else {
-            // Heading toward the wall (positive) from the front/back imbalance. A cone that
-            // sees no wall within 2 m looks through an opening (a door beside, the wall's
-            // end ahead): it tells nothing of the heading, which is held.
-            let toward = if front.max(back) > 2.0 {
+            // Heading toward the wall (positive) from the front/back imbalance. Beside a
+            // wall (the 60° or 120° cone on it within 1.2 m), the other cone seeing no wall
+            // within 2 m looks through an opening (a door, the wall's end): it tells nothing
+            // of the heading, which is held.
+            let toward = if front.min(back) <= 1.2 && front.max(back) > 2.0 {
                 0.0
             } else {
                 ((1.0 - front / back) / 0.54).clamp(-0.6, 0.6)

@@ -3,6 +3,11 @@
 use super::*;
 use serde::{Deserialize, Serialize};
 
+/// A side cone reading farther than this sees no wall (m, from the ring).
+const NO_WALL: f64 = 2.0;
+/// A side cone reading this or nearer is on a wall the robot is beside (m, from the ring).
+const BESIDE: f64 = 1.2;
+
 /// Parameters of [`WallFollow`].
 #[derive(Params, Debug, Clone)]
 pub struct WallFollowParams {
@@ -63,22 +68,23 @@ impl Skill for WallFollow {
             .min(at(105.0))
             .min(at(120.0));
         let ahead = min_in(&i.sonar, -0.5, 0.5);
-        self.lost = if beside > 2.0 { self.lost + 1 } else { 0 };
+        let open = beside > NO_WALL;
+        self.lost = if open { self.lost + 1 } else { 0 };
         let (translate, turn_left) = if ahead < p.distance + 0.3 {
             // A wall ahead: turn away from the wall's side on the spot.
             (0.0, 1.0)
-        } else if beside > 2.0 && self.lost <= p.gap {
+        } else if open && self.lost <= p.gap {
             // A gap in the wall: straight on.
             (p.speed, 0.0)
-        } else if beside > 2.0 {
+        } else if open {
             // No wall: curve toward the side.
             (p.speed, -0.3 / p.gain.max(0.1))
         } else {
             // Heading toward the wall (positive) from the front/back imbalance. Beside a
-            // wall (the 60° or 120° cone on it within 1.2 m), the other cone seeing no wall
-            // within 2 m looks through an opening (a door, the wall's end): it tells nothing
-            // of the heading, which is held.
-            let toward = if front.min(back) <= 1.2 && front.max(back) > 2.0 {
+            // wall (the 60° or 120° cone on it), the other cone seeing no wall looks through
+            // an opening (a door, the wall's end): it tells nothing of the heading, which is
+            // held.
+            let toward = if front.min(back) <= BESIDE && front.max(back) > NO_WALL {
                 0.0
             } else {
                 ((1.0 - front / back) / 0.54).clamp(-0.6, 0.6)

@@ -91,7 +91,10 @@ const CENTRING_MAX: f64 = 0.3;
 /// a wall ahead at `middle`), a quarter turn on the spot (the axis ± 90°: the corridors are
 /// square to each other), then out on the new heading until walls are on both sides again.
 /// A wall ahead with a turn latched starts the turn at once; at a wall ahead with `turn` set
-/// while in an intersection whose entry it has missed, it turns too. Out on the new heading
+/// while in an intersection whose entry it has missed, it turns too. Stopped by a wall across
+/// the way with the turn's side never seen to open by its side sonar (out of a door askew
+/// toward that side, the sonar's cone reads the wall the door is in), another sonar on that
+/// side reading open is the way: on to the middle square to the wall ahead, and turn. Out on the new heading
 /// in a lobby, the corridor's mouth may be off the line it turned on: in open space the front
 /// cones steer it into a mouth ahead; stopped square to a wall across the way with a mouth
 /// opening in it to one side (that side's diagonal sonars read down it), it turns along the
@@ -188,6 +191,17 @@ fn mouth_beside(s: &Sonar, ahead: f64) -> f64 {
         (false, true) => -1.0,
         _ => 0.0,
     }
+}
+
+/// Whether a sonar on `side` (+1 left, −1 right), from 45° to 135° off the heading, reads
+/// farther than [`SIDE_WALL`]: a way that side, whatever the one at 90° reads.
+fn opens_beside(s: &Sonar, side: f64) -> bool {
+    let (from, to) = if side > 0.0 {
+        (45.0, 135.0)
+    } else {
+        (-135.0, -45.0)
+    };
+    arc(s, from, to).is_some_and(|(_, far)| far > SIDE_WALL)
 }
 
 /// How much farther than a flat wall a side's sonar must read for [`mouth_beside`] (m).
@@ -311,9 +325,22 @@ impl Skill for HallFollow {
                 let side = if turn > 0.0 { 0 } else { 1 };
                 // Open since before the robot saw a wall there (from a door, or at
                 // activation): counted from here.
-                let from = from
+                let mut from = from
                     .or(self.opened[side])
                     .or((!self.walled[side]).then_some(pos));
+                let mut axis = axis;
+                // Stopped by a wall across the way with that side never seen to open: come
+                // out of a door askew toward that side, its 90° sonar's cone reads the wall
+                // the door is in (and the axis held is the heading it came out on). Another
+                // sonar on that side reading open is a way there: counted from here, on
+                // square to the wall ahead, to turn in the corridor's middle.
+                if from.is_none() && ahead < p.stop && opens_beside(s, turn) {
+                    from = Some(pos);
+                    if let Some(w) = wall_toward(s, 0.0) {
+                        axis = wrap(od.theta + w.normal);
+                        self.axis = Some(axis);
+                    }
+                }
                 self.mode = Mode::Cross { turn, from };
                 let want = self.steer(axis, walls, p.centring);
                 match from {

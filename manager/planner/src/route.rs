@@ -92,6 +92,9 @@ pub enum Step {
         side: Option<Side>,
         /// Another door faces it across the corridor.
         faced: bool,
+        /// The leg's dead end beyond the door (by its index in [`Map::legs`]): where a robot
+        /// that did not find the door stops.
+        missed: Option<usize>,
     },
 }
 
@@ -141,7 +144,9 @@ impl fmt::Display for Step {
                 ),
                 None => write!(f, "the lab: its door ahead, at the corridor's end"),
             },
-            Step::AtTheRoom { room, side, faced } => match side {
+            Step::AtTheRoom {
+                room, side, faced, ..
+            } => match side {
                 Some(s) => write!(
                     f,
                     "room {room}: its door on the {s}{}",
@@ -534,7 +539,14 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
     let to_room = |pos: Pos, door: Option<CameOut>| {
         room_ahead(map, pos, room, door).map(|side| {
             let faced = map.legs[pos.leg].faced(room);
-            (0u32, vec![Step::AtTheRoom { room, side, faced }])
+            let missed = (side.is_some() && *pos.ahead(map) == End::DeadEnd).then_some(pos.leg);
+            let step = Step::AtTheRoom {
+                room,
+                side,
+                faced,
+                missed,
+            };
+            (0u32, vec![step])
         })
     };
     let to = (format!("room {room}"), &to_room as &Goal<'_>, floor);

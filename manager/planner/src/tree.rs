@@ -31,6 +31,9 @@
 //!   the robot is at that dead end when one fails ([`Route::believed`]). From a dead end
 //!   (`From::DeadEnd`) the route starts with `AtADeadEnd`: turned round, the corridor
 //!   skills straight on.
+//! - A room's door not found: where the room's leg ends in a dead end past its door, the wait
+//!   for the door is guarded the same way and says that dead end (unless a missed turn before
+//!   it says its own); from there the route turns round and finds the door on the other side.
 
 use crate::map::{Side, Turn};
 use crate::replan::Believed;
@@ -482,8 +485,17 @@ impl Route {
                         });
                     }
                 }
-                Step::AtTheRoom { room, side, faced } => {
+                Step::AtTheRoom {
+                    room,
+                    side,
+                    faced,
+                    missed,
+                } => {
                     w.set_turn(Turn::Straight);
+                    // Not found, the door is passed and the robot stops at the leg's dead end
+                    // beyond it: the wait for it fails there. A missed turn before says its
+                    // own dead end, as it did (a robot that missed it never came this way).
+                    w.dead_end = w.dead_end.or(*missed);
                     for skill in ["barcode_track", "deliver"] {
                         w.push(X::SetParam {
                             skill,

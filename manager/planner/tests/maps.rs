@@ -301,7 +301,9 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
         Some(&Step::AtTheRoom {
             room: 105,
             side: Some(Side::Right),
-            faced: false
+            faced: false,
+            // 'on' ends in a dead end past the door.
+            missed: map.legs.iter().position(|l| l.name == "on"),
         })
     );
     // A room on a leg walked against its way: its side is the other one.
@@ -316,7 +318,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
         Some(&Step::AtTheRoom {
             room: 102,
             side: Some(Side::Left),
-            faced: false
+            faced: false,
+            missed: map.legs.iter().position(|l| l.name == "east arm"),
         })
     );
     // On the lab's floor: no elevator. Room 2 is after the lab's door on its side (north):
@@ -333,7 +336,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
             Step::AtTheRoom {
                 room: 2,
                 side: Some(Side::Left),
-                faced: false
+                faced: false,
+                missed: None,
             },
         ]
     );
@@ -344,7 +348,8 @@ fn routes_turn_the_way_the_map_says_on_each_floor() {
         Some(&Step::AtTheRoom {
             room: 9,
             side: None,
-            faced: false
+            faced: false,
+            missed: None,
         })
     );
     // Room 1 is across the corridor from the lab's door: whether it is north or south of it
@@ -657,14 +662,20 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
     let home = plan_back_from(&map, 105, From::Lobby { floor: 1 }).unwrap();
     assert_eq!(home.trip, Trip::BackToTheLab);
     assert_eq!(home.steps, back.steps[back_ride..]);
-    // Where each node leaves the robot if it fails: only the boardings say.
+    // Where each node leaves the robot if it fails: the boardings, and the wait for 105's
+    // door (not found, the robot stops at the end of 'on', its leg, past it).
     let believed = plan_round_trip(&map, None).unwrap().believed().unwrap();
     let said: Vec<Believed> = believed.iter().flatten().copied().collect();
+    let on = map.legs.iter().position(|l| l.name == "on").unwrap();
     assert_eq!(
         said,
         [
             Believed {
                 at: From::Lobby { floor: 0 },
+                back: false
+            },
+            Believed {
+                at: From::DeadEnd { leg: on },
                 back: false
             },
             Believed {
@@ -756,7 +767,8 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
             Step::AtTheRoom {
                 room: 407,
                 side: Some(Side::Left),
-                faced: false
+                faced: false,
+                missed: Some(leg("the north arm")),
             },
         ]
     );
@@ -800,6 +812,74 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
         plan(&map, None, From::DeadEnd { leg: 99 }),
         Err(PlanError::NoDeadEnd { n: 100, .. })
     ));
+}
+
+/// A room's door not found: building A's office, 405, is on 'the offices', which ends in a
+/// dead end past it. The wait for its door says that dead end when it fails (the robot went
+/// on past the door and stands at the corridor's end); from there the route turns round and
+/// the door is on the left, with no dead end past it that way.
+#[test]
+fn a_rooms_door_not_found_is_looked_for_again_from_its_legs_dead_end() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let building = root.join("devices/denning-sim/buildings/building-a.toml");
+    let map = Map::load(&map_beside(&building)).unwrap();
+    let offices = map
+        .legs
+        .iter()
+        .position(|l| l.name == "the offices")
+        .unwrap();
+    let route = plan(&map, None, From::Lab).unwrap();
+    assert_eq!(
+        route.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 405,
+            side: Some(Side::Right),
+            faced: false,
+            missed: Some(offices),
+        })
+    );
+    let at_the_end = Believed {
+        at: From::DeadEnd { leg: offices },
+        back: false,
+    };
+    // The only wait that says a place besides the boarding: the door's.
+    let said: Vec<(String, Believed)> = route
+        .node_steps()
+        .unwrap()
+        .into_iter()
+        .zip(route.believed().unwrap())
+        .filter_map(|(step, b)| Some((route.steps[step].to_string(), b?)))
+        .filter(|(_, b)| matches!(b.at, From::DeadEnd { .. }))
+        .collect();
+    assert_eq!(
+        said,
+        [("room 405: its door on the right".to_string(), at_the_end)]
+    );
+    let again = route.replanned(&map, at_the_end).unwrap();
+    assert_eq!(
+        again.steps,
+        [
+            Step::TurnRound {
+                leg: "the offices".into()
+            },
+            Step::Along {
+                leg: "the offices".into(),
+                heading: Heading::East
+            },
+            Step::AtTheRoom {
+                room: 405,
+                side: Some(Side::Left),
+                faced: false,
+                missed: None,
+            },
+        ]
+    );
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    let planned = route.plan_xml(&library, "building-a").unwrap();
+    assert!(planned.contains(
+        "<Parallel name=\"unless stopped at a dead end\" success_count=\"1\" failure_count=\"1\">\n        <SubTree ID=\"ToTheOfficeOnTheRight\"/>"
+    ), "{planned}");
 }
 
 /// Two turns in a row, each with a dead end straight on: failing at a dead end while the

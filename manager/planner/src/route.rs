@@ -83,6 +83,9 @@ pub enum Step {
         side: Option<Side>,
         /// Doors on that side the robot passes before it.
         doors_before: usize,
+        /// The leg's dead end beyond the door (by its index in [`Map::legs`]): where a robot
+        /// that did not count the door stops.
+        missed: Option<usize>,
     },
     /// At the room's door; the message is delivered.
     AtTheRoom {
@@ -136,7 +139,9 @@ impl fmt::Display for Step {
             Step::OutOfTheRoom { room, turn } => {
                 write!(f, "out of room {room}'s door: {turn} into the corridor")
             }
-            Step::AtTheLab { side, doors_before } => match side {
+            Step::AtTheLab {
+                side, doors_before, ..
+            } => match side {
                 Some(s) => write!(
                     f,
                     "the lab: its door on the {s}, after {doors_before} other door{} on the {s}",
@@ -592,8 +597,15 @@ fn back_to_the_lab(map: &Map, room: Option<u32>, from: From) -> Result<Route, Pl
     let floor = map.legs[room_leg].floor;
     let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
     let to_lab = |pos: Pos, door: Option<CameOut>| {
-        lab_ahead(map, pos, lab_leg, lab_at, door)
-            .map(|(side, doors_before)| (0u32, vec![Step::AtTheLab { side, doors_before }]))
+        lab_ahead(map, pos, lab_leg, lab_at, door).map(|(side, doors_before)| {
+            let missed = (side.is_some() && *pos.ahead(map) == End::DeadEnd).then_some(pos.leg);
+            let step = Step::AtTheLab {
+                side,
+                doors_before,
+                missed,
+            };
+            (0u32, vec![step])
+        })
     };
     let to = ("the lab".to_string(), &to_lab as &Goal<'_>, lab_floor);
     let steps = match from {

@@ -31,9 +31,10 @@
 //!   the robot is at that dead end when one fails ([`Route::believed`]). From a dead end
 //!   (`From::DeadEnd`) the route starts with `AtADeadEnd`: turned round, the corridor
 //!   skills straight on.
-//! - A room's door not found: where the room's leg ends in a dead end past its door, the wait
-//!   for the door is guarded the same way and says that dead end (unless a missed turn before
-//!   it says its own); from there the route turns round and finds the door on the other side.
+//! - A room's door not found, or the lab's not counted on the way back: where the leg ends in
+//!   a dead end past the door, the wait for the door is guarded the same way and says that
+//!   dead end (unless a missed turn before it says its own); from there the route turns round
+//!   and finds the door on the other side.
 
 use crate::map::{Side, Turn};
 use crate::replan::Believed;
@@ -518,8 +519,15 @@ impl Route {
                     w.sign_floor = None;
                     (w.back, w.dead_end) = (true, None);
                 }
-                Step::AtTheLab { side, doors_before } => {
+                Step::AtTheLab {
+                    side,
+                    doors_before,
+                    missed,
+                } => {
                     w.set_turn(Turn::Straight);
+                    // As a room's door: not counted, the lab's door is passed and the robot
+                    // stops at the leg's dead end beyond it.
+                    w.dead_end = w.dead_end.or(*missed);
                     match side {
                         // Doors are counted from the corridor after the last junction: the
                         // lab's is the one after `doors_before` others on its side.

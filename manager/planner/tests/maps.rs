@@ -479,7 +479,9 @@ fn the_way_back_turns_out_of_the_door_and_counts_the_labs_door_on_its_side() {
         r.steps.last(),
         Some(&Step::AtTheLab {
             side: Some(Side::Right),
-            doors_before: 1
+            doors_before: 1,
+            // The lab's corridor ends south of the lab's door.
+            missed: Some(0),
         })
     );
     // 102: on the right of the east arm, which runs west to the crossing, so on its north
@@ -509,7 +511,8 @@ fn the_way_back_turns_out_of_the_door_and_counts_the_labs_door_on_its_side() {
             },
             Step::AtTheLab {
                 side: Some(Side::Right),
-                doors_before: 0
+                doors_before: 0,
+                missed: Some(0),
             },
         ]
     );
@@ -662,8 +665,9 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
     let home = plan_back_from(&map, 105, From::Lobby { floor: 1 }).unwrap();
     assert_eq!(home.trip, Trip::BackToTheLab);
     assert_eq!(home.steps, back.steps[back_ride..]);
-    // Where each node leaves the robot if it fails: the boardings, and the wait for 105's
-    // door (not found, the robot stops at the end of 'on', its leg, past it).
+    // Where each node leaves the robot if it fails: the boardings, the wait for 105's door
+    // (not found, the robot stops at the end of 'on', its leg, past it) and the count to the
+    // lab's door on the way back (the lab's corridor ends past it).
     let believed = plan_round_trip(&map, None).unwrap().believed().unwrap();
     let said: Vec<Believed> = believed.iter().flatten().copied().collect();
     let on = map.legs.iter().position(|l| l.name == "on").unwrap();
@@ -680,6 +684,10 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
             },
             Believed {
                 at: From::Lobby { floor: 1 },
+                back: true
+            },
+            Believed {
+                at: From::DeadEnd { leg: 0 },
                 back: true
             }
         ]
@@ -814,12 +822,13 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
     ));
 }
 
-/// A room's door not found: building A's office, 405, is on 'the offices', which ends in a
-/// dead end past it. The wait for its door says that dead end when it fails (the robot went
-/// on past the door and stands at the corridor's end); from there the route turns round and
-/// the door is on the left, with no dead end past it that way.
+/// A door not found: building A's office, 405, is on 'the offices', which ends in a dead end
+/// past it. The wait for its door says that dead end when it fails (the robot went on past
+/// the door and stands at the corridor's end); from there the route turns round and the door
+/// is on the left, with no dead end past it that way. The same for the lab's door on the way
+/// back: the lab's corridor ends south of it.
 #[test]
-fn a_rooms_door_not_found_is_looked_for_again_from_its_legs_dead_end() {
+fn a_door_not_found_is_looked_for_again_from_its_legs_dead_end() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let building = root.join("devices/denning-sim/buildings/building-a.toml");
     let map = Map::load(&map_beside(&building)).unwrap();
@@ -880,6 +889,47 @@ fn a_rooms_door_not_found_is_looked_for_again_from_its_legs_dead_end() {
     assert!(planned.contains(
         "<Parallel name=\"unless stopped at a dead end\" success_count=\"1\" failure_count=\"1\">\n        <SubTree ID=\"ToTheOfficeOnTheRight\"/>"
     ), "{planned}");
+    // The way back: the lab's corridor ends south of the lab's door, so the count of doors to
+    // it says that dead end when it fails; from there the lab's door is the first on the left.
+    let lab_corridor = map
+        .legs
+        .iter()
+        .position(|l| l.name == "the lab's corridor")
+        .unwrap();
+    let back = plan_back(&map, None).unwrap();
+    assert_eq!(
+        back.steps.last(),
+        Some(&Step::AtTheLab {
+            side: Some(Side::Right),
+            doors_before: 0,
+            missed: Some(lab_corridor),
+        })
+    );
+    let at_the_south_end = Believed {
+        at: From::DeadEnd { leg: lab_corridor },
+        back: true,
+    };
+    assert_eq!(
+        back.believed().unwrap().into_iter().flatten().last(),
+        Some(at_the_south_end)
+    );
+    assert_eq!(
+        back.replanned(&map, at_the_south_end).unwrap().steps,
+        [
+            Step::TurnRound {
+                leg: "the lab's corridor".into()
+            },
+            Step::Along {
+                leg: "the lab's corridor".into(),
+                heading: Heading::North
+            },
+            Step::AtTheLab {
+                side: Some(Side::Left),
+                doors_before: 0,
+                missed: None,
+            },
+        ]
+    );
 }
 
 /// Two turns in a row, each with a dead end straight on: failing at a dead end while the

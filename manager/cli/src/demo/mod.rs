@@ -657,13 +657,20 @@ pub fn run_once(opts: &DemoOptions, seed: u64, run: u32) -> anyhow::Result<RunOu
     }
     out.end = out.trajectory.last().map(|r| (r.floor, r.x, r.y));
     // The robot may have gone on a little until the judge looked: the time it first was
-    // outside (or the message was delivered) is the mission's.
+    // outside (or the message was delivered) is the mission's. Back at the lab is a place,
+    // not an event, and the robot may pass it before it stops there (its door not counted,
+    // the count taken again from the dead end beyond): the time from which it held to the end.
     let done = |r: &&TruthRecord| match opts.site {
         Site::World(_) => r.outside,
         Site::Building(_) if opts.and_back => r.delivered && r.at_lab,
         Site::Building(_) => r.delivered,
     };
-    if let Some(first) = out.trajectory.iter().find(done) {
+    let first = if opts.and_back {
+        out.trajectory.iter().rev().take_while(done).last()
+    } else {
+        out.trajectory.iter().find(done)
+    };
+    if let Some(first) = first {
         out.time_s = first.t;
     }
     if opts.and_back {

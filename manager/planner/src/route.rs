@@ -470,6 +470,12 @@ fn straight_on_to_a_dead_end(map: &Map, pos: Pos, j: usize) -> Option<usize> {
         .map(|next| next.leg)
 }
 
+/// `pos`'s leg when it ends in a dead end ahead: where a robot that passes a door in its side
+/// without finding it stops.
+fn dead_end_ahead(map: &Map, pos: Pos) -> Option<usize> {
+    (*pos.ahead(map) == End::DeadEnd).then_some(pos.leg)
+}
+
 /// The steps from a start to node `n`.
 fn path_to(nodes: &[Node], n: usize) -> Vec<Step> {
     let mut chain = Vec::new();
@@ -544,12 +550,11 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
     let to_room = |pos: Pos, door: Option<CameOut>| {
         room_ahead(map, pos, room, door).map(|side| {
             let faced = map.legs[pos.leg].faced(room);
-            let missed = (side.is_some() && *pos.ahead(map) == End::DeadEnd).then_some(pos.leg);
             let step = Step::AtTheRoom {
                 room,
                 side,
                 faced,
-                missed,
+                missed: side.and(dead_end_ahead(map, pos)),
             };
             (0u32, vec![step])
         })
@@ -598,11 +603,10 @@ fn back_to_the_lab(map: &Map, room: Option<u32>, from: From) -> Result<Route, Pl
     let (lab_leg, lab_at, lab_floor) = the_lab(map, room, floor)?;
     let to_lab = |pos: Pos, door: Option<CameOut>| {
         lab_ahead(map, pos, lab_leg, lab_at, door).map(|(side, doors_before)| {
-            let missed = (side.is_some() && *pos.ahead(map) == End::DeadEnd).then_some(pos.leg);
             let step = Step::AtTheLab {
                 side,
                 doors_before,
-                missed,
+                missed: side.and(dead_end_ahead(map, pos)),
             };
             (0u32, vec![step])
         })

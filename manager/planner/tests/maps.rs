@@ -822,6 +822,19 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
     ));
 }
 
+/// The nodes of `route`'s tree that say the robot is at a dead end when they fail, with
+/// their route step in words.
+fn dead_ends_said(route: &skillfab_planner::Route) -> Vec<(String, Believed)> {
+    route
+        .node_steps()
+        .unwrap()
+        .into_iter()
+        .zip(route.believed().unwrap())
+        .filter_map(|(step, b)| Some((route.steps[step].to_string(), b?)))
+        .filter(|(_, b)| matches!(b.at, From::DeadEnd { .. }))
+        .collect()
+}
+
 /// A door not found: building A's office, 405, is on 'the offices', which ends in a dead end
 /// past it. The wait for its door says that dead end when it fails (the robot went on past
 /// the door and stands at the corridor's end); from there the route turns round and the door
@@ -851,17 +864,9 @@ fn a_door_not_found_is_looked_for_again_from_its_legs_dead_end() {
         at: From::DeadEnd { leg: offices },
         back: false,
     };
-    // The only wait that says a place besides the boarding: the door's.
-    let said: Vec<(String, Believed)> = route
-        .node_steps()
-        .unwrap()
-        .into_iter()
-        .zip(route.believed().unwrap())
-        .filter_map(|(step, b)| Some((route.steps[step].to_string(), b?)))
-        .filter(|(_, b)| matches!(b.at, From::DeadEnd { .. }))
-        .collect();
+    // The only wait that says a dead end: the door's.
     assert_eq!(
-        said,
+        dead_ends_said(&route),
         [("room 405: its door on the right".to_string(), at_the_end)]
     );
     let again = route.replanned(&map, at_the_end).unwrap();
@@ -981,15 +986,7 @@ left = [107]
     let map = Map::parse(&text, "small.map.toml").unwrap();
     let leg = |name: &str| map.legs.iter().position(|l| l.name == name).unwrap();
     let route = plan(&map, Some(107), From::Lab).unwrap();
-    // The nodes that say a place, with their route step: the boarding's lobby left out.
-    let guarded: Vec<(String, Believed)> = route
-        .node_steps()
-        .unwrap()
-        .into_iter()
-        .zip(route.believed().unwrap())
-        .filter_map(|(step, b)| Some((route.steps[step].to_string(), b?)))
-        .filter(|(_, b)| matches!(b.at, From::DeadEnd { .. }))
-        .collect();
+    let guarded = dead_ends_said(&route);
     let at = |name| Believed {
         at: From::DeadEnd { leg: leg(name) },
         back: false,

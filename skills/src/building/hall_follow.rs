@@ -94,9 +94,9 @@ const CENTRING_MAX: f64 = 0.3;
 /// while in an intersection whose entry it has missed, it turns too. Stopped by a wall across
 /// the way with the turn's side never seen to open by its side sonar (out of a door askew
 /// toward that side, the sonar's cone reads the wall the door is in), another sonar on that
-/// side reading open is the way: on to the middle square to the wall ahead, and turn. Out on the new heading
-/// in a lobby, the corridor's mouth may be off the line it turned on: in open space the front
-/// cones steer it into a mouth ahead; stopped square to a wall across the way with a mouth
+/// side reading open is the way: on to the middle square to the wall ahead, and turn. Out on
+/// the new heading in a lobby, the corridor's mouth may be off the line it turned on: in open
+/// space the front cones steer it into a mouth ahead; stopped square to a wall across the way with a mouth
 /// opening in it to one side (that side's diagonal sonars read down it), it turns along the
 /// wall and crosses into the mouth as into a T's stem.
 ///

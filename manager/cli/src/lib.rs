@@ -230,8 +230,13 @@ enum Cmd {
         to: Option<plan::Place>,
         /// Where the route starts: `lab`; a room (its number) with `--to lab`: the way
         /// back, from the room's door where the message was said; to a room, `lobby:F` (floor
-        /// F's lobby) or `end:N` (the dead end of the map's N-th leg, the robot facing it).
-        #[arg(long, value_name = "lab|ROOM|lobby:F|end:N", default_value = "lab")]
+        /// F's lobby), `end:N` (the dead end of the map's N-th leg, the robot facing it) or
+        /// `car:F` (in a car boarded on floor F, its ride failed).
+        #[arg(
+            long,
+            value_name = "lab|ROOM|lobby:F|end:N|car:F",
+            default_value = "lab"
+        )]
         from: plan::Place,
         /// To the room and back to the lab: one tree with both ways.
         #[arg(long)]

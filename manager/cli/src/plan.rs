@@ -14,7 +14,7 @@ pub enum Place {
     /// A room, by its number.
     Room(u32),
     /// Where a route to a room may start besides the lab: a floor's lobby (`lobby:F`), a
-    /// leg's dead end (`end:N`).
+    /// leg's dead end (`end:N`), a car boarded on a floor (`car:F`).
     At(From),
 }
 
@@ -26,7 +26,7 @@ impl std::str::FromStr for Place {
             n => n.parse().map(Place::Room).or_else(|_| {
                 n.parse().map(Place::At).map_err(|_| {
                     format!(
-                        "'{n}' is neither `lab`, a room's number, a lobby (`lobby:F`) nor a leg's dead end (`end:N`, the map's N-th leg)"
+                        "'{n}' is neither `lab`, a room's number, a lobby (`lobby:F`), a leg's dead end (`end:N`, the map's N-th leg) nor a car (`car:F`, boarded on floor F)"
                     )
                 })
             }),

@@ -369,6 +369,46 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// Building A's ride up: its tries all failed (a car stopped between floors), the robot is
+    /// in the car; the plan from there rides again without boarding, and its file says so.
+    #[test]
+    fn a_ride_that_fails_is_planned_on_from_the_car() {
+        let dir = std::env::temp_dir().join(format!("sf-replan-car-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut r = replanner(&dir, true);
+        let believed = r.route.believed().unwrap();
+        let ride = (0..believed.len())
+            .find(|&i| {
+                matches!(
+                    believed[i],
+                    Some(Believed {
+                        at: From::Car { .. },
+                        ..
+                    })
+                )
+            })
+            .unwrap();
+        let (shape, status) = failed_at(&r, &dir.join("plan.xml"), ride);
+        let again = r.after_failure(&shape, &status).unwrap();
+        assert_eq!(
+            again.at,
+            Believed {
+                at: From::Car { floor: 0 },
+                back: false
+            }
+        );
+        assert_eq!(again.at.to_string(), "in a car boarded on floor 0");
+        assert_eq!(again.file, dir.join("plan.replanned-from-car-0.xml"));
+        assert_eq!(r.believed_from_file(&again.file), Some(again.at));
+        assert!(again.planned.xml.contains("<SubTree ID=\"InACar\"/>"));
+        assert_eq!(
+            again.planned.route.steps[0].to_string(),
+            "a car from floor 0 to floor 4"
+        );
+        assert_eq!(again.planned.route.trip, skillfab_planner::Trip::RoundTrip);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// Building E: 'the crossing: left' counted at a door before it, the robot went straight
     /// on into the east arm and stopped at its end; the wait for 407's sign fails there.
     #[test]

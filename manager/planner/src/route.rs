@@ -83,8 +83,8 @@ pub enum Step {
         side: Option<Side>,
         /// Doors on that side the robot passes before it.
         doors_before: usize,
-        /// The leg's dead end beyond the door (by its index in [`Map::legs`]): where a robot
-        /// that did not count the door stops.
+        /// The dead end a robot that did not count the door comes to, straight on (the leg
+        /// of it, by its index in [`Map::legs`]): this leg's, or past junctions ahead.
         missed: Option<usize>,
     },
     /// At the room's door; the message is delivered.
@@ -95,8 +95,8 @@ pub enum Step {
         side: Option<Side>,
         /// Another door faces it across the corridor.
         faced: bool,
-        /// The leg's dead end beyond the door (by its index in [`Map::legs`]): where a robot
-        /// that did not find the door stops.
+        /// The dead end a robot that did not find the door comes to, straight on (the leg of
+        /// it, by its index in [`Map::legs`]): this leg's, or past junctions ahead.
         missed: Option<usize>,
     },
 }
@@ -226,17 +226,29 @@ pub enum From {
         /// The leg, by its index in [`Map::legs`].
         leg: usize,
     },
+    /// In a car boarded on a floor, its ride failed (the floor's button pressed and the
+    /// indicator not saying that floor in time, try after try: a car that stopped, or a
+    /// press missed): the route presses the button of the floor it goes to and rides, as
+    /// after a boarding. Written `car:F`, F the floor the car was boarded on.
+    Car {
+        /// The floor the car was boarded on.
+        floor: i32,
+    },
 }
 
 impl std::str::FromStr for From {
     type Err = PlanError;
-    /// `lab`, `lobby:F` (floor F's lobby) or `end:N` (the dead end of the map's N-th leg).
+    /// `lab`, `lobby:F` (floor F's lobby), `end:N` (the dead end of the map's N-th leg) or
+    /// `car:F` (in a car boarded on floor F).
     fn from_str(s: &str) -> Result<From, PlanError> {
         if s == "lab" {
             return Ok(From::Lab);
         }
         if let Some(Ok(floor)) = s.strip_prefix("lobby:").map(str::parse) {
             return Ok(From::Lobby { floor });
+        }
+        if let Some(Ok(floor)) = s.strip_prefix("car:").map(str::parse) {
+            return Ok(From::Car { floor });
         }
         match s.strip_prefix("end:").map(str::parse::<usize>) {
             Some(Ok(n)) if n >= 1 => Ok(From::DeadEnd { leg: n - 1 }),
@@ -252,6 +264,7 @@ impl From {
             From::Lab => "the lab".to_string(),
             From::Lobby { floor } => format!("the lobby of floor {floor}"),
             From::DeadEnd { leg } => format!("the dead end of the map's leg {}", leg + 1),
+            From::Car { floor } => format!("a car boarded on floor {floor}"),
         }
     }
 }
@@ -263,6 +276,7 @@ impl fmt::Display for From {
             From::Lab => write!(f, "lab"),
             From::Lobby { floor } => write!(f, "lobby:{floor}"),
             From::DeadEnd { leg } => write!(f, "end:{}", leg + 1),
+            From::Car { floor } => write!(f, "car:{floor}"),
         }
     }
 }
@@ -286,7 +300,7 @@ pub enum PlanError {
     NoDestination(String),
     /// A start the planner does not plan from.
     #[error(
-        "--from {0}: a route starts at the lab, at a floor's lobby (`lobby:F`), at a leg's dead end (`end:N`, the map's N-th leg) or, back to the lab, at a room (its number)"
+        "--from {0}: a route starts at the lab, at a floor's lobby (`lobby:F`), at a leg's dead end (`end:N`, the map's N-th leg), in a car boarded on a floor (`car:F`) or, back to the lab, at a room (its number)"
     )]
     NotFrom(String),
     /// A lobby the map does not have.
@@ -458,22 +472,40 @@ fn search(map: &Map, starts: Vec<Start>, goal: &Goal<'_>) -> Option<Vec<Step>> {
     None
 }
 
-/// The leg straight on at junction `j` arriving on `pos`, when it ends in a dead end.
-fn straight_on_to_a_dead_end(map: &Map, pos: Pos, j: usize) -> Option<usize> {
+/// The way straight on at junction `j` arriving on `pos`, if the junction has one.
+fn straight_on(map: &Map, pos: Pos, j: usize) -> Option<Pos> {
     let heading = pos.heading(map);
     map.junctions[j]
         .arms
         .iter()
-        .filter(|&&(leg, leaves)| leg != pos.leg && heading.turn_to(leaves) == Some(Turn::Straight))
+        .find(|&&(leg, leaves)| leg != pos.leg && heading.turn_to(leaves) == Some(Turn::Straight))
         .map(|&(leg, _)| Pos::leaving(map, leg, &End::Junction(j)))
-        .find(|next| *next.ahead(map) == End::DeadEnd)
+}
+
+/// The leg straight on at junction `j` arriving on `pos`, when it ends in a dead end.
+fn straight_on_to_a_dead_end(map: &Map, pos: Pos, j: usize) -> Option<usize> {
+    straight_on(map, pos, j)
+        .filter(|next| *next.ahead(map) == End::DeadEnd)
         .map(|next| next.leg)
 }
 
-/// `pos`'s leg when it ends in a dead end ahead: where a robot that passes a door in its side
-/// without finding it stops.
+/// The dead end a robot on `pos` comes to going straight on, through the junctions ahead
+/// that have a way straight on: where a robot that passes a door in the leg's side without
+/// finding it stops. Nothing counts junctions while the door is awaited (`hall_follow`'s turn
+/// is set back to straight before it), so a junction passed changes no step. `None` where the way ends otherwise (a lobby, a room's
+/// or the lab's door, a junction with no way straight on: a T's bar, where the sides are
+/// open and the robot is not at a dead end).
 fn dead_end_ahead(map: &Map, pos: Pos) -> Option<usize> {
-    (*pos.ahead(map) == End::DeadEnd).then_some(pos.leg)
+    let mut at = pos;
+    // A way straight on passes each leg once; more is a loop of legs.
+    for _ in 0..=map.legs.len() {
+        match at.ahead(map) {
+            End::DeadEnd => return Some(at.leg),
+            End::Junction(j) => at = straight_on(map, at, *j)?,
+            _ => return None,
+        }
+    }
+    None
 }
 
 /// The steps from a start to node `n`.
@@ -543,7 +575,8 @@ fn the_lab(map: &Map, room: u32, floor: i32) -> Result<(usize, DoorAt, i32), Pla
     }
 }
 
-/// The route from `from` (the lab, or a floor's lobby) to `room` (default: the map's office).
+/// The route from `from` (the lab, a floor's lobby, a leg's dead end or a car) to `room`
+/// (default: the map's office).
 pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
     let (room, room_leg, _) = the_room(map, room)?;
     let floor = map.legs[room_leg].floor;
@@ -569,7 +602,8 @@ pub fn plan(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError
                 to,
             )?
         }
-        From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
+        From::Lobby { floor: lobby } => from_the_lobby(map, lobby, false, to)?,
+        From::Car { floor: car } => from_the_lobby(map, car, true, to)?,
         From::DeadEnd { leg } => from_a_dead_end(map, leg, to)?,
     };
     Ok(Route {
@@ -589,14 +623,14 @@ pub fn plan_back(map: &Map, room: Option<u32>) -> Result<Route, PlanError> {
 }
 
 /// The route back to the lab from `from` (a floor's lobby, where a car that did not come on
-/// the way back left the robot, or a leg's dead end), `room` being the room the message was
-/// for. `From::Lab` is the room's door, as [`plan_back`].
+/// the way back left the robot, a leg's dead end, or a car whose ride failed), `room` being
+/// the room the message was for. `From::Lab` is the room's door, as [`plan_back`].
 pub fn plan_back_from(map: &Map, room: u32, from: From) -> Result<Route, PlanError> {
     back_to_the_lab(map, Some(room), from)
 }
 
-/// The way back to the lab from `room`'s door (`from` [`From::Lab`]), from a floor's lobby or
-/// from a leg's dead end.
+/// The way back to the lab from `room`'s door (`from` [`From::Lab`]), from a floor's lobby,
+/// from a leg's dead end or from a car.
 fn back_to_the_lab(map: &Map, room: Option<u32>, from: From) -> Result<Route, PlanError> {
     let (room, room_leg, room_at) = the_room(map, room)?;
     let floor = map.legs[room_leg].floor;
@@ -622,7 +656,8 @@ fn back_to_the_lab(map: &Map, room: Option<u32>, from: From) -> Result<Route, Pl
             ),
             to,
         )?,
-        From::Lobby { floor: lobby } => from_the_lobby(map, lobby, to)?,
+        From::Lobby { floor: lobby } => from_the_lobby(map, lobby, false, to)?,
+        From::Car { floor: car } => from_the_lobby(map, car, true, to)?,
         From::DeadEnd { leg } => from_a_dead_end(map, leg, to)?,
     };
     Ok(Route {
@@ -706,11 +741,13 @@ fn between_floors(
     Ok(steps)
 }
 
-/// The steps from floor `lobby`'s lobby to where `goal` says the destination is on its floor:
-/// a car to that floor first if it is another.
+/// The steps from floor `lobby`'s lobby, or from a car boarded there (`in_a_car`), to where
+/// `goal` says the destination is on its floor: a car to that floor first if it is another
+/// (from a car, a ride always: the car may have gone anywhere).
 fn from_the_lobby(
     map: &Map,
     lobby: i32,
+    in_a_car: bool,
     (to, goal, floor): (String, &Goal<'_>, i32),
 ) -> Result<Vec<Step>, PlanError> {
     if map.lobby(lobby).is_none() {
@@ -720,7 +757,7 @@ fn from_the_lobby(
         });
     }
     let mut steps = Vec::new();
-    if lobby != floor {
+    if in_a_car || lobby != floor {
         steps.push(Step::Ride {
             from: lobby,
             to: floor,

@@ -17,7 +17,9 @@
 //! - The corridor skills are activated with the first junction (or the lobby) after the lab,
 //!   with `sign_read` on the room's floor on the way there.
 //! - A ride: `BoardACar`, then `barcode_track.id` set to the floor's panel button (860 + f)
-//!   and `sign_read.floor` to the floor, then `RideToTheFloor`.
+//!   and `sign_read.floor` to the floor, then `RideToTheFloor`. Its tries all failed, the
+//!   robot is believed in the car (`From::Car`); a route from a car starts with `InACar`
+//!   and rides, with no boarding.
 //! - The way back: out of the room's door turned along the corridor on the spot, square to
 //!   its walls (`OutOfTheOfficeLeft`/`Right`), junctions counted once the robot is between
 //!   the corridor's walls; at the lab's leg, doors counted again from the corridor
@@ -31,10 +33,11 @@
 //!   the robot is at that dead end when one fails ([`Route::believed`]). From a dead end
 //!   (`From::DeadEnd`) the route starts with `AtADeadEnd`: turned round, the corridor
 //!   skills straight on.
-//! - A room's door not found, or the lab's not counted on the way back: where the leg ends in
-//!   a dead end past the door, the wait for the door is guarded the same way and says that
-//!   dead end (unless a missed turn before it says its own); from there the route turns round
-//!   and finds the door on the other side.
+//! - A room's door not found, or the lab's not counted on the way back: where the way
+//!   straight on past the door comes to a dead end (the leg's, or past junctions crossed
+//!   straight), the wait for the door is guarded the same way and says that dead end
+//!   (unless a missed turn before it says its own); from there the route comes back and
+//!   finds the door on the other side.
 
 use crate::map::{Side, Turn};
 use crate::replan::Believed;
@@ -301,7 +304,8 @@ impl Route {
 
     /// Where the robot is believed to be when a child of the route's tree's `Sequence` fails,
     /// one entry per child: `Some` for the steps the plan can go on from (a car that did not
-    /// come: the robot is in that floor's lobby), `None` for the others. The sequencer's
+    /// come: the robot is in that floor's lobby; a ride that failed: in the car; a missed turn
+    /// or door: at a dead end), `None` for the others. The sequencer's
     /// runner reads which child failed; [`Route::replanned`] plans from there.
     pub fn believed(&self) -> Result<Vec<Option<Believed>>, TreeError> {
         let w = self.written()?;
@@ -313,7 +317,8 @@ impl Route {
     }
 
     /// The step of the route (an index into `steps`) each child of the route's tree's
-    /// `Sequence` was written for (a plan from a lobby: its first node, too, the first step's).
+    /// `Sequence` was written for (a plan from a lobby or a car: its first node, too, the first
+    /// step's).
     pub fn node_steps(&self) -> Result<Vec<usize>, TreeError> {
         Ok(self.written()?.step_of)
     }
@@ -333,7 +338,7 @@ impl Route {
             count: 0,
             // The way back starts on the room's floor, the way there on the first ride's.
             floor: match (self.from, self.trip) {
-                (From::Lobby { floor }, _) => Some(floor),
+                (From::Lobby { floor } | From::Car { floor }, _) => Some(floor),
                 (_, Trip::BackToTheLab) => None,
                 _ => self.steps.iter().find_map(|s| match s {
                     Step::Ride { from, .. } => Some(*from),
@@ -349,8 +354,11 @@ impl Route {
             back: self.trip == Trip::BackToTheLab,
         };
         // From a lobby, whatever ran before: the corridor skills off, `avoid` on.
-        if let From::Lobby { .. } = self.from {
-            w.push(X::SubTree("InALobby"));
+        // From a car: what ran before the ride off, `avoid` on.
+        match self.from {
+            From::Lobby { .. } => w.push(X::SubTree("InALobby")),
+            From::Car { .. } => w.push(X::SubTree("InACar")),
+            _ => {}
         }
         for (i, step) in self.steps.iter().enumerate() {
             w.step = i;
@@ -434,11 +442,14 @@ impl Route {
                     }
                     // The ride's floor, which its subtree cannot be told: the button
                     // barcode_track finds, the floor sign_read waits for. No car boarded:
-                    // the robot is still in this floor's lobby.
-                    w.push(X::SubTree("BoardACar"));
-                    let at = From::Lobby { floor: *from };
+                    // the robot is still in this floor's lobby. (A plan from a car starts
+                    // boarded.)
                     let back = w.back;
-                    w.believed.push((w.out.len() - 1, Believed { at, back }));
+                    if !(i == 0 && matches!(self.from, From::Car { .. })) {
+                        w.push(X::SubTree("BoardACar"));
+                        let at = From::Lobby { floor: *from };
+                        w.believed.push((w.out.len() - 1, Believed { at, back }));
+                    }
                     w.push(X::SetParam {
                         skill: "barcode_track",
                         param: "id",
@@ -449,7 +460,10 @@ impl Route {
                         param: "floor",
                         value: to.to_string(),
                     });
+                    // The ride failed, try after try: the robot is still in the car.
                     w.push(X::SubTree("RideToTheFloor"));
+                    let at = From::Car { floor: *from };
+                    w.believed.push((w.out.len() - 1, Believed { at, back }));
                     w.floor = *to;
                 }
                 Step::OutOfTheLobby {
@@ -493,9 +507,10 @@ impl Route {
                     missed,
                 } => {
                     w.set_turn(Turn::Straight);
-                    // Not found, the door is passed and the robot stops at the leg's dead end
-                    // beyond it: the wait for it fails there. A missed turn before says its
-                    // own dead end, as it did (a robot that missed it never came this way).
+                    // Not found, the door is passed and the robot, straight on, stops at the
+                    // dead end past it (the leg's, or past junctions crossed straight): the
+                    // wait for it fails there. A missed turn before says its own dead end, as
+                    // it did (a robot that missed it never came this way).
                     w.dead_end = w.dead_end.or(*missed);
                     for skill in ["barcode_track", "deliver"] {
                         w.push(X::SetParam {
@@ -526,7 +541,7 @@ impl Route {
                 } => {
                     w.set_turn(Turn::Straight);
                     // As a room's door: not counted, the lab's door is passed and the robot
-                    // stops at the leg's dead end beyond it.
+                    // stops at the dead end straight on past it.
                     w.dead_end = w.dead_end.or(*missed);
                     match side {
                         // Doors are counted from the corridor after the last junction: the

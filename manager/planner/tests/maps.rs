@@ -665,9 +665,9 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
     let home = plan_back_from(&map, 105, From::Lobby { floor: 1 }).unwrap();
     assert_eq!(home.trip, Trip::BackToTheLab);
     assert_eq!(home.steps, back.steps[back_ride..]);
-    // Where each node leaves the robot if it fails: the boardings, the wait for 105's door
-    // (not found, the robot stops at the end of 'on', its leg, past it) and the count to the
-    // lab's door on the way back (the lab's corridor ends past it).
+    // Where each node leaves the robot if it fails: the boardings and the rides, the wait for
+    // 105's door (not found, the robot stops at the end of 'on', its leg, past it) and the
+    // count to the lab's door on the way back (the lab's corridor ends past it).
     let believed = plan_round_trip(&map, None).unwrap().believed().unwrap();
     let said: Vec<Believed> = believed.iter().flatten().copied().collect();
     let on = map.legs.iter().position(|l| l.name == "on").unwrap();
@@ -679,11 +679,19 @@ fn from_a_lobby_the_route_goes_on_as_from_the_lab_and_says_where_a_boarding_leav
                 back: false
             },
             Believed {
+                at: From::Car { floor: 0 },
+                back: false
+            },
+            Believed {
                 at: From::DeadEnd { leg: on },
                 back: false
             },
             Believed {
                 at: From::Lobby { floor: 1 },
+                back: true
+            },
+            Believed {
+                at: From::Car { floor: 1 },
                 back: true
             },
             Believed {
@@ -739,8 +747,13 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
             // the lobby's call button in view.
             at(south),
             at(south),
+            // A car that does not come, a ride that fails.
             Believed {
                 at: From::Lobby { floor: 0 },
+                back: false
+            },
+            Believed {
+                at: From::Car { floor: 0 },
                 back: false
             },
             // 'the crossing': left, then 407's door on the left.
@@ -998,4 +1011,178 @@ left = [107]
             ("room 107: its door on the left".to_string(), at("far west")),
         ]
     );
+}
+
+/// A door not found on a leg that goes on: building E's 401 is on 'to the crossing', which
+/// ends at the crossing, and straight across it the east arm ends in a dead end. A robot that
+/// passes 401's door without finding it crosses straight on (nothing counts junctions then,
+/// `hall_follow` straight on) and stands at the east arm's end: the wait for the door says
+/// that dead end. From there the route turns round, crosses straight back, and the door is
+/// on the left. Where the way straight on ends at a T's bar (the small map's room 2, before
+/// the T), the wait says nothing: the robot stops there with the sides open.
+#[test]
+fn a_door_not_found_on_a_leg_that_goes_on_is_looked_for_again_from_the_dead_end_straight_on() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let building = root.join("devices/denning-sim/buildings/heldout/building-e.toml");
+    let map = Map::load(&map_beside(&building)).unwrap();
+    let leg = |name: &str| map.legs.iter().position(|l| l.name == name).unwrap();
+    let route = plan(&map, Some(401), From::Lab).unwrap();
+    assert_eq!(
+        route.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 401,
+            side: Some(Side::Right),
+            faced: false,
+            missed: Some(leg("the east arm")),
+        })
+    );
+    let at_the_east_end = Believed {
+        at: From::DeadEnd {
+            leg: leg("the east arm"),
+        },
+        back: false,
+    };
+    // (On floor 0 the first intersection's waits say its own dead end, as on every route.)
+    assert_eq!(
+        dead_ends_said(&route).last(),
+        Some(&(
+            "room 401: its door on the right".to_string(),
+            at_the_east_end
+        ))
+    );
+    assert_eq!(
+        route.replanned(&map, at_the_east_end).unwrap().steps,
+        [
+            Step::TurnRound {
+                leg: "the east arm".into()
+            },
+            Step::Along {
+                leg: "the east arm".into(),
+                heading: Heading::West
+            },
+            Step::Junction {
+                name: "the crossing".into(),
+                turn: Turn::Straight,
+                overshoot: None,
+            },
+            Step::Along {
+                leg: "to the crossing".into(),
+                heading: Heading::West
+            },
+            Step::AtTheRoom {
+                room: 401,
+                side: Some(Side::Left),
+                faced: false,
+                missed: None,
+            },
+        ]
+    );
+    // The office, 407, on the north arm, which ends in a dead end past it: the step says
+    // that end, as before (the wait keeps the crossing's dead end, the east arm: a robot
+    // that missed the turn never came to the north arm).
+    let office = plan(&map, None, From::Lab).unwrap();
+    assert_eq!(
+        office.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 407,
+            side: Some(Side::Left),
+            faced: false,
+            missed: Some(leg("the north arm")),
+        })
+    );
+
+    let small = Map::parse(SMALL, "small.map.toml").unwrap();
+    let to_2 = plan(&small, Some(2), From::Lab).unwrap();
+    assert_eq!(
+        to_2.steps.last(),
+        Some(&Step::AtTheRoom {
+            room: 2,
+            side: Some(Side::Left),
+            faced: false,
+            missed: None,
+        })
+    );
+    assert_eq!(dead_ends_said(&to_2), []);
+}
+
+/// A ride that fails: `RideToTheFloor`'s tries all failed (a car stopped between floors), the
+/// robot is still in the car. The route from there starts in the car (`InACar`, no boarding)
+/// and rides to the room's floor, pressing its button again; on the way back, to the lab's.
+#[test]
+fn a_ride_that_fails_is_ridden_again_from_the_car() {
+    let map = Map::parse(SMALL, "small.map.toml").unwrap();
+    let both = plan_round_trip(&map, None).unwrap();
+    let in_the_car = |floor, back| Believed {
+        at: From::Car { floor },
+        back,
+    };
+    let rides: Vec<(String, Believed)> = both
+        .node_steps()
+        .unwrap()
+        .into_iter()
+        .zip(both.believed().unwrap())
+        .filter_map(|(step, b)| Some((both.steps[step].to_string(), b?)))
+        .filter(|(_, b)| matches!(b.at, From::Car { .. }))
+        .collect();
+    assert_eq!(
+        rides,
+        [
+            (
+                "a car from floor 0 to floor 1".to_string(),
+                in_the_car(0, false)
+            ),
+            (
+                "a car from floor 1 to floor 0".to_string(),
+                in_the_car(1, true)
+            ),
+        ]
+    );
+    let lobby0 = plan(&map, None, From::Lobby { floor: 0 }).unwrap();
+    let again = both.replanned(&map, in_the_car(0, false)).unwrap();
+    let back = plan_back(&map, None).unwrap();
+    assert_eq!(again.from, From::Car { floor: 0 });
+    assert_eq!(again.steps, [lobby0.steps, back.steps.clone()].concat());
+    let back_ride = back
+        .steps
+        .iter()
+        .position(|s| matches!(s, Step::Ride { .. }))
+        .unwrap();
+    assert_eq!(
+        both.replanned(&map, in_the_car(1, true)).unwrap().steps,
+        back.steps[back_ride..]
+    );
+    // From a car on the room's floor itself: a ride all the same (its button reopens the
+    // doors there).
+    assert_eq!(
+        plan(&map, None, From::Car { floor: 1 }).unwrap().steps[0],
+        Step::Ride { from: 1, to: 1 }
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let library = std::fs::read_to_string(root.join("skills/plans/deliver.xml")).unwrap();
+    let library = Library::parse(&library, "deliver.xml").unwrap();
+    let xml = again.plan_xml(&library, "small").unwrap();
+    assert!(
+        xml.contains(
+            "<Sequence>\n      <SubTree ID=\"InACar\"/>\n      \
+             <SetParam skill=\"barcode_track\" param=\"id\" value=\"861\"/>\n      \
+             <SetParam skill=\"sign_read\" param=\"floor\" value=\"1\"/>\n      \
+             <SubTree ID=\"RideToTheFloor\"/>"
+        ),
+        "{xml}"
+    );
+    // No boarding before the ride from the car; the way back boards a car again.
+    let route_tree = &xml[..xml.find("</BehaviorTree>").unwrap()];
+    assert_eq!(route_tree.matches("<SubTree ID=\"BoardACar\"/>").count(), 1);
+    let parsed = skillfab_sequence::Plan::parse(&xml, "planned").unwrap();
+    let seq = skillfab_sequence::Sequencer::new(&parsed, None).unwrap();
+    let children = seq
+        .live()
+        .shape()
+        .iter()
+        .filter(|n| n.parent == Some(0))
+        .count();
+    assert_eq!(children, again.believed().unwrap().len());
+    assert_eq!("car:4".parse(), Ok(From::Car { floor: 4 }));
+    assert_eq!(From::Car { floor: 4 }.to_string(), "car:4");
+    assert!("car:".parse::<From>().is_err());
 }

@@ -379,6 +379,7 @@ mod tests {
             "heldout/building-c.toml",
             "heldout/building-d.toml",
             "heldout/building-e.toml",
+            "heldout/building-f.toml",
         ] {
             let b = building(file);
             let segs = b.segments(b.start_floor);

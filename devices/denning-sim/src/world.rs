@@ -208,6 +208,7 @@ mod tests {
             "heldout/south-tall",
             "heldout/west-long",
             "heldout/row-gaps",
+            "heldout/south-detour",
         ] {
             let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("worlds/{w}.toml"));
             let world = World::load(&path).unwrap();

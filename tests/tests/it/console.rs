@@ -318,7 +318,8 @@ fn waits_for_the_manager_and_reconnects() {
     )
     .unwrap();
     // (The new pid is taken where it is seen: a second look at the board may fall between
-    // two of its states.)
+    // two of its states. A slot registered again holds 0 until its pid is stored, while its
+    // run count can already be past 2: 0 is not a pid.)
     let mut new_pid = pid;
     t.wait_until("smooth to be restarted and running", || {
         skillfab_tests::registered(&board, "smooth").is_some_and(|s| {
@@ -326,7 +327,7 @@ fn waits_for_the_manager_and_reconnects() {
                 .slot(s.slot)
                 .pid
                 .load(std::sync::atomic::Ordering::Acquire);
-            new_pid != pid && s.runs > 2
+            new_pid != pid && new_pid != 0 && s.runs > 2
         })
     });
     con.wait_for(&format!("pid {new_pid} "));

@@ -281,25 +281,20 @@ mod tests {
         (shape, status)
     }
 
+    /// The nodes whose failure leaves the robot at a place `kept` keeps.
+    fn nodes_at(believed: &[Option<Believed>], kept: fn(&From) -> bool) -> Vec<usize> {
+        (0..believed.len())
+            .filter(|&i| believed[i].is_some_and(|b| kept(&b.at)))
+            .collect()
+    }
+
     #[test]
     fn a_car_that_does_not_come_is_planned_on_from_its_lobby_and_the_plan_is_kept_by_name() {
         let dir = std::env::temp_dir().join(format!("sf-replan-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut r = replanner(&dir, true);
         let believed = r.route.believed().unwrap();
-        let boards = |b: &[Option<Believed>]| -> Vec<usize> {
-            (0..b.len())
-                .filter(|&i| {
-                    matches!(
-                        b[i],
-                        Some(Believed {
-                            at: From::Lobby { .. },
-                            ..
-                        })
-                    )
-                })
-                .collect()
-        };
+        let boards = |b: &[Option<Believed>]| nodes_at(b, |at| matches!(at, From::Lobby { .. }));
         let board = boards(&believed);
         // Building A's round trip rides twice: up from floor 0, down from floor 4.
         assert_eq!(board.len(), 2);
@@ -377,17 +372,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let mut r = replanner(&dir, true);
         let believed = r.route.believed().unwrap();
-        let ride = (0..believed.len())
-            .find(|&i| {
-                matches!(
-                    believed[i],
-                    Some(Believed {
-                        at: From::Car { .. },
-                        ..
-                    })
-                )
-            })
-            .unwrap();
+        let ride = nodes_at(&believed, |at| matches!(at, From::Car { .. }))[0];
         let (shape, status) = failed_at(&r, &dir.join("plan.xml"), ride);
         let again = r.after_failure(&shape, &status).unwrap();
         assert_eq!(

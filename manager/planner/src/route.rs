@@ -491,10 +491,10 @@ fn straight_on_to_a_dead_end(map: &Map, pos: Pos, j: usize) -> Option<usize> {
 
 /// The dead end a robot on `pos` comes to going straight on, through the junctions ahead
 /// that have a way straight on: where a robot that passes a door in the leg's side without
-/// finding it stops. Nothing counts junctions while the door is awaited (`hall_follow`'s turn
-/// is set back to straight before it), so a junction passed changes no step. `None` where the way ends otherwise (a lobby, a room's
-/// or the lab's door, a junction with no way straight on: a T's bar, where the sides are
-/// open and the robot is not at a dead end).
+/// finding it stops. Nothing counts junctions while the door is awaited (`hall_follow`'s
+/// turn is set back to straight before it), so a junction passed changes no step. `None`
+/// where the way ends otherwise (a lobby, a room's or the lab's door, a junction with no
+/// way straight on: a T's bar, where the sides are open and the robot is not at a dead end).
 fn dead_end_ahead(map: &Map, pos: Pos) -> Option<usize> {
     let mut at = pos;
     // A way straight on passes each leg once; more is a loop of legs.

@@ -838,17 +838,25 @@ fn a_missed_turn_into_a_dead_end_is_planned_on_from_that_dead_end() {
     ));
 }
 
-/// The nodes of `route`'s tree that say the robot is at a dead end when they fail, with
-/// their route step in words.
-fn dead_ends_said(route: &skillfab_planner::Route) -> Vec<(String, Believed)> {
+/// The nodes of `route`'s tree that say where the robot is when they fail, a place `kept`
+/// keeps, with their route step in words.
+fn places_said(
+    route: &skillfab_planner::Route,
+    kept: fn(&From) -> bool,
+) -> Vec<(String, Believed)> {
     route
         .node_steps()
         .unwrap()
         .into_iter()
         .zip(route.believed().unwrap())
         .filter_map(|(step, b)| Some((route.steps[step].to_string(), b?)))
-        .filter(|(_, b)| matches!(b.at, From::DeadEnd { .. }))
+        .filter(|(_, b)| kept(&b.at))
         .collect()
+}
+
+/// The nodes of `route`'s tree that say the robot is at a dead end when they fail.
+fn dead_ends_said(route: &skillfab_planner::Route) -> Vec<(String, Believed)> {
+    places_said(route, |at| matches!(at, From::DeadEnd { .. }))
 }
 
 /// A door not found: building A's office, 405, is on 'the offices', which ends in a dead end
@@ -1119,14 +1127,7 @@ fn a_ride_that_fails_is_ridden_again_from_the_car() {
         at: From::Car { floor },
         back,
     };
-    let rides: Vec<(String, Believed)> = both
-        .node_steps()
-        .unwrap()
-        .into_iter()
-        .zip(both.believed().unwrap())
-        .filter_map(|(step, b)| Some((both.steps[step].to_string(), b?)))
-        .filter(|(_, b)| matches!(b.at, From::Car { .. }))
-        .collect();
+    let rides = places_said(&both, |at| matches!(at, From::Car { .. }));
     assert_eq!(
         rides,
         [

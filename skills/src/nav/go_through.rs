@@ -56,6 +56,9 @@ pub struct GoOut<'a> {
 /// within [`REFINE_CROSS`] of its axis and [`REFINE_ALONG`] along it, heading within
 /// [`REFINE_HEADING`]. Backing off a post lets the door go.
 ///
+/// Held on its way to the approach point with something in the way (a box on the door's
+/// axis inside the room), it goes round ([`Detour`]).
+///
 /// An estimate it cannot pass is not tried again as it is: pushing a post in front of the
 /// door line, it moves its aim [`SHIFT_STEP`] along the wall away from the post (the side
 /// whose front sonars read nearer), up to [`SHIFT_MAX`], and lines up again. An estimate
@@ -74,6 +77,9 @@ pub struct GoThrough {
     stuck: u32,
     /// Cycles of backing off left.
     backing: u32,
+    /// Going round what holds the way to the approach point.
+    detour: Detour,
+    activation: Activation,
 }
 
 /// Lined up this close before the door line (m, along its axis), the door is held.
@@ -151,6 +157,9 @@ impl Skill for GoThrough {
     const PRIORITY: i32 = 6;
     fn compute(&mut self, ctx: &Ctx<GoThroughParams>, i: GoIn, o: &mut GoOut) -> SkillResult {
         let (d, od, s, p) = (*i.door, *i.odometry, *i.sonar, ctx.params);
+        if self.activation.begins(ctx) {
+            self.detour.reset();
+        }
         if !d.found {
             self.held = None;
             o.progress.set(Progress::default());
@@ -194,14 +203,21 @@ impl Skill for GoThrough {
             self.lined_up = false;
             self.held = None;
         }
-        let goal = if self.lined_up || along > 0.3 {
+        let lining_up = !(self.lined_up || along > 0.3);
+        let goal = if lining_up {
+            start
+        } else {
             let ahead = along + 0.6;
             (d.x + ahead * c, d.y + ahead * sn)
-        } else {
-            start
         };
         let want = (goal.1 - od.y).atan2(goal.0 - od.x);
         let mut err = wrap(want - od.theta);
+        if lining_up {
+            let far = (goal.0 - od.x).hypot(goal.1 - od.y);
+            err = self.detour.steer(&s, err, far, period_ms(ctx));
+        } else {
+            self.detour.reset();
+        }
         if self.lined_up && (-0.9..0.5).contains(&along) {
             // Between the posts: steer away from the nearer one.
             let left = min_in(&s, 0.5, 2.4).min(0.8);

@@ -21,26 +21,43 @@ pub struct HomeParams {
 pub struct HomeIn<'a> {
     /// The target.
     pub target: Input<'a, Target>,
+    /// The ring (going round what holds the approach).
+    pub sonar: Input<'a, Sonar>,
 }
 
-/// Homing: drive toward the tracked target, stop at `stop_distance`.
-#[derive(Default)]
-pub struct Home;
+/// Homing: drive toward the tracked target, stop at `stop_distance`. Held short of it with
+/// something in the way, it goes round ([`Detour`]).
+#[derive(Default, Serialize, Deserialize)]
+pub struct Home {
+    detour: Detour,
+    activation: Activation,
+}
 
 impl Skill for Home {
     type Params = HomeParams;
     type Inputs<'a> = HomeIn<'a>;
     type Outputs<'a> = DriveOut<'a>;
+    const STATE: State<Self> = State::kept(1);
     const PRIORITY: i32 = 4;
     fn compute(&mut self, ctx: &Ctx<HomeParams>, i: HomeIn, o: &mut DriveOut) -> SkillResult {
         let p = ctx.params;
         let t = *i.target;
+        if self.activation.begins(ctx) {
+            self.detour.reset();
+        }
         if !t.seen {
             return Ok(());
         }
-        let rotate = (p.gain * t.bearing).clamp(-1.0, 1.0);
+        let bearing = if t.range > p.stop_distance {
+            self.detour
+                .steer(&i.sonar, t.bearing, t.range, period_ms(ctx))
+        } else {
+            self.detour.reset();
+            t.bearing
+        };
+        let rotate = (p.gain * bearing).clamp(-1.0, 1.0);
         let translate = if t.range > p.stop_distance {
-            p.speed * t.bearing.cos().max(0.0)
+            p.speed * bearing.cos().max(0.0)
         } else {
             0.0
         };

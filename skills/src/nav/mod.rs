@@ -6,6 +6,7 @@
 
 mod avoid;
 mod barcode_track;
+pub(crate) mod detour;
 mod door_locate;
 mod explore;
 mod go_through;
@@ -18,6 +19,7 @@ mod wander;
 
 pub use avoid::*;
 pub use barcode_track::*;
+pub use detour::Detour;
 pub use door_locate::*;
 pub use explore::*;
 pub use go_through::*;

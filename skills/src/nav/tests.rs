@@ -49,6 +49,7 @@ fn avoid_turns_away_from_the_near_side_and_is_quiet_in_the_open() {
 fn home_converges_on_its_goal() {
     // Integrate the proposals with a unicycle: the robot ends near the goal.
     let mut h = Harness::<Home>::new();
+    h.input(HomeIn::SONAR, ring(|_| 5.0));
     let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 2.0f64);
     let goal = (4.0, 3.0);
     for _ in 0..2000 {

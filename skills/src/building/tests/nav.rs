@@ -148,3 +148,125 @@ fn wall_follow_passes_a_door_beside_it_and_door_locate_finds_the_door() {
         );
     }
 }
+
+/// A lab (10 m x 8 m) with its door in the east wall (y 3.4-4.6), the door's barcode in the
+/// south-east corner, and one box: the lab of the tests that go round a box.
+fn boxed_lab(start: [f64; 3], boxed: [f64; 4]) -> String {
+    let walls = [
+        [0.0, 0.0, 10.0, 0.0],
+        [10.0, 0.0, 10.0, 3.4],
+        [10.0, 4.6, 10.0, 8.0],
+        [10.0, 8.0, 0.0, 8.0],
+        [0.0, 8.0, 0.0, 0.0],
+    ];
+    let [x0, y0, x1, y1] = boxed;
+    let extra = format!("[[box]]\nmin = [{x0}, {y0}]\nmax = [{x1}, {y1}]\n");
+    world(start, &walls, &(extra + &barcode(7, 8.2, 0.05)))
+}
+
+/// `home` with `avoid` above it, a box between the robot and the barcode it remembers (the
+/// held-out lab south-detour's box A, the robot beside it facing away from the barcode, as
+/// where four runs of its first batch stood until the limit: `home` turned toward the
+/// barcode through the box and `avoid` turned it back): it goes round and comes near the
+/// barcode, touching nothing.
+#[test]
+fn home_goes_round_a_box_between_it_and_the_barcode() {
+    use crate::nav::{Avoid, Home, HomeIn};
+    let code = (8.2, 0.05);
+    for (start, seed) in [
+        ([3.3, 3.9, 1.3], 1),
+        ([3.05, 3.0, 1.3], 2),
+        ([3.1, 3.4, 1.8], 3),
+    ] {
+        let mut r = Robot::new(&boxed_lab(start, [3.8, 2.6, 5.2, 3.8]), seed);
+        let mut home = Harness::<Home>::new();
+        let mut avoid = Harness::<Avoid>::new();
+        let mut near = false;
+        for _ in 0..9000 {
+            // Where barcode_track keeps it: from the true pose (odometry drift aside).
+            let [x, y, th] = r.sim.pose;
+            let range = (code.0 - x).hypot(code.1 - y);
+            let target = Target {
+                seen: true,
+                visible: false,
+                id: 7,
+                x: code.0,
+                y: code.1,
+                range,
+                bearing: wrap((code.1 - y).atan2(code.0 - x) - th),
+            };
+            home.input(HomeIn::TARGET, target)
+                .input(HomeIn::SONAR, r.sonar);
+            let to = home.step().unwrap().output::<Drive>("drive").copied();
+            avoid.input("sonar", r.sonar);
+            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+            r.drive(arbitrate(&[(8, away), (4, to)]));
+            if range < 1.7 {
+                near = true;
+                break;
+            }
+        }
+        assert!(
+            near,
+            "from {start:?}: held short of the barcode, at {:?}",
+            r.sim.pose
+        );
+        assert!(
+            r.closest > 0.0,
+            "from {start:?}: touched something (closest {:.2})",
+            r.closest
+        );
+    }
+}
+
+/// `go_through` (with `avoid` at the passage's lowered safe distance) sent to a door whose
+/// axis runs through a box 2.6 m inside the door, the robot beside the box where five runs of
+/// building F's first batch stood until the limit: it goes round and through, touching
+/// nothing.
+#[test]
+fn go_through_goes_round_a_box_on_the_doors_axis() {
+    use crate::nav::{Avoid, AvoidParams, GoThrough};
+    for (start, seed) in [
+        ([6.08, 3.8, 0.0], 1),
+        ([6.0, 3.3, 0.2], 2),
+        ([5.5, 4.0, -0.2], 3),
+    ] {
+        let mut r = Robot::new(&boxed_lab(start, [6.6, 2.8, 7.4, 4.2]), seed);
+        let (dx, dy) = r.to_odom(10.0, 4.0);
+        let door = skillfab_msgs::Door {
+            found: true,
+            x: dx,
+            y: dy,
+            heading: 0.0,
+            width: 1.2,
+        };
+        let mut go = Harness::<GoThrough>::new();
+        let mut avoid = Harness::<Avoid>::new();
+        avoid.set(AvoidParams::SAFE_DISTANCE, 0.2).unwrap();
+        let mut through = false;
+        for _ in 0..9000 {
+            go.input(GoIn::DOOR, door)
+                .input(GoIn::ODOMETRY, r.odometry)
+                .input(GoIn::SONAR, r.sonar);
+            let out = go.step().unwrap();
+            through = out.output::<Progress>("progress").is_some_and(|p| p.done);
+            let drive = out.output::<Drive>("drive").copied();
+            avoid.input("sonar", r.sonar);
+            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+            r.drive(arbitrate(&[(8, away), (6, drive)]));
+            if through {
+                break;
+            }
+        }
+        assert!(
+            through && r.sim.pose[0] > 10.3,
+            "from {start:?}: not through, at {:?}",
+            r.sim.pose
+        );
+        assert!(
+            r.closest > 0.0,
+            "from {start:?}: touched something (closest {:.2})",
+            r.closest
+        );
+    }
+}

@@ -380,6 +380,7 @@ mod tests {
             "heldout/building-d.toml",
             "heldout/building-e.toml",
             "heldout/building-f.toml",
+            "heldout/building-g.toml",
         ] {
             let b = building(file);
             let segs = b.segments(b.start_floor);

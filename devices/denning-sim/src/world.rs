@@ -209,6 +209,7 @@ mod tests {
             "heldout/west-long",
             "heldout/row-gaps",
             "heldout/south-detour",
+            "heldout/north-maze",
         ] {
             let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("worlds/{w}.toml"));
             let world = World::load(&path).unwrap();

@@ -6,7 +6,7 @@
 
 mod avoid;
 mod barcode_track;
-pub(crate) mod detour;
+mod detour;
 mod door_locate;
 mod explore;
 mod go_through;

@@ -365,7 +365,7 @@ fn a_restarted_door_locate_keeps_its_readings_and_its_door() {
 }
 
 #[test]
-fn restarted_go_through_wall_follow_and_avoid_go_on_as_if_never_killed() {
+fn restarted_go_through_wall_follow_avoid_and_home_go_on_as_if_never_killed() {
     let door = Door {
         found: true,
         x: 3.0,
@@ -409,6 +409,28 @@ fn restarted_go_through_wall_follow_and_avoid_go_on_as_if_never_killed() {
         outputs_restarted_every(5, 800, DriveOut::DRIVE, avoid),
         outputs_restarted_every(0, 800, DriveOut::DRIVE, avoid),
     );
+    // home held at a box on the line to its target: going round starts after 8 s (800
+    // cycles) counted across the restarts.
+    let held = |h: &mut Harness<Home>, _| {
+        h.input(
+            HomeIn::TARGET,
+            Target {
+                seen: true,
+                range: 4.0,
+                ..Target::default()
+            },
+        )
+        .input(
+            HomeIn::SONAR,
+            ring(|a| if a.abs() < 0.7 { 0.3 } else { 5.0 }),
+        );
+    };
+    let home = outputs_restarted_every(5, 1000, DriveOut::DRIVE, held);
+    assert_eq!(
+        home,
+        outputs_restarted_every(0, 1000, DriveOut::DRIVE, held)
+    );
+    assert_ne!(home[0], home[999], "it went round");
 }
 
 #[test]
@@ -719,4 +741,47 @@ fn go_through_aims_away_from_a_post_it_cannot_pass() {
         d.rotate < 0.0,
         "turns right toward the moved approach point: {d:?}"
     );
+}
+
+#[test]
+fn a_detour_leaves_an_approach_alone_until_it_is_held_with_something_on_the_line() {
+    // 10 ms cycles: HELD_S is 800 of them, ROUND_S 3000.
+    let open = ring(|_| 5.0);
+    // A box ahead, 0.3 m from the ring over the front ±40°, clear elsewhere.
+    let boxed = ring(|a| if a.abs() < 0.7 { 0.3 } else { 5.0 });
+    let mut d = Detour::default();
+    for _ in 0..2000 {
+        assert_eq!(d.steer(&open, 0.2, 4.0, 10.0), 0.2, "held, the line clear");
+    }
+    let mut d = Detour::default();
+    for k in 0..800 {
+        assert_eq!(
+            d.steer(&boxed, 0.0, 4.0, 10.0),
+            0.0,
+            "cycle {k}: not held 8 s yet"
+        );
+    }
+    let first = d.steer(&boxed, 0.0, 4.0, 10.0);
+    assert!(first.abs() > 0.7, "round the box: {first}");
+    for _ in 0..3000 {
+        assert_eq!(d.steer(&boxed, 0.0, 4.0, 10.0).signum(), first.signum());
+    }
+    // Given up after 30 s: straight again, then held 8 s more, round the other side.
+    assert_eq!(d.steer(&boxed, 0.0, 4.0, 10.0), 0.0);
+    for _ in 0..800 {
+        d.steer(&boxed, 0.0, 4.0, 10.0);
+    }
+    let second = d.steer(&boxed, 0.0, 4.0, 10.0);
+    assert!(
+        second.signum() == -first.signum() && second.abs() > 0.7,
+        "{second}"
+    );
+    // The line clear (round the box): straight at once.
+    assert_eq!(d.steer(&open, 0.3, 3.5, 10.0), 0.3);
+    // Getting nearer resets the count: a slow approach with the box ahead is left alone.
+    let mut d = Detour::default();
+    for k in 0..5000 {
+        let far = 4.0 - 0.3 * f64::from(k / 700);
+        assert_eq!(d.steer(&boxed, 0.0, far.max(1.5), 10.0), 0.0, "cycle {k}");
+    }
 }

@@ -33,16 +33,13 @@ pub use leave_car::*;
 pub use push_button::*;
 pub use sign_read::*;
 
-use crate::nav::{Activation, DriveOut, RING, min_in, period_ms, range, wrap};
+use crate::nav::{Activation, CONE, DriveOut, RING, min_in, period_ms, range, wrap};
 use skill_sdk::prelude::*;
 use skillfab_msgs::{
     Arm, Barcodes, Car, Doors, Drive, Junction, Odometry, Progress, Push, SONARS, Say, Signs,
     Sonar, Target, Voice,
 };
 use std::f64::consts::{FRAC_PI_2, PI};
-
-/// Half a sonar cone (rad): a reading is the nearest echo within it.
-const CONE: f64 = 15.0 * PI / 180.0;
 
 /// Camera reports older than this are not "in view" (ms), as in `barcode_track`.
 const IN_VIEW_MS: f64 = 500.0;

@@ -46,8 +46,6 @@ pub const HALF_WIDTH: f64 = 0.55;
 const LANE_LENGTH: f64 = 1.2;
 /// Lanes tried round, from the goal's bearing outward (rad, 10°).
 const STEP: f64 = PI / 18.0;
-/// Half a sonar's cone (rad).
-const CONE: f64 = PI / 12.0;
 
 /// The side a detour goes round on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -38,10 +38,6 @@ pub struct DoorOut<'a> {
     pub door: Output<'a, Door>,
 }
 
-/// Radius of the sonar ring (m): ranges are measured from it.
-pub const RING: f64 = 0.36;
-/// Half the sonar cone (rad).
-const CONE: f64 = 15.0 * PI / 180.0;
 /// Incidence beyond which a ping reflects away from a wall instead of echoing (rad).
 const GRAZING: f64 = 65.0 * PI / 180.0;
 /// Width of an evidence bin along the wall (m).

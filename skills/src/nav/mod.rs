@@ -13,7 +13,7 @@ mod go_through;
 mod home;
 mod stop;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 mod wall_follow;
 mod wander;
 
@@ -42,6 +42,11 @@ pub fn sonar_angle(i: usize) -> f64 {
 pub fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
+
+/// Radius of the sonar ring (m): ranges are measured from it.
+pub const RING: f64 = 0.36;
+/// Half a sonar's cone (rad): a reading is the nearest echo within it.
+pub const CONE: f64 = 15.0 * PI / 180.0;
 
 /// How far a sonar reaches (m): a longer range, or no echo, counts as this.
 const SONAR_REACH: f64 = 10.0;

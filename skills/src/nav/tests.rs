@@ -165,7 +165,7 @@ const DOOR_WORLD: &str = "name = 'door'\nstart = [0.0, 0.0, 0.0]\n\
     [[barcode]]\nid = 7\nat = [1.95, -0.4]\n";
 
 /// The door's barcode at `code`, seen before and out of view now, from pose `od`.
-fn remembered(code: (f64, f64), od: &Odometry) -> Target {
+pub(crate) fn remembered(code: (f64, f64), od: &Odometry) -> Target {
     let (dx, dy) = (code.0 - od.x, code.1 - od.y);
     Target {
         seen: true,

@@ -171,6 +171,7 @@ fn boxed_lab(start: [f64; 3], boxed: [f64; 4]) -> String {
 /// barcode, touching nothing.
 #[test]
 fn home_goes_round_a_box_between_it_and_the_barcode() {
+    use crate::nav::tests::remembered;
     use crate::nav::{Avoid, Home, HomeIn};
     let code = (8.2, 0.05);
     for (start, seed) in [
@@ -184,24 +185,23 @@ fn home_goes_round_a_box_between_it_and_the_barcode() {
         let mut near = false;
         for _ in 0..9000 {
             // Where barcode_track keeps it: from the true pose (odometry drift aside).
-            let [x, y, th] = r.sim.pose;
-            let range = (code.0 - x).hypot(code.1 - y);
-            let target = Target {
-                seen: true,
-                visible: false,
-                id: 7,
-                x: code.0,
-                y: code.1,
-                range,
-                bearing: wrap((code.1 - y).atan2(code.0 - x) - th),
-            };
+            let [x, y, theta] = r.sim.pose;
+            let target = remembered(
+                code,
+                &Odometry {
+                    x,
+                    y,
+                    theta,
+                    ..Odometry::default()
+                },
+            );
             home.input(HomeIn::TARGET, target)
                 .input(HomeIn::SONAR, r.sonar);
             let to = home.step().unwrap().output::<Drive>("drive").copied();
             avoid.input("sonar", r.sonar);
             let away = avoid.step().unwrap().output::<Drive>("drive").copied();
             r.drive(arbitrate(&[(8, away), (4, to)]));
-            if range < 1.7 {
+            if target.range < 1.7 {
                 near = true;
                 break;
             }

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
 /// The format's version: a kept state of another is unreadable (and said so).
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
 /// A plan's execution state, as kept between runners.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -38,8 +38,8 @@ pub struct PlanState {
     pub overrides: Vec<Override>,
     /// When the plan started by the wall clock (the origin of its time over a bridge).
     pub started: SystemTime,
-    /// The fabric's time at the last tick.
-    pub at: Duration,
+    /// The fabric's time at the plan's last tick: none before its first, or after a halt.
+    pub ticked: Option<Duration>,
 }
 
 /// What a runner found.
@@ -122,7 +122,7 @@ impl PlanState {
             fired: Vec::new(),
             overrides: Vec::new(),
             started: SystemTime::now(),
-            at: Duration::ZERO,
+            ticked: None,
         }
     }
 }

@@ -247,12 +247,12 @@ impl Sequencer {
                 let why = format!(
                     "the kept plan state is unreadable ({why}); what it set cannot be restored"
                 );
-                return self.opened(fabric, Opening::StartedOver { why });
+                return self.opened(Opening::StartedOver { why });
             }
             Kept::State(s) => Some(*s),
         };
         let Some(old) = old else {
-            return self.opened(fabric, Opening::Fresh);
+            return self.opened(Opening::Fresh);
         };
         let (file, tree) = (&k.state.file, &k.state.tree);
         let mut why = if k.fresh {
@@ -287,7 +287,7 @@ impl Sequencer {
         }
         let why = why.unwrap_or_default();
         self.undo(fabric, &old, &why)?;
-        self.opened(fabric, Opening::StartedOver { why })
+        self.opened(Opening::StartedOver { why })
     }
 
     /// Undoes what the runners of `old` left set (their overrides, latest first) and
@@ -415,6 +415,7 @@ impl Sequencer {
             .duration_since(old.started)
             .unwrap_or_default();
         self.origin = Instant::now().checked_sub(since).unwrap_or(self.origin);
+        k.state.ticked = old.ticked;
         self.steps.push(format!(
             "resuming {} (runner {} of it) at: {}; monitors: {live} taken over, {fired} fired meanwhile, {} installed again",
             k.state.file,
@@ -422,28 +423,31 @@ impl Sequencer {
             if at.is_empty() { "its start".to_string() } else { at.join("; ") },
             gone.len()
         ));
-        self.opened(fabric, Opening::Resumed { at })
+        self.opened(Opening::Resumed { at })
     }
 
-    fn opened(&mut self, fabric: &mut dyn Fabric, o: Opening) -> Result<Opening, SeqError> {
+    fn opened(&mut self, o: Opening) -> Result<Opening, SeqError> {
         if let Some(k) = self.keep.as_mut() {
             k.opened = Some(o.clone());
         }
-        self.commit(fabric.now());
+        self.commit(None);
         Ok(o)
     }
 
-    /// Keeps the plan's state as it is now (after a tick).
-    fn commit(&mut self, now: std::time::Duration) {
+    /// Keeps the plan's state as it is now: after a tick at fabric time `ticked`, or with
+    /// the last tick's time unchanged (`None`: a runner's opening, a halt sets it apart).
+    fn commit(&mut self, ticked: Option<Duration>) {
         let Some(k) = self.keep.as_mut() else {
             return;
         };
+        if ticked.is_some() {
+            k.state.ticked = ticked;
+        }
         k.state.nodes.clear();
         self.root.save(&mut k.state.nodes);
         k.state.fired = self.fired.iter().copied().collect();
         k.state.fired.sort_unstable();
         k.state.overrides.clone_from(&self.overrides);
-        k.state.at = now;
         save(k);
     }
 
@@ -458,6 +462,16 @@ impl Sequencer {
     /// lock-step the plan waits for it to pause).
     fn resumed(&self) -> bool {
         matches!(self.opening(), Some(Opening::Resumed { .. }))
+    }
+
+    /// Whether the plan was taken over from a runner that ticked it at fabric time `now` (the
+    /// cycle the paused manager is in) and died before resuming the manager.
+    fn ticked_at(&self, now: Duration) -> bool {
+        self.resumed()
+            && self
+                .keep
+                .as_ref()
+                .is_some_and(|k| k.state.ticked == Some(now))
     }
 
     /// When the plan started: the origin of its wall-clock time over a bridge.
@@ -514,7 +528,7 @@ impl Sequencer {
         let status = self.root.tick(&mut cx)?;
         let now = fabric.now();
         match status {
-            Status::Running => self.commit(now),
+            Status::Running => self.commit(Some(now)),
             // The plan ended: nothing to take over.
             Status::Success | Status::Failure => self.ended(),
         }
@@ -549,8 +563,11 @@ impl Sequencer {
             status: &mut self.live.status,
         };
         self.root.halt(&mut cx);
-        let now = fabric.now();
-        self.commit(now);
+        // A halted tree was not ticked: its next runner ticks it at once.
+        if let Some(k) = self.keep.as_mut() {
+            k.state.ticked = None;
+        }
+        self.commit(None);
     }
 
     /// The earliest fabric time a running timer (`Sleep`, `Timeout`) of the plan is due.
@@ -695,16 +712,24 @@ fn drive(
         on_step(client, &s);
     }
     let mut lockstep = LockStep::of(client);
-    // A plan taken over while its lock-step manager runs (its last runner died after `run`
-    // or inside a `step`): the manager pauses at the next firing or the step's end.
     if seq.resumed()
         && let Some(l) = lockstep.as_mut()
-        && client
+    {
+        if client
             .stats()
             .map_err(failed("reading the manager's state"))?
             .running
-    {
-        (l.paused, l.until_paused) = (false, true);
+        {
+            // Taken over while the manager runs (its last runner died after `run` or inside a
+            // `step`): the manager pauses at the next firing or the step's end.
+            (l.paused, l.until_paused) = (false, true);
+        } else if client.clock().is_some_and(|c| seq.ticked_at(c.time)) {
+            // Its last runner ticked the plan in this cycle and died before resuming the
+            // manager: resumed as that runner would have. Ticked again in the same cycle, a
+            // retry's next attempt (due at the next tick) would start a cycle early.
+            l.resume(client, seq)
+                .map_err(failed("resuming the lock-step manager"))?;
+        }
     }
     loop {
         if stop() {

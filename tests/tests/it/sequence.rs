@@ -267,7 +267,10 @@ fn a_plan_runner_killed_inside_a_with_param_a_retry_and_a_timeout_is_resumed_to_
     // 5 ms a cycle: each attempt times out after 40 cycles; the ticker (one a cycle) passes
     // the mark in the third. Killed after the parameter is set, after each failed attempt
     // and inside the sleep, the runners together end the plan in the cycle one runner does.
-    let run = |kills: &[&str]| -> (u64, String) {
+    // A runner goes on pacing the manager until the kill lands, so each is killed while the
+    // test holds the fabric at the cycle its line is said in (`holds`: that many cycles after
+    // the start): where each runner dies is the same every run, however loaded the host.
+    let run = |kills: &[&str], holds: &[u64]| -> (u64, String) {
         // The manager waits for the plan: the ticker's value now is where it starts.
         let tick = c.query("ticker.tick.value").unwrap().0.as_f64().unwrap() as u64;
         let p = plan(
@@ -290,26 +293,40 @@ fn a_plan_runner_killed_inside_a_with_param_a_retry_and_a_timeout_is_resumed_to_
             ),
         );
         let mut text = String::new();
-        for k in kills {
+        // The manager stays paused where the last plan ended: the plan starts there.
+        let at = c.stats().unwrap().cycles;
+        for (k, h) in kills.iter().zip(holds) {
+            c.hold(Some(at + h)).unwrap();
             Runner::start(&t, &p).until(Some(k), &mut text);
+            assert_eq!(cycle_of(&text, "start"), at, "{text}");
         }
+        c.hold(None).unwrap();
         Runner::start(&t, &p).until(None, &mut text);
         let start = cycle_of(&text, "start");
         (cycle_of(&text, "done") - start, text)
     };
-    let (whole, text) = run(&[]);
-    assert!(whole > 100, "{text}");
-    assert_eq!(
-        c.get_param("scale", "gain").unwrap(),
-        ParamValue::Float(2.0)
-    );
-    let (killed, text) = run(&[
+    let kills = [
         "scale.gain = 7 while Sequence (was 2)",
         "look: timed out after 200 ms",
         "RetryUntilSuccessful: attempt 2 failed; again",
         "marked",
-    ]);
+    ];
+    let (whole, text) = run(&[], &[]);
+    assert!(whole > 100, "{text}");
+    // Where each kill lands: the cycle its line is first said in, counted from the start.
+    let holds: Vec<u64> = kills
+        .iter()
+        .map(|k| cycle_of(&text, k) - cycle_of(&text, "start"))
+        .collect();
+    assert_eq!(
+        c.get_param("scale", "gain").unwrap(),
+        ParamValue::Float(2.0)
+    );
+    let (killed, text) = run(&kills, &holds);
     assert_eq!(killed, whole, "{text}");
+    for (k, h) in kills.iter().zip(&holds) {
+        assert_eq!(cycle_of(&text, k) - cycle_of(&text, "start"), *h, "{text}");
+    }
     assert_eq!(text.matches("resuming").count(), 4, "{text}");
     // What the plan set is restored, and no runner left a monitor behind.
     assert_eq!(

@@ -15,7 +15,18 @@ pub struct AvoidParams {
     /// Forward speed while turning away (m/s).
     #[param(default = 0.05, min = -0.3, max = 0.5)]
     pub creep: f64,
+    /// An echo that can only come from this far beyond the robot's side or more (m), or
+    /// from behind its centre, is beside the way ahead and does not make it take over: the
+    /// robot drives through a gap twice this wider than itself. At [`EVERY_ECHO`] (the
+    /// default) every echo in the arcs counts, wherever it may come from: the corridor skills
+    /// turn in lobbies with avoid turning at what is beside them. The exit-lab plan searches
+    /// a lab at 0.15 (the lab's boxes may leave gaps 1.4 m wide).
+    #[param(default = 10.0, min = 0.0, max = 10.0)]
+    pub beside: f64,
 }
+
+/// `beside` at which every echo in avoid's arcs counts (its largest value).
+pub const EVERY_ECHO: f64 = 10.0;
 
 /// Input of sonar-driven skills.
 #[derive(Inputs)]
@@ -25,7 +36,11 @@ pub struct SonarIn<'a> {
 }
 
 /// Obstacle avoidance from the sonar ring: when something is closer than `safe_distance`
-/// in the front arc, turn toward the freer side; otherwise propose nothing.
+/// in the front arc (±46°), or than half of it on the flanks (46°–80°), turn toward the freer
+/// side; otherwise propose nothing. With `beside` lowered, an echo counts only if it may come
+/// from the way ahead ([`echo_places`]): one `beside` or more beyond the robot's side does
+/// not. A box's corner passed 0.34 m off, in a gap 1.4 m wide, is seen by the sonars 45°–75°
+/// off the front well inside their arcs: with every echo counted the robot is held there.
 #[derive(Default, Serialize, Deserialize)]
 pub struct Avoid {
     /// Side chosen while an obstacle persists (stops dithering): +1 left, −1 right.
@@ -41,9 +56,10 @@ impl Skill for Avoid {
     fn compute(&mut self, ctx: &Ctx<AvoidParams>, i: SonarIn, o: &mut DriveOut) -> SkillResult {
         let p = ctx.params;
         // The front arc at the safe distance, the flanks at half of it.
-        let front = min_in(&i.sonar, -0.8, 0.8)
-            .min(2.0 * min_in(&i.sonar, -1.4, -0.8))
-            .min(2.0 * min_in(&i.sonar, 0.8, 1.4));
+        let ahead = |from, to| min_ahead(&i.sonar, from, to, p.beside);
+        let front = ahead(-0.8, 0.8)
+            .min(2.0 * ahead(-1.4, -0.8))
+            .min(2.0 * ahead(0.8, 1.4));
         if front >= p.safe_distance {
             self.side = 0.0;
             return Ok(());
@@ -64,4 +80,22 @@ impl Skill for Avoid {
         });
         Ok(())
     }
+}
+
+/// The smallest range among sonars whose angle lies within `[from, to]` (rad) and whose
+/// echo may come from the way ahead: not only from `beside` (m) or more beyond the robot's
+/// side, or from behind its centre (at [`EVERY_ECHO`], every sonar's).
+fn min_ahead(s: &Sonar, from: f64, to: f64, beside: f64) -> f64 {
+    if beside >= EVERY_ECHO {
+        return min_in(s, from, to);
+    }
+    (0..SONARS)
+        .filter(|&i| (from..=to).contains(&sonar_angle(i)))
+        .filter(|&i| {
+            let mut ahead = false;
+            echo_places(s, i, |x, y| ahead |= x > 0.0 && y.abs() < RING + beside);
+            ahead
+        })
+        .filter_map(|i| range(s, i))
+        .fold(f64::INFINITY, f64::min)
 }

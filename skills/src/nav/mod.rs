@@ -68,6 +68,64 @@ pub(crate) fn min_in(s: &Sonar, from: f64, to: f64) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// Rays per side of a sonar's axis an echo is placed on (the cone sampled every 5°).
+const RAYS: i32 = 3;
+/// A place nearer than another sonar's reading by this much (m), inside its cone, is clear:
+/// the reading's noise and a margin.
+const CARVE: f64 = 0.1;
+
+/// Where sonar `i`'s echo may come from, each place given to `f` (m, the robot's frame, from
+/// its centre). A reading is the nearest echo somewhere in the cone: any of its rays (every
+/// 5°) at the range read — unless another sonar that heard an echo reads farther there (the
+/// place is inside its cone and nearer than its reading by [`CARVE`]), for then nothing is
+/// there. A side wall seen by a sonar 45° off the front comes from its cone's outer rays:
+/// the inner ones fall in the cone of the sonar 15° nearer the front, which reads farther.
+/// When every ray is ruled out (the readings disagree) the cone's axis is kept. No place
+/// for a sonar not read or with no echo.
+pub(crate) fn echo_places(s: &Sonar, i: usize, mut f: impl FnMut(f64, f64)) {
+    let Some(r) = heard(s, i) else {
+        return;
+    };
+    let axis = sonar_angle(i);
+    let place = |k: i32| {
+        let a = axis + f64::from(k) * CONE / f64::from(RAYS);
+        (
+            RING * axis.cos() + r * a.cos(),
+            RING * axis.sin() + r * a.sin(),
+        )
+    };
+    let clear = |(x, y): (f64, f64)| {
+        (0..SONARS).any(|j| {
+            let Some(rj) = heard(s, j).filter(|_| j != i % SONARS) else {
+                return false;
+            };
+            let aj = sonar_angle(j);
+            let (dx, dy) = (x - RING * aj.cos(), y - RING * aj.sin());
+            wrap(dy.atan2(dx) - aj).abs() <= CONE && dx.hypot(dy) < rj - CARVE
+        })
+    };
+    let mut any = false;
+    for k in -RAYS..=RAYS {
+        let p = place(k);
+        if !clear(p) {
+            any = true;
+            f(p.0, p.1);
+        }
+    }
+    if !any {
+        let (x, y) = place(0);
+        f(x, y);
+    }
+}
+
+/// Sonar `i`'s range when it heard an echo (m, from the ring).
+fn heard(s: &Sonar, i: usize) -> Option<f64> {
+    match s.echo(i % SONARS)? {
+        skillfab_msgs::Echo::Range(r) if r < SONAR_REACH => Some(r),
+        _ => None,
+    }
+}
+
 /// The cycle period (ms) a skill times things in, counting cycles: the manager's nominal
 /// period, or its default (10 ms) when it free-runs without one.
 pub(crate) fn period_ms<P>(ctx: &Ctx<'_, P>) -> f64 {

@@ -45,6 +45,60 @@ fn avoid_turns_away_from_the_near_side_and_is_quiet_in_the_open() {
     assert!(h.step().unwrap().output(DriveOut::DRIVE).is_none());
 }
 
+/// The ring in a passage `wide` (m) with the robot on its centre line, facing along it, and
+/// a wall across it `ahead` (m from the centre): each sonar reads the nearest of its cone's
+/// seven rays (every 5°, as the simulator casts them), from the ring.
+fn passage(wide: f64, ahead: f64) -> Sonar {
+    ring(|a| {
+        let (ox, oy) = (RING * a.cos(), RING * a.sin());
+        (-3..=3)
+            .map(|k| {
+                let ray = a + f64::from(k) * CONE / 3.0;
+                let (c, s) = (ray.cos(), ray.sin());
+                let side = if s.abs() > 1e-9 {
+                    (wide / 2.0 * s.signum() - oy) / s
+                } else {
+                    f64::INFINITY
+                };
+                let front = if c > 1e-9 {
+                    (ahead - ox) / c
+                } else {
+                    f64::INFINITY
+                };
+                side.min(front)
+            })
+            .fold(f64::INFINITY, f64::min)
+            .min(9.0)
+    })
+}
+
+/// In a passage 1.4 m wide (0.34 m each side of the robot), the sonars 45°–75° off the
+/// front read the side walls under the safe distance: with every echo counted avoid takes
+/// over; with `beside` at 0.15 those echoes can only come from beside the way ahead, and it
+/// is quiet — until a wall across the passage comes within the safe distance.
+#[test]
+fn avoid_with_beside_lowered_lets_the_robot_down_a_passage_and_turns_at_its_end() {
+    let open = passage(1.4, 9.0);
+    let mut h = Harness::<Avoid>::new();
+    h.input(SonarIn::SONAR, open);
+    assert!(
+        h.step().unwrap().output(DriveOut::DRIVE).is_some(),
+        "every echo counted: the side walls hold it"
+    );
+    let mut h = Harness::<Avoid>::new();
+    h.set(AvoidParams::BESIDE, 0.15).unwrap();
+    h.input(SonarIn::SONAR, open);
+    assert!(h.step().unwrap().output(DriveOut::DRIVE).is_none());
+    // A wall across it 0.9 m ahead (0.54 m from the ring): it takes over.
+    h.input(SonarIn::SONAR, passage(1.4, 0.9));
+    assert!(h.step().unwrap().output(DriveOut::DRIVE).is_some());
+    // Narrower than 0.15 m beyond each side of the robot (1.0 m): it takes over.
+    let mut h = Harness::<Avoid>::new();
+    h.set(AvoidParams::BESIDE, 0.15).unwrap();
+    h.input(SonarIn::SONAR, passage(1.0, 9.0));
+    assert!(h.step().unwrap().output(DriveOut::DRIVE).is_some());
+}
+
 #[test]
 fn home_converges_on_its_goal() {
     // Integrate the proposals with a unicycle: the robot ends near the goal.

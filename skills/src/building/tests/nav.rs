@@ -219,6 +219,84 @@ fn home_goes_round_a_box_between_it_and_the_barcode() {
     }
 }
 
+/// A lab split by a row of two boxes with a gap 1.4 m wide between them (0.34 m each side of
+/// the robot; the held-out lab north-maze's gaps), the barcode beyond it on the gap's line:
+/// `home` with `avoid` above it drives through, touching nothing. With every echo in
+/// `avoid`'s arcs counted (`beside` at its default), the boxes' corners, seen by the sonars
+/// 45°–75° off the front, hold it at the gap.
+#[test]
+fn home_drives_through_a_gap_0_34_m_wider_than_the_robot_each_side() {
+    use crate::nav::tests::remembered;
+    use crate::nav::{Avoid, AvoidParams, Home, HomeIn};
+    let code = (5.0, 7.95);
+    let walls = [
+        [0.0, 0.0, 10.0, 0.0],
+        [10.0, 0.0, 10.0, 8.0],
+        [10.0, 8.0, 0.0, 8.0],
+        [0.0, 8.0, 0.0, 0.0],
+    ];
+    // The gaps to the walls (0.6 m) are narrower than the robot.
+    let boxes = "[[box]]\nmin = [0.6, 3.6]\nmax = [4.3, 4.4]\n\
+                 [[box]]\nmin = [5.7, 3.6]\nmax = [9.4, 4.4]\n";
+    let through = |start: [f64; 3], seed, beside: f64| {
+        let lab = world(
+            start,
+            &walls,
+            &format!("{boxes}{}", barcode(7, code.0, code.1)),
+        );
+        let mut r = Robot::new(&lab, seed);
+        let mut home = Harness::<Home>::new();
+        let mut avoid = Harness::<Avoid>::new();
+        avoid.set(AvoidParams::BESIDE, beside).unwrap();
+        for _ in 0..6000 {
+            let [x, y, theta] = r.sim.pose;
+            let target = remembered(
+                code,
+                &Odometry {
+                    x,
+                    y,
+                    theta,
+                    ..Odometry::default()
+                },
+            );
+            home.input(HomeIn::TARGET, target)
+                .input(HomeIn::SONAR, r.sonar);
+            let to = home.step().unwrap().output::<Drive>("drive").copied();
+            avoid.input("sonar", r.sonar);
+            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+            r.drive(arbitrate(&[(8, away), (4, to)]));
+            if r.sim.pose[1] > 5.0 {
+                break;
+            }
+        }
+        r
+    };
+    for (start, seed) in [
+        ([5.0, 1.5, FRAC_PI_2], 1),
+        ([4.6, 1.2, 1.3], 2),
+        ([5.5, 1.0, 1.9], 3),
+    ] {
+        // As the exit-lab plan searches a lab.
+        let r = through(start, seed, 0.15);
+        assert!(
+            r.sim.pose[1] > 5.0,
+            "from {start:?}: held short of the gap, at {:?}",
+            r.sim.pose
+        );
+        assert!(
+            r.closest > 0.0,
+            "from {start:?}: touched something (closest {:.2})",
+            r.closest
+        );
+        let r = through(start, seed, crate::nav::EVERY_ECHO);
+        assert!(
+            r.sim.pose[1] < 5.0,
+            "from {start:?}: through with every echo counted, at {:?}",
+            r.sim.pose
+        );
+    }
+}
+
 /// `go_through` (with `avoid` at the passage's lowered safe distance) sent to a door whose
 /// axis runs through a box 2.6 m inside the door, the robot beside the box where five runs of
 /// building F's first batch stood until the limit: it goes round and through, touching

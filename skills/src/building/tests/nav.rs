@@ -297,6 +297,74 @@ fn home_drives_through_a_gap_0_34_m_wider_than_the_robot_each_side() {
     }
 }
 
+/// The held-out lab north-maze's boxes D and B, whose corners leave a gap 1.4 m wide, the
+/// barcode beyond it to the north-west: `home` (with `avoid` as the exit-lab plan searches)
+/// from south of the gap, where runs of its second batch stood for four minutes — the line
+/// to the barcode passes 0.43 m from D's corner, `avoid` turned the robot away and `home`
+/// turned it back — goes round through the gap and comes near the barcode, touching nothing.
+#[test]
+fn home_held_by_a_corner_beside_the_line_goes_through_the_gap_beside_it() {
+    use crate::nav::tests::remembered;
+    use crate::nav::{Avoid, AvoidParams, Home, HomeIn};
+    let code = (1.2, 7.95);
+    let walls = [
+        [0.0, 0.0, 10.0, 0.0],
+        [10.0, 0.0, 10.0, 8.0],
+        [10.0, 8.0, 0.0, 8.0],
+        [0.0, 8.0, 0.0, 0.0],
+    ];
+    let boxes = "[[box]]\nmin = [3.8, 4.4]\nmax = [5.4, 5.2]\n\
+                 [[box]]\nmin = [1.4, 3.4]\nmax = [2.4, 4.4]\n";
+    for (start, seed) in [
+        ([3.1, 3.8, 2.0], 1),
+        ([3.3, 3.7, 1.6], 2),
+        ([3.0, 3.6, 2.3], 3),
+    ] {
+        let lab = world(
+            start,
+            &walls,
+            &format!("{boxes}{}", barcode(7, code.0, code.1)),
+        );
+        let mut r = Robot::new(&lab, seed);
+        let mut home = Harness::<Home>::new();
+        let mut avoid = Harness::<Avoid>::new();
+        avoid.set(AvoidParams::BESIDE, 0.15).unwrap();
+        let mut near = false;
+        for _ in 0..9000 {
+            let [x, y, theta] = r.sim.pose;
+            let target = remembered(
+                code,
+                &Odometry {
+                    x,
+                    y,
+                    theta,
+                    ..Odometry::default()
+                },
+            );
+            home.input(HomeIn::TARGET, target)
+                .input(HomeIn::SONAR, r.sonar);
+            let to = home.step().unwrap().output::<Drive>("drive").copied();
+            avoid.input("sonar", r.sonar);
+            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+            r.drive(arbitrate(&[(8, away), (4, to)]));
+            if target.range < 1.7 {
+                near = true;
+                break;
+            }
+        }
+        assert!(
+            near,
+            "from {start:?}: held short of the barcode, at {:?}",
+            r.sim.pose
+        );
+        assert!(
+            r.closest > 0.0,
+            "from {start:?}: touched something (closest {:.2})",
+            r.closest
+        );
+    }
+}
+
 /// `go_through` (with `avoid` at the passage's lowered safe distance) sent to a door whose
 /// axis runs through a box 2.6 m inside the door, the robot beside the box where five runs of
 /// building F's first batch stood until the limit: it goes round and through, touching

@@ -6,19 +6,21 @@
 //! box for good.
 //!
 //! A [`Detour`] watches the approach: held [`HELD_S`] without getting [`PROGRESS`] nearer,
-//! with something on the line to the goal (the lane toward the goal is not clear for
-//! [`NEAR`] beyond the ring, nor [`SHORT`] short of the goal), it takes a side and steers
-//! for the clear lane nearest the goal on that side, until the line is clear. A lane is clear
-//! when the ring sees nothing in it: [`HALF_WIDTH`] each side of its centre line, each echo
-//! wherever in its cone the other readings leave it room ([`echo_places`]: a gap 1.4 m wide
-//! is a lane, a box's corner 0.45 m off the line is not). Until a detour starts the
-//! approach's bearing is returned as it is: an approach that is not held, or held with its
-//! line clear, is not changed.
+//! with something on the line to the goal (a sonar facing within [`ON_LINE`] of the goal's
+//! bearing reads under [`NEAR`], and [`SHORT`] short of the goal), it takes a side and steers
+//! for the clear lane nearest the goal on that side, until no sonar facing within
+//! [`OFF_LINE`] of the goal reads so near. A lane is clear when the ring sees nothing in it:
+//! [`HALF_WIDTH`] each side of its centre line for [`LANE_LENGTH`], each echo wherever in its
+//! cone the other readings leave it room ([`echo_places`]: a gap 1.4 m wide is a lane).
+//! Until a detour starts the approach's bearing is
+//! returned as it is: an approach that is not held, or held with its line clear, is not
+//! changed.
 //!
-//! The line is judged only near: out to the goal, the wall the goal is on would block it. A
-//! wall near and nearly along the line can still count (a barcode approached within 0.55 m
-//! of its wall at a shallow angle); a detour started there cannot end round, and gives up
-//! after [`ROUND_S`], one side after the other.
+//! The line is judged from the sonars facing the goal and only near: a lane test out to the
+//! goal saw a wall the goal is on, or one the robot runs beside, as blocking (each cone spans
+//! 30°). A wall near and nearly along the line can still count (a barcode approached within
+//! 0.65 m of its wall at a shallow angle); a detour started there cannot end round, and gives
+//! up after [`ROUND_S`], one side after the other.
 
 use super::*;
 
@@ -35,6 +37,10 @@ pub const NEAR: f64 = 1.0;
 /// ... and this much short of the goal (m): the goal's own wall, seen through the cone's
 /// edge, reads a little short of it ...
 pub const SHORT: f64 = 0.5;
+/// ... on the line: a sonar facing within this of the goal's bearing (rad, 15°) ...
+pub const ON_LINE: f64 = PI / 12.0;
+/// ... and round it when no sonar facing within this of it reads so near (rad, 20°).
+pub const OFF_LINE: f64 = PI / 9.0;
 /// Half a lane (m, from its centre line): the robot's radius (0.36 m) and a margin.
 pub const HALF_WIDTH: f64 = 0.55;
 /// The lane the robot takes round must be clear this far (m, from its centre).
@@ -103,7 +109,7 @@ impl Detour {
         let cycles = |secs: f64| (secs * 1000.0 / period_ms.max(1.0)) as u32;
         let side = match self.side {
             None => {
-                if self.since < cycles(HELD_S) || !on_the_line(s, bearing, far) {
+                if self.since < cycles(HELD_S) || !on_the_line(s, bearing, far, ON_LINE) {
                     return bearing;
                 }
                 let side = self
@@ -112,7 +118,7 @@ impl Detour {
                 self.remaining = cycles(ROUND_S);
                 side
             }
-            Some(side) if self.remaining == 0 || !on_the_line(s, bearing, far) => {
+            Some(side) if self.remaining == 0 || !on_the_line(s, bearing, far, OFF_LINE) => {
                 // Given up, or round: straight again, counting afresh.
                 self.gave_up = (self.remaining == 0).then_some(side);
                 self.side = None;
@@ -129,10 +135,13 @@ impl Detour {
 }
 
 /// Whether something is near on the line to a goal at `bearing` (rad, the robot's frame) and
-/// `far` (m, from the robot's centre): the lane toward it is not clear for [`NEAR`] beyond
-/// the ring, nor [`SHORT`] short of the goal.
-fn on_the_line(s: &Sonar, bearing: f64, far: f64) -> bool {
-    !clear(s, bearing, RING + NEAR.min(far - RING - SHORT))
+/// `far` (m, from the robot's centre): a sonar facing within `within` of it reads under
+/// [`NEAR`] and [`SHORT`] short of the goal.
+fn on_the_line(s: &Sonar, bearing: f64, far: f64, within: f64) -> bool {
+    let near = NEAR.min(far - RING - SHORT);
+    (0..SONARS).any(|i| {
+        wrap(sonar_angle(i) - bearing).abs() <= within && range(s, i).is_some_and(|r| r < near)
+    })
 }
 
 /// Whether the lane toward `heading` (rad, the robot's frame) is clear for `length` (m from

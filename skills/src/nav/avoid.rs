@@ -18,9 +18,9 @@ pub struct AvoidParams {
     /// An echo that can only come from this far beyond the robot's side or more (m), or
     /// from behind its centre, is beside the way ahead and does not make it take over: the
     /// robot drives through a gap twice this wider than itself. At [`EVERY_ECHO`] (the
-    /// default) every echo in the arcs counts, wherever it may come from: the corridor skills
-    /// turn in lobbies with avoid turning at what is beside them. The exit-lab plan searches
-    /// a lab at 0.15 (the lab's boxes may leave gaps 1.4 m wide).
+    /// default) every echo in the arcs counts, wherever it may come from, as before the
+    /// parameter: the corridor skills turn in lobbies with avoid turning at what is beside
+    /// them, and no shipped plan lowers it yet (docs/measurements.md, "Gaps 1.4 m wide").
     #[param(default = 10.0, min = 0.0, max = 10.0)]
     pub beside: f64,
 }

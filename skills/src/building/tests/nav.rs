@@ -276,7 +276,7 @@ fn home_drives_through_a_gap_0_34_m_wider_than_the_robot_each_side() {
         ([4.6, 1.2, 1.3], 2),
         ([5.5, 1.0, 1.9], 3),
     ] {
-        // As the exit-lab plan searches a lab.
+        // Beside the way ahead from 0.15 m beyond the robot's side.
         let r = through(start, seed, 0.15);
         assert!(
             r.sim.pose[1] > 5.0,

@@ -164,6 +164,43 @@ fn boxed_lab(start: [f64; 3], boxed: [f64; 4]) -> String {
     world(start, &walls, &(extra + &barcode(7, 8.2, 0.05)))
 }
 
+/// `home` toward the barcode at `code` with `avoid` above it (`beside` set), both stepped on
+/// `r` until `done` holds of the robot and the target `home` was given, at most `cycles`;
+/// whether it did. The target is where `barcode_track` keeps it: from the true pose
+/// (odometry drift aside).
+fn home_until(
+    r: &mut Robot,
+    code: (f64, f64),
+    beside: f64,
+    cycles: u32,
+    done: impl Fn(&Robot, &Target) -> bool,
+) -> bool {
+    use crate::nav::tests::remembered;
+    use crate::nav::{Avoid, AvoidParams, Home, HomeIn};
+    let mut home = Harness::<Home>::new();
+    let mut avoid = Harness::<Avoid>::new();
+    avoid.set(AvoidParams::BESIDE, beside).unwrap();
+    (0..cycles).any(|_| {
+        let [x, y, theta] = r.sim.pose;
+        let target = remembered(
+            code,
+            &Odometry {
+                x,
+                y,
+                theta,
+                ..Odometry::default()
+            },
+        );
+        home.input(HomeIn::TARGET, target)
+            .input(HomeIn::SONAR, r.sonar);
+        let to = home.step().unwrap().output::<Drive>("drive").copied();
+        avoid.input("sonar", r.sonar);
+        let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+        r.drive(arbitrate(&[(8, away), (4, to)]));
+        done(r, &target)
+    })
+}
+
 /// `home` with `avoid` above it, a box between the robot and the barcode it remembers (the
 /// held-out lab south-detour's box A, the robot beside it facing away from the barcode, as
 /// where four runs of its first batch stood until the limit: `home` turned toward the
@@ -171,8 +208,6 @@ fn boxed_lab(start: [f64; 3], boxed: [f64; 4]) -> String {
 /// barcode, touching nothing.
 #[test]
 fn home_goes_round_a_box_between_it_and_the_barcode() {
-    use crate::nav::tests::remembered;
-    use crate::nav::{Avoid, Home, HomeIn};
     let code = (8.2, 0.05);
     for (start, seed) in [
         ([3.3, 3.9, 1.3], 1),
@@ -180,32 +215,9 @@ fn home_goes_round_a_box_between_it_and_the_barcode() {
         ([3.1, 3.4, 1.8], 3),
     ] {
         let mut r = Robot::new(&boxed_lab(start, [3.8, 2.6, 5.2, 3.8]), seed);
-        let mut home = Harness::<Home>::new();
-        let mut avoid = Harness::<Avoid>::new();
-        let mut near = false;
-        for _ in 0..9000 {
-            // Where barcode_track keeps it: from the true pose (odometry drift aside).
-            let [x, y, theta] = r.sim.pose;
-            let target = remembered(
-                code,
-                &Odometry {
-                    x,
-                    y,
-                    theta,
-                    ..Odometry::default()
-                },
-            );
-            home.input(HomeIn::TARGET, target)
-                .input(HomeIn::SONAR, r.sonar);
-            let to = home.step().unwrap().output::<Drive>("drive").copied();
-            avoid.input("sonar", r.sonar);
-            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
-            r.drive(arbitrate(&[(8, away), (4, to)]));
-            if target.range < 1.7 {
-                near = true;
-                break;
-            }
-        }
+        let near = home_until(&mut r, code, crate::nav::EVERY_ECHO, 9000, |_, target| {
+            target.range < 1.7
+        });
         assert!(
             near,
             "from {start:?}: held short of the barcode, at {:?}",
@@ -226,8 +238,6 @@ fn home_goes_round_a_box_between_it_and_the_barcode() {
 /// 45°–75° off the front, hold it at the gap.
 #[test]
 fn home_drives_through_a_gap_0_34_m_wider_than_the_robot_each_side() {
-    use crate::nav::tests::remembered;
-    use crate::nav::{Avoid, AvoidParams, Home, HomeIn};
     let code = (5.0, 7.95);
     let walls = [
         [0.0, 0.0, 10.0, 0.0],
@@ -245,30 +255,7 @@ fn home_drives_through_a_gap_0_34_m_wider_than_the_robot_each_side() {
             &format!("{boxes}{}", barcode(7, code.0, code.1)),
         );
         let mut r = Robot::new(&lab, seed);
-        let mut home = Harness::<Home>::new();
-        let mut avoid = Harness::<Avoid>::new();
-        avoid.set(AvoidParams::BESIDE, beside).unwrap();
-        for _ in 0..6000 {
-            let [x, y, theta] = r.sim.pose;
-            let target = remembered(
-                code,
-                &Odometry {
-                    x,
-                    y,
-                    theta,
-                    ..Odometry::default()
-                },
-            );
-            home.input(HomeIn::TARGET, target)
-                .input(HomeIn::SONAR, r.sonar);
-            let to = home.step().unwrap().output::<Drive>("drive").copied();
-            avoid.input("sonar", r.sonar);
-            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
-            r.drive(arbitrate(&[(8, away), (4, to)]));
-            if r.sim.pose[1] > 5.0 {
-                break;
-            }
-        }
+        home_until(&mut r, code, beside, 6000, |r, _| r.sim.pose[1] > 5.0);
         r
     };
     for (start, seed) in [

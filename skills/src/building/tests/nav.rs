@@ -85,7 +85,7 @@ fn go_through_reports_lining_up_passing_and_through() {
 /// with the wall on its right comes up the east wall, turns the corner and passes under the
 /// door, `door_locate` beside it; the door is found where it is. (G's seeds 1 and 8 came to
 /// the barcode another way, by `home` from the south-west, and their first fit took the
-/// east wall; this pass does not, and passes on the code before the wider refit too.)
+/// east wall, which no refit leaves: docs/deliver.md, building G.)
 #[test]
 fn door_locate_finds_a_door_by_the_corner_its_barcode_is_near() {
     use crate::nav::{Avoid, DoorIn, DoorLocate, DoorOut, WallFollow, WallFollowParams};

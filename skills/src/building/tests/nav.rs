@@ -80,6 +80,44 @@ fn go_through_reports_lining_up_passing_and_through() {
     );
 }
 
+/// `wall_follow` (its wall on `side`: 1 right, −1 left) with `avoid` above it and
+/// `door_locate` beside it, the barcode (id 7) tracked as `barcode_track` does, stepped on `r`
+/// for `cycles`, `each` called after every cycle: the first door reported and the pose it was
+/// reported from.
+fn follow_and_locate(
+    r: &mut Robot,
+    side: i32,
+    cycles: u32,
+    mut each: impl FnMut(&Robot),
+) -> Option<(skillfab_msgs::Door, [f64; 3])> {
+    use crate::nav::{Avoid, DoorIn, DoorLocate, DoorOut, WallFollow, WallFollowParams};
+    let mut track = Harness::<BarcodeTrack>::new();
+    track.set(TrackParams::ID, 7).unwrap();
+    let mut follow = Harness::<WallFollow>::new();
+    follow.set(WallFollowParams::SIDE, side).unwrap();
+    let mut avoid = Harness::<Avoid>::new();
+    let mut locate = Harness::<DoorLocate>::new();
+    let mut found = None;
+    for _ in 0..cycles {
+        let target = r.track(&mut track);
+        locate
+            .input(DoorIn::SONAR, r.sonar)
+            .input(DoorIn::ODOMETRY, r.odometry)
+            .input(DoorIn::TARGET, target);
+        let door = *locate.step().unwrap().output(DoorOut::DOOR).unwrap();
+        if door.found && found.is_none() {
+            found = Some((door, r.sim.pose));
+        }
+        follow.input("sonar", r.sonar);
+        let along = follow.step().unwrap().output::<Drive>("drive").copied();
+        avoid.input("sonar", r.sonar);
+        let away = avoid.step().unwrap().output::<Drive>("drive").copied();
+        r.drive(arbitrate(&[(8, away), (3, along)]));
+        each(r);
+    }
+    found
+}
+
 /// A lab's door by its corner (held-out building G's lab: the door x 7.6-8.8 in the north
 /// wall, the north-east corner at x = 10, the barcode 0.6 m from the corner): `wall_follow`
 /// with the wall on its right comes up the east wall, turns the corner and passes under the
@@ -88,7 +126,6 @@ fn go_through_reports_lining_up_passing_and_through() {
 /// east wall, which no refit leaves: docs/deliver.md, building G.)
 #[test]
 fn door_locate_finds_a_door_by_the_corner_its_barcode_is_near() {
-    use crate::nav::{Avoid, DoorIn, DoorLocate, DoorOut, WallFollow, WallFollowParams};
     let walls = [
         [10.0, 0.0, 10.0, 8.0],
         [10.0, 8.0, 8.8, 8.0],
@@ -103,36 +140,13 @@ fn door_locate_finds_a_door_by_the_corner_its_barcode_is_near() {
             &world([x, 4.0, FRAC_PI_2], &walls, &barcode(7, 9.4, 7.95)),
             seed,
         );
-        let mut track = Harness::<BarcodeTrack>::new();
-        track.set(TrackParams::ID, 7).unwrap();
-        let mut follow = Harness::<WallFollow>::new();
-        follow.set(WallFollowParams::SIDE, 1).unwrap();
-        let mut avoid = Harness::<Avoid>::new();
-        let mut locate = Harness::<DoorLocate>::new();
-        let mut found = None;
-        for _ in 0..6000 {
-            let target = r.track(&mut track);
-            locate
-                .input(DoorIn::SONAR, r.sonar)
-                .input(DoorIn::ODOMETRY, r.odometry)
-                .input(DoorIn::TARGET, target);
-            let door = *locate.step().unwrap().output(DoorOut::DOOR).unwrap();
-            if door.found && found.is_none() {
-                found = Some((door, r.sim.pose));
-            }
-            follow.input("sonar", r.sonar);
-            let along = follow.step().unwrap().output::<Drive>("drive").copied();
-            avoid.input("sonar", r.sonar);
-            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
-            r.drive(arbitrate(&[(8, away), (3, along)]));
-        }
+        let found = follow_and_locate(&mut r, 1, 6000, |_| {});
         let (door, at) =
             found.unwrap_or_else(|| panic!("from x = {x}: no door, at {:?}", r.sim.pose));
-        // Odometry starts at the start, its axes the world's.
-        let (dx, dy) = (door.x + x, door.y + 4.0);
+        let (dx, dy) = r.to_odom(8.2, 8.0);
         assert!(
-            (dx - 8.2).abs() < 0.3 && (dy - 8.0).abs() < 0.2,
-            "from x = {x}: the door at ({dx:.2}, {dy:.2}), reported at {at:?}"
+            (door.x - dx).abs() < 0.3 && (door.y - dy).abs() < 0.2,
+            "from x = {x}: the door at ({dx:.2}, {dy:.2}) in odometry, reported at {door:?} from {at:?}"
         );
         assert!(
             (door.heading - FRAC_PI_2).abs() < 0.15 && door.width > 0.6,
@@ -149,7 +163,6 @@ fn door_locate_finds_a_door_by_the_corner_its_barcode_is_near() {
 /// from the wall and turned the robot into it).
 #[test]
 fn wall_follow_passes_a_door_beside_it_and_door_locate_finds_the_door() {
-    use crate::nav::{Avoid, DoorIn, DoorLocate, DoorOut, WallFollow, WallFollowParams};
     // The lab's west wall (x = 0) with its door (y 4.8-6.0), the corridor's far wall at
     // x = -2.4, the barcode south of the door.
     let walls = [
@@ -163,28 +176,7 @@ fn wall_follow_passes_a_door_beside_it_and_door_locate_finds_the_door() {
             &world([x, 1.0, PI / 2.0], &walls, &barcode(7, 0.05, 4.2)),
             seed,
         );
-        let mut track = Harness::<BarcodeTrack>::new();
-        track.set(TrackParams::ID, 7).unwrap();
-        let mut follow = Harness::<WallFollow>::new();
-        follow.set(WallFollowParams::SIDE, -1).unwrap();
-        let mut avoid = Harness::<Avoid>::new();
-        let mut locate = Harness::<DoorLocate>::new();
-        let mut found = None;
-        for _ in 0..3000 {
-            let target = r.track(&mut track);
-            locate
-                .input(DoorIn::SONAR, r.sonar)
-                .input(DoorIn::ODOMETRY, r.odometry)
-                .input(DoorIn::TARGET, target);
-            let door = *locate.step().unwrap().output(DoorOut::DOOR).unwrap();
-            if door.found && found.is_none() {
-                found = Some((door, r.sim.pose));
-            }
-            follow.input("sonar", r.sonar);
-            let along = follow.step().unwrap().output::<Drive>("drive").copied();
-            avoid.input("sonar", r.sonar);
-            let away = avoid.step().unwrap().output::<Drive>("drive").copied();
-            r.drive(arbitrate(&[(8, away), (3, along)]));
+        let found = follow_and_locate(&mut r, -1, 3000, |r| {
             // Beside the door: on along the wall, not drawn toward the gap (the code before
             // turned 35° toward it and came to 0.54 m of the wall's line here).
             let [px, py, th] = r.sim.pose;
@@ -195,7 +187,7 @@ fn wall_follow_passes_a_door_beside_it_and_door_locate_finds_the_door() {
                     r.sim.pose
                 );
             }
-        }
+        });
         assert!(
             r.sim.pose[1] > 7.0,
             "from x = {x}: on past the door: {:?}",

@@ -430,19 +430,25 @@ impl Sequencer {
         if let Some(k) = self.keep.as_mut() {
             k.opened = Some(o.clone());
         }
-        self.commit(None);
+        self.commit();
         Ok(o)
     }
 
-    /// Keeps the plan's state as it is now: after a tick at fabric time `ticked`, or with
-    /// the last tick's time unchanged (`None`: a runner's opening, a halt sets it apart).
-    fn commit(&mut self, ticked: Option<Duration>) {
+    /// Keeps the plan's state as it is now, the time of its last tick as `ticked` says (a
+    /// time: ticked then; `None`: halted, not ticked since).
+    fn commit_ticked(&mut self, ticked: Option<Duration>) {
+        if let Some(k) = self.keep.as_mut() {
+            k.state.ticked = ticked;
+        }
+        self.commit();
+    }
+
+    /// Keeps the plan's state as it is now (its last tick's time as it was: a runner's
+    /// opening is not a tick).
+    fn commit(&mut self) {
         let Some(k) = self.keep.as_mut() else {
             return;
         };
-        if ticked.is_some() {
-            k.state.ticked = ticked;
-        }
         k.state.nodes.clear();
         self.root.save(&mut k.state.nodes);
         k.state.fired = self.fired.iter().copied().collect();
@@ -464,14 +470,13 @@ impl Sequencer {
         matches!(self.opening(), Some(Opening::Resumed { .. }))
     }
 
-    /// Whether the plan was taken over from a runner that ticked it at fabric time `now` (the
-    /// cycle the paused manager is in) and died before resuming the manager.
+    /// Whether the plan's last tick was at fabric time `now`: taken over in the cycle the
+    /// paused manager is in, its last runner ticked it there and died before resuming the
+    /// manager.
     fn ticked_at(&self, now: Duration) -> bool {
-        self.resumed()
-            && self
-                .keep
-                .as_ref()
-                .is_some_and(|k| k.state.ticked == Some(now))
+        self.keep
+            .as_ref()
+            .is_some_and(|k| k.state.ticked == Some(now))
     }
 
     /// When the plan started: the origin of its wall-clock time over a bridge.
@@ -528,7 +533,7 @@ impl Sequencer {
         let status = self.root.tick(&mut cx)?;
         let now = fabric.now();
         match status {
-            Status::Running => self.commit(Some(now)),
+            Status::Running => self.commit_ticked(Some(now)),
             // The plan ended: nothing to take over.
             Status::Success | Status::Failure => self.ended(),
         }
@@ -564,10 +569,7 @@ impl Sequencer {
         };
         self.root.halt(&mut cx);
         // A halted tree was not ticked: its next runner ticks it at once.
-        if let Some(k) = self.keep.as_mut() {
-            k.state.ticked = None;
-        }
-        self.commit(None);
+        self.commit_ticked(None);
     }
 
     /// The earliest fabric time a running timer (`Sleep`, `Timeout`) of the plan is due.

@@ -2,7 +2,8 @@
 //! own build script would (docs/messages.md): the shipped catalog's files and one's own.
 
 fn main() {
-    let here = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    // Read when the script runs (as the msgs package's script does).
+    let here = std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let dirs = [here.join("../skill-sdk/msgs/msg"), here.join("msg")];
     if let Err(e) = skillfab_msggen::build(&dirs, "test_pkg") {
         eprintln!("error: {e}");

@@ -5,7 +5,10 @@
 use std::fmt::Write;
 
 fn main() {
-    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("msg");
+    // Read when the script runs, not when it is compiled: a build script compiled in one
+    // checkout may be run for another sharing the target directory.
+    let manifest = std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default();
+    let dir = std::path::PathBuf::from(manifest).join("msg");
     if let Err(e) = skillfab_msggen::build(std::slice::from_ref(&dir), "skillfab") {
         // The message file's path and line, as cargo shows a build script's error.
         eprintln!("error: {e}");

@@ -761,7 +761,8 @@ fn go_through_aims_away_from_a_post_it_cannot_pass() {
     };
     let mut h = Harness::<GoThrough>::new();
     h.input(GoIn::DOOR, door);
-    // Lined up at the approach point, then against a post on the left 0.5 m before the line.
+    // Lined up at the approach point, then against a post ahead on the left 0.5 m before the
+    // line (in front of the side sonars, which would turn it away from the post instead).
     let at = |x: f64, v: f64| Odometry {
         x,
         y: 0.0,
@@ -774,7 +775,7 @@ fn go_through_aims_away_from_a_post_it_cannot_pass() {
     h.step().unwrap();
     h.input(
         GoIn::SONAR,
-        ring(|a| if (0.0..1.0).contains(&a) { 0.2 } else { 5.0 }),
+        ring(|a| if (0.0..0.45).contains(&a) { 0.2 } else { 5.0 }),
     )
     .input(GoIn::ODOMETRY, at(2.5, 0.0));
     let mut backing = 0;

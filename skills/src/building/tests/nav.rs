@@ -206,17 +206,19 @@ fn wall_follow_passes_a_door_beside_it_and_door_locate_finds_the_door() {
 /// A lab (10 m x 8 m) with its door in the east wall (y 3.4-4.6), the door's barcode in the
 /// south-east corner, and one box: the lab of the tests that go round a box.
 fn boxed_lab(start: [f64; 3], boxed: [f64; 4]) -> String {
-    let walls = [
-        [0.0, 0.0, 10.0, 0.0],
-        [10.0, 0.0, 10.0, 3.4],
-        [10.0, 4.6, 10.0, 8.0],
-        [10.0, 8.0, 0.0, 8.0],
-        [0.0, 8.0, 0.0, 0.0],
-    ];
     let [x0, y0, x1, y1] = boxed;
     let extra = format!("[[box]]\nmin = [{x0}, {y0}]\nmax = [{x1}, {y1}]\n");
-    world(start, &walls, &(extra + &barcode(7, 8.2, 0.05)))
+    world(start, &EAST_DOOR_LAB, &(extra + &barcode(7, 8.2, 0.05)))
 }
+
+/// The walls of a lab (10 m x 8 m) with its door in the east wall (y 3.4-4.6).
+const EAST_DOOR_LAB: [[f64; 4]; 5] = [
+    [0.0, 0.0, 10.0, 0.0],
+    [10.0, 0.0, 10.0, 3.4],
+    [10.0, 4.6, 10.0, 8.0],
+    [10.0, 8.0, 0.0, 8.0],
+    [0.0, 8.0, 0.0, 0.0],
+];
 
 /// `home` toward the barcode at `code` with `avoid` above it (`beside` set), both stepped on
 /// `r` until `done` holds of the robot and the target `home` was given, at most `cycles`;
@@ -444,13 +446,6 @@ fn passes_off(
 /// or were held short of the door; with the gain at 2.5 alone, 46.)
 #[test]
 fn go_through_passes_a_door_whose_estimate_is_off_by_up_to_0_7_m_and_20_degrees() {
-    let walls = [
-        [0.0, 0.0, 10.0, 0.0],
-        [10.0, 0.0, 10.0, 3.4],
-        [10.0, 4.6, 10.0, 8.0],
-        [10.0, 8.0, 0.0, 8.0],
-        [0.0, 8.0, 0.0, 0.0],
-    ];
     let starts = [
         ([7.0, 4.0, 0.0], 1),
         ([7.5, 2.0, 0.8], 2),
@@ -462,7 +457,7 @@ fn go_through_passes_a_door_whose_estimate_is_off_by_up_to_0_7_m_and_20_degrees(
     ];
     let askews = [-20.0, -10.0, 0.0, 10.0, 20.0];
     let failed = passes_off(
-        |start| world(start, &walls, ""),
+        |start| world(start, &EAST_DOOR_LAB, ""),
         ((10.0, 4.0), 0.0),
         &offs,
         &askews,

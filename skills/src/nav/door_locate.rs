@@ -79,6 +79,20 @@ const FIT_RANGE: i32 = 70;
 /// as many again agree with it (and more than with the best near one).
 const REFIT_PARTS: i32 = 5;
 
+/// The normals the first fit tries, one a degree within [`FIT_RANGE`] of the way from the
+/// robot at `od` to the barcode at `code`; with `part`, only that one of every
+/// [`REFIT_PARTS`] (a refit's share of them).
+fn first_fit_normals(
+    od: &Odometry,
+    code: (f64, f64),
+    part: Option<i32>,
+) -> impl Iterator<Item = f64> {
+    let beta = (code.1 - od.y).atan2(code.0 - od.x);
+    (-FIT_RANGE..=FIT_RANGE)
+        .filter(move |d| part.is_none_or(|p| (d + FIT_RANGE) % REFIT_PARTS == p))
+        .map(move |d| wrap(beta + f64::from(d).to_radians()))
+}
+
 /// One sonar reading placed in the odometry frame: ring point, direction, range (∞: no echo).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Ray {
@@ -414,8 +428,7 @@ impl Skill for DoorLocate {
         };
         if self.wall.is_none() && t.seen && t.range < p.near {
             // First fit: any normal within 70° of the way to the barcode, through it.
-            let beta = (t.y - od.y).atan2(t.x - od.x);
-            let phis = (-FIT_RANGE..=FIT_RANGE).map(|d| wrap(beta + f64::from(d).to_radians()));
+            let phis = first_fit_normals(&od, (t.x, t.y), None);
             self.wall = Self::fit(&newest(&self.history), (t.x, t.y), phis).map(|f| f.1);
             self.fitted = ctx.cycle;
             self.rebuild(p.span, p.margin);
@@ -446,12 +459,9 @@ impl Skill for DoorLocate {
             // corner, the line along the corner's other wall (held-out building G's lab,
             // seeds 1 and 8) — which the near normals never leave: a part of the first fit's
             // range is tried too, in turn.
-            let beta = (anchor.1 - od.y).atan2(anchor.0 - od.x);
             let part = (self.refits % REFIT_PARTS as u32) as i32;
             self.refits = self.refits.wrapping_add(1);
-            let wide = (-FIT_RANGE..=FIT_RANGE)
-                .filter(|d| (d + FIT_RANGE) % REFIT_PARTS == part)
-                .map(|d| wrap(beta + f64::from(d).to_radians()));
+            let wide = first_fit_normals(&od, anchor, Some(part));
             let near = Self::fit(&rays, anchor, cands);
             let far = Self::fit(&rays, anchor, wide);
             let beats = |n: usize, by: usize| n >= held + by;

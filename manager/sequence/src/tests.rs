@@ -535,6 +535,7 @@ fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered
     ];
     let mut f = Mock::new(&skills);
     f.params.insert("wall_follow.side".into(), 1.0);
+    f.params.insert("avoid.beside".into(), 10.0);
     let mut seq = Sequencer::new(&p, None).unwrap();
     let step = |f: &mut Mock, seq: &mut Sequencer, fired: Option<&str>| {
         if let Some(c) = fired {
@@ -545,14 +546,19 @@ fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered
     };
     step(&mut f, &mut seq, None);
     assert_eq!(f.on(), ["avoid", "barcode_track", "explore"]);
+    // explore and home drive through gaps: echoes beside the way pass.
+    assert_eq!(f.params["avoid.beside"], 0.15);
     step(&mut f, &mut seq, Some("barcode_track.target.seen == 1"));
     assert_eq!(f.on(), ["avoid", "barcode_track", "door_locate", "home"]);
+    assert_eq!(f.params["avoid.beside"], 0.15);
     step(&mut f, &mut seq, Some("barcode_track.target.range < 1.7"));
     assert_eq!(
         f.on(),
         ["avoid", "barcode_track", "door_locate", "wall_follow"]
     );
     assert_eq!(f.params["wall_follow.side"], -1.0);
+    // Along the wall every echo counts.
+    assert_eq!(f.params["avoid.beside"], 10.0);
     step(&mut f, &mut seq, Some("barcode_track.target.range > 4.0"));
     assert_eq!(f.on(), ["avoid", "barcode_track", "door_locate", "home"]);
     step(&mut f, &mut seq, Some("barcode_track.target.range < 1.7"));
@@ -563,6 +569,7 @@ fn the_shipped_exit_lab_plan_searches_both_ways_then_goes_through_with_a_lowered
         ["avoid", "barcode_track", "door_locate", "go_through"]
     );
     assert_eq!(f.params["avoid.safe_distance"], 0.2);
+    assert_eq!(f.params["avoid.beside"], 10.0);
     // Only the door's monitor was left, and it fired: none stays behind.
     assert!(f.monitors.is_empty(), "{:?}", f.monitors);
     // Halted (the robot is outside): the distance comes back.

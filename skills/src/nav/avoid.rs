@@ -20,7 +20,8 @@ pub struct AvoidParams {
     /// robot drives through a gap twice this wider than itself. At [`EVERY_ECHO`] (the
     /// default) every echo in the arcs counts, wherever it may come from, as before the
     /// parameter: the corridor skills turn in lobbies with avoid turning at what is beside
-    /// them, and no shipped plan lowers it yet (docs/measurements.md, "Gaps 1.4 m wide").
+    /// them. The lab plans lower it to 0.15 while `explore` and `home` drive, not along the
+    /// wall (docs/measurements.md, "Gaps 1.4 m wide" and "The lab search by cost").
     #[param(default = 10.0, min = 0.0, max = 10.0)]
     pub beside: f64,
 }

@@ -10,8 +10,9 @@
 //! bearing reads under [`NEAR`], and [`SHORT`] short of the goal), it takes a side and steers
 //! for the clear lane nearest the goal on that side, until no sonar facing within
 //! [`OFF_LINE`] of the goal reads so near. A lane is clear when the ring sees nothing in it:
-//! [`HALF_WIDTH`] each side of its centre line for [`LANE_LENGTH`], each echo placed at the
-//! edge of its cone nearest the lane. Until a detour starts the approach's bearing is
+//! [`HALF_WIDTH`] each side of its centre line for [`LANE_LENGTH`], each echo wherever in its
+//! cone the other readings leave it room ([`echo_places`]: a gap 1.4 m wide is a lane).
+//! Until a detour starts the approach's bearing is
 //! returned as it is: an approach that is not held, or held with its line clear, is not
 //! changed.
 //!
@@ -144,18 +145,18 @@ fn on_the_line(s: &Sonar, bearing: f64, far: f64, within: f64) -> bool {
 }
 
 /// Whether the lane toward `heading` (rad, the robot's frame) is clear for `length` (m from
-/// the robot's centre): no echo of the ring, placed at the edge of its cone nearest the lane,
-/// within [`HALF_WIDTH`] of its centre line before `length`. Unread sonars see nothing.
+/// the robot's centre): no place an echo of the ring may come from ([`echo_places`]) within
+/// [`HALF_WIDTH`] of its centre line before `length`. Unread sonars see nothing.
 fn clear(s: &Sonar, heading: f64, length: f64) -> bool {
-    (0..SONARS).all(|i| {
-        let Some(r) = range(s, i) else {
-            return true;
-        };
-        let off = (wrap(sonar_angle(i) - heading).abs() - CONE).max(0.0);
-        // From the robot's centre: a sonar's range is from the ring.
-        let d = r + RING;
-        off >= PI / 2.0 || d * off.cos() >= length || d * off.sin() >= HALF_WIDTH
-    })
+    let (c, sn) = (heading.cos(), heading.sin());
+    let mut clear = true;
+    for i in 0..SONARS {
+        echo_places(s, i, |x, y| {
+            let along = x * c + y * sn;
+            clear &= along <= 0.0 || along >= length || (y * c - x * sn).abs() >= HALF_WIDTH;
+        });
+    }
+    clear
 }
 
 /// The clear lane nearest `bearing` on `side`, short of turning back.

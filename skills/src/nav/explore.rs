@@ -2,7 +2,9 @@
 
 use super::*;
 use serde::{Deserialize, Serialize};
-use std::collections::{HashMap, VecDeque};
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap};
+use std::f64::consts::SQRT_2;
 
 /// Parameters of [`Explore`].
 #[derive(Params, Debug, Clone)]
@@ -18,13 +20,14 @@ pub struct ExploreParams {
     /// from 3 m or so (nearer ground hides less behind boxes).
     #[param(default = 3.0, min = 0.5, max = 10.0)]
     pub cover: f64,
-    /// Cells within this of an occupied one are not driven through (m): the robot's radius
-    /// and a margin.
-    #[param(default = 0.5, min = 0.0, max = 2.0)]
+    /// Ground nearer than this to an occupied cell costs more to drive through, the nearer
+    /// the more (m): paths keep this far from what the ring saw where they can, and to the
+    /// middle of a gap narrower than twice this.
+    #[param(default = 0.75, min = 0.0, max = 2.0)]
     pub clearance: f64,
-    /// The clearance of the last search before starting over (m): the robot's radius
-    /// (0.36 m) and a little. Ground beyond a gap that only this leaves a way through is
-    /// searched when no other ground is left.
+    /// Cells within this of an occupied one are not driven through (m): the robot's radius
+    /// (0.36 m) and a little. A step through a cell this near costs [`NARROW_COST`] times one
+    /// in the open.
     #[param(default = 0.4, min = 0.0, max = 2.0)]
     pub narrow_clearance: f64,
     /// A goal not reached in this long is given up (s of fabric time).
@@ -52,10 +55,14 @@ const OCCUPIED_MAX: f64 = 3.0;
 const REACHED: f64 = 0.35;
 /// The waypoint followed is this far along the path (cells).
 const LOOKAHEAD: usize = 4;
+/// A step through a cell `narrow_clearance` from an occupied one costs this many times one
+/// `clearance` or more from any (the cost grows linearly between them).
+pub const NARROW_COST: f64 = 5.0;
 
 type Cell = (i32, i32);
 
-/// Steps from a cell to its neighbours: the four side ones, then the four corner ones.
+/// Steps from a cell to its neighbours: the four side ones, then the four corner ones (whose
+/// length is √2 cells).
 const STEPS: [Cell; 8] = [
     (1, 0),
     (-1, 0),
@@ -98,13 +105,16 @@ enum Mode {
 /// The ring builds an occupancy grid in the odometry frame (0.25 m cells: each new reading
 /// marks the cells along its axis free, up to 3.5 m, and the cell it echoes from occupied).
 /// Ground within `cover` of a place it looked around from is covered. The next goal is the
-/// nearest free cell that is not covered, by a breadth-first search through free cells kept
-/// `clearance` from occupied ones (the frontier of the covered ground), stepping to side
-/// neighbours, and when that finds none, to corner neighbours too; the robot follows the
-/// path and looks around there. A goal not reached in `give_up_s` (something in the way
-/// the ring had not seen) is abandoned and the search goes on from where the robot is. With
-/// nothing left to cover, the places looked from are forgotten and the room is covered
-/// again. Close obstacles are `avoid`'s (it runs beside, at a higher priority).
+/// free cell not covered that is cheapest to reach (the frontier of the covered ground): a
+/// shortest-path search through free cells more than `narrow_clearance` from occupied ones,
+/// stepping to the eight neighbours, where a step costs its length, times up to
+/// [`NARROW_COST`] the nearer than `clearance` the cell is to an occupied one — so a path
+/// keeps to the middle of a gap, and ground beyond a gap 1.4 m wide is reached at a cost,
+/// not only once everything else is covered. The robot follows the path and looks around
+/// there. A goal not reached in `give_up_s` (something in the way the ring had not seen) is
+/// abandoned and the search goes on from where the robot is. With nothing left to cover,
+/// the places looked from are forgotten and the room is covered again. Close obstacles are
+/// `avoid`'s (it runs beside, at a higher priority).
 ///
 /// Unlike `wander`, which draws legs through the least visited ground, every part of a
 /// closed room is looked at from within `cover` after a bounded drive, whatever the seed.
@@ -165,84 +175,96 @@ impl Explore {
         }
     }
 
-    /// Whether a cell may be driven through: free, and no occupied cell within `clearance`.
-    fn passable(&self, c: Cell, clearance: f64) -> bool {
-        let n = (clearance / CELL).ceil() as i32;
-        self.free(c)
-            && (-n..=n).all(|i| {
-                (-n..=n).all(|j| {
-                    f64::from(i * i + j * j).sqrt() * CELL > clearance
-                        || !self.occupied((c.0 + i, c.1 + j))
-                })
-            })
+    /// How far (m, centre to centre) the nearest occupied cell is from `c`, up to `within`.
+    fn room(&self, c: Cell, within: f64) -> f64 {
+        let n = (within / CELL).ceil() as i32;
+        let mut room = within;
+        for i in -n..=n {
+            for j in -n..=n {
+                if self.occupied((c.0 + i, c.1 + j)) {
+                    room = room.min(f64::from(i * i + j * j).sqrt() * CELL);
+                }
+            }
+        }
+        room
     }
 
-    /// The path (cells after the robot's, in order) to the nearest passable cell not within
-    /// `cover` of a place looked from; `None` when every reachable cell is covered. The path
-    /// steps to the four side neighbours, and with `diagonal` to the four corner ones too.
-    fn frontier(
-        &self,
-        from: Cell,
-        p: &ExploreParams,
-        clearance: f64,
-        diagonal: bool,
-    ) -> Option<Vec<Cell>> {
+    /// Whether a cell may be driven through: free, and no occupied cell within `clearance`.
+    #[cfg(test)]
+    fn passable(&self, c: Cell, clearance: f64) -> bool {
+        self.free(c) && self.room(c, clearance + CELL) > clearance
+    }
+
+    /// The cost of a step of `length` (cells) into `c`: `None` if it may not be driven
+    /// through; in thousandths of a cell.
+    fn step_cost(&self, c: Cell, length: f64, p: &ExploreParams) -> Option<u64> {
+        if !self.free(c) {
+            return None;
+        }
+        let room = self.room(c, p.clearance.max(p.narrow_clearance) + CELL);
+        if room <= p.narrow_clearance {
+            return None;
+        }
+        let squeeze = if p.clearance > p.narrow_clearance {
+            ((p.clearance - room) / (p.clearance - p.narrow_clearance)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        Some((1000.0 * length * (1.0 + (NARROW_COST - 1.0) * squeeze)).round() as u64)
+    }
+
+    /// The path (cells after the robot's, in order) to the passable cell not within `cover`
+    /// of a place looked from (nor given up on) that is cheapest to reach; `None` when every
+    /// reachable cell is covered.
+    fn frontier(&self, from: Cell, p: &ExploreParams) -> Option<Vec<Cell>> {
         let covered = |c: Cell| {
             let (x, y) = centre(c);
             self.looked
                 .iter()
                 .any(|&(lx, ly)| (x - lx).hypot(y - ly) <= p.cover)
         };
-        let mut parent: HashMap<Cell, Cell> = HashMap::new();
-        let mut queue = VecDeque::from([from]);
-        parent.insert(from, from);
-        while let Some(c) = queue.pop_front() {
+        // Cell → (cost, the cell it is reached from).
+        let mut reached: HashMap<Cell, (u64, Cell)> = HashMap::from([(from, (0, from))]);
+        let mut queue = BinaryHeap::from([Reverse((0, from))]);
+        while let Some(Reverse((cost, c))) = queue.pop() {
+            if reached.get(&c).is_some_and(|&(k, _)| k < cost) {
+                continue;
+            }
             if c != from && !covered(c) && !self.abandoned.contains(&c) {
                 let mut path = vec![c];
                 let mut at = c;
-                while let Some(&up) = parent.get(&at).filter(|&&up| up != from) {
+                while let Some(&(_, up)) = reached.get(&at).filter(|&&(_, up)| up != from) {
                     path.push(up);
                     at = up;
                 }
                 path.reverse();
                 return Some(path);
             }
-            let steps = if diagonal { &STEPS[..] } else { &STEPS[..4] };
-            for &(i, j) in steps {
+            for (k, &(i, j)) in STEPS.iter().enumerate() {
                 let n = (c.0 + i, c.1 + j);
-                if !parent.contains_key(&n) && self.passable(n, clearance) {
-                    parent.insert(n, c);
-                    queue.push_back(n);
+                let length = if k < 4 { 1.0 } else { SQRT_2 };
+                let Some(step) = self.step_cost(n, length, p) else {
+                    continue;
+                };
+                let to = cost + step;
+                if reached.get(&n).is_none_or(|&(k, _)| to < k) {
+                    reached.insert(n, (to, c));
+                    queue.push(Reverse((to, n)));
                 }
             }
         }
         None
     }
 
-    /// The next goal from here: the nearest ground not covered; with none, the ground beyond
-    /// a passage only diagonal steps get through, then beyond one only `narrow_clearance`
-    /// leaves open; with none either, the room is covered: start over (forget the places
-    /// looked from and the goals given up).
-    ///
-    /// Passable ground through a gap is a strip as wide as the gap less twice `clearance`
-    /// and a cell or two: 1.8 m between two boxes leaves a strip one or two cells wide, or
-    /// none where an echo through the cone's side lands in the gap, and where the echoes
-    /// shift it by a cell the strip goes on only diagonally. Side steps alone then end at
-    /// the gap, every cell on this side gets covered, and the search starts over on the same
-    /// ground until the time runs out (the held-out lab row-gaps, docs/measurements.md).
-    /// The side-step search at `clearance` is tried first, so a room whose ground it reaches
-    /// is searched as before.
+    /// The next goal from here: the cheapest ground not covered; with none, the room is
+    /// covered: start over (forget the places looked from and the goals given up).
     fn next(&mut self, od: &Odometry, p: &ExploreParams, cycle: u64) -> Mode {
         let from = cell(od.x, od.y);
-        let path = self
-            .frontier(from, p, p.clearance, false)
-            .or_else(|| self.frontier(from, p, p.clearance, true))
-            .or_else(|| self.frontier(from, p, p.narrow_clearance, true))
-            .or_else(|| {
-                self.looked.clear();
-                self.abandoned.clear();
-                self.frontier(from, p, p.clearance, false)
-            });
+        let path = self.frontier(from, p).or_else(|| {
+            self.looked.clear();
+            self.abandoned.clear();
+            self.frontier(from, p)
+        });
         match path {
             Some(path) => Mode::Go { path, since: cycle },
             // Nothing passable known around (hemmed in, or no readings yet): look again.
@@ -339,8 +361,7 @@ mod tests {
     use super::*;
 
     /// A room of 25 x 11 cells split by a wall two cells thick (columns 10 and 11) with a gap
-    /// whose second column is shifted a cell north: at the default clearance the passable
-    /// strip through it is (10, 5) then (11, 6), one diagonal step.
+    /// whose second column is shifted a cell north (as the echoes shift a gap's cells).
     fn split_room() -> Explore {
         room(|i, j| (i == 10 && !(3..=7).contains(&j)) || (i == 11 && !(4..=8).contains(&j)))
     }
@@ -368,35 +389,54 @@ mod tests {
         e
     }
 
+    fn at(c: Cell) -> Odometry {
+        let (x, y) = centre(c);
+        Odometry {
+            x,
+            y,
+            ..Odometry::default()
+        }
+    }
+
     #[test]
-    fn ground_beyond_a_gap_passable_only_diagonally_is_searched_before_starting_over() {
+    fn ground_beyond_a_gap_shifted_by_a_cell_is_searched_before_starting_over() {
         let p = ExploreParams::default();
         let mut e = split_room();
         let here = centre((4, 5));
         // Looked around from here: the whole west part is covered (within 3 m).
         e.looked.push(here);
-        assert!(e.passable((10, 5), p.clearance) && e.passable((11, 6), p.clearance));
-        assert!(!e.passable((10, 6), p.clearance) && !e.passable((11, 5), p.clearance));
-        assert_eq!(
-            e.frontier(cell(here.0, here.1), &p, p.clearance, false),
-            None,
-            "side steps alone do not get through the gap"
-        );
-        let od = Odometry {
-            x: here.0,
-            y: here.1,
-            ..Odometry::default()
-        };
-        let Mode::Go { path, .. } = e.next(&od, &p, 0) else {
+        let Mode::Go { path, .. } = e.next(&at((4, 5)), &p, 0) else {
             panic!("no goal");
         };
         let goal = *path.last().unwrap();
         assert!(goal.0 > 11, "the goal is beyond the wall: {goal:?}");
         assert!(
-            path.contains(&(10, 5)) && path.contains(&(11, 6)),
-            "{path:?}"
+            path.iter().any(|&(i, j)| i == 10 && (3..=7).contains(&j))
+                && path.iter().any(|&(i, j)| i == 11 && (4..=8).contains(&j)),
+            "through the gap: {path:?}"
         );
         assert_eq!(e.looked, vec![here], "the covered ground is not forgotten");
+    }
+
+    /// A wall across the room (column 10) with a gap 1.5 m wide (j 2-7): the path through it
+    /// keeps to its middle (j 4 or 5, 0.5 m or more from either side), and it is taken while
+    /// ground on this side is left uncovered farther away (the gap costs less than the way).
+    #[test]
+    fn a_path_through_a_gap_keeps_to_its_middle_and_the_gap_does_not_wait_for_the_rest() {
+        let p = ExploreParams::default();
+        let mut e = room(|i, j| i == 10 && !(2..=7).contains(&j));
+        e.looked.push(centre((6, 5)));
+        // Beyond the gap (column 14, 2 m from it) is nearer than this side's uncovered ground
+        // (column 0 and below, more than 3 m from where it looked).
+        let Mode::Go { path, .. } = e.next(&at((7, 5)), &p, 0) else {
+            panic!("no goal");
+        };
+        assert!(path.last().unwrap().0 > 10, "beyond the gap: {path:?}");
+        let through: Vec<i32> = path.iter().filter(|c| c.0 == 10).map(|c| c.1).collect();
+        assert!(
+            !through.is_empty() && through.iter().all(|j| (4..=5).contains(j)),
+            "through the middle: {path:?}"
+        );
     }
 
     #[test]
@@ -407,14 +447,9 @@ mod tests {
         let mut e = room(|i, j| i == 10 && !(3..=6).contains(&j));
         let here = centre((4, 5));
         e.looked.push(here);
-        assert!(!(0..=10).any(|j| e.passable((10, j), p.clearance)));
+        assert!(!(0..=10).any(|j| e.passable((10, j), 0.5)));
         assert!(e.passable((10, 4), p.narrow_clearance));
-        let od = Odometry {
-            x: here.0,
-            y: here.1,
-            ..Odometry::default()
-        };
-        let Mode::Go { path, .. } = e.next(&od, &p, 0) else {
+        let Mode::Go { path, .. } = e.next(&at((4, 5)), &p, 0) else {
             panic!("no goal");
         };
         assert!(path.last().unwrap().0 > 10, "beyond the wall: {path:?}");
@@ -427,13 +462,7 @@ mod tests {
         let mut e = split_room();
         // Looked from both sides: every cell is covered.
         e.looked.extend([centre((4, 5)), centre((18, 5))]);
-        let here = centre((4, 5));
-        let od = Odometry {
-            x: here.0,
-            y: here.1,
-            ..Odometry::default()
-        };
-        assert!(matches!(e.next(&od, &p, 0), Mode::Go { .. }));
+        assert!(matches!(e.next(&at((4, 5)), &p, 0), Mode::Go { .. }));
         assert!(e.looked.is_empty(), "the places looked from are forgotten");
     }
 }

@@ -133,6 +133,52 @@ fn home_converges_on_its_goal() {
     );
 }
 
+/// North-maze seed 6 (lock-step, the tried lab search): the barcode behind the robot, `home`
+/// turning the short way round toward it, and `avoid` turning it back each time a box's
+/// corner comes into its front arc on that side: the two took turns for 250 s. Here the
+/// box is a sector of headings in which `avoid`'s turn (0.9 rad/s, counter-clockwise)
+/// replaces `home`'s: `home` turns the other way round after `TURN_HELD_S` and faces the
+/// target without entering it.
+#[test]
+fn home_turns_the_other_way_round_when_its_turn_on_the_spot_is_held() {
+    let mut h = Harness::<Home>::new();
+    h.input(HomeIn::SONAR, ring(|_| 5.0));
+    let target = -2.9;
+    let blocked = -1.2..-0.6;
+    let mut th = 0.0f64;
+    let mut faced = None;
+    let mut held = 0;
+    for k in 0..3000 {
+        let bearing = wrap(target - th);
+        if bearing.abs() < 0.1 {
+            faced = Some(k);
+            break;
+        }
+        h.input(
+            HomeIn::TARGET,
+            Target {
+                seen: true,
+                visible: true,
+                range: 4.0,
+                bearing,
+                ..Target::default()
+            },
+        );
+        let d = *h.step().unwrap().output(DriveOut::DRIVE).unwrap();
+        let rotate = if blocked.contains(&wrap(th)) {
+            held += 1;
+            0.9
+        } else {
+            d.rotate
+        };
+        th += rotate * 0.01;
+    }
+    let faced = faced.expect("it faces the target");
+    assert!(held > 0, "its first turn was the short way, into the box");
+    // Into the box (0.6 rad), 4 s held, then round the other way (4 rad at up to 1 rad/s).
+    assert!(faced < 1000, "{faced} cycles");
+}
+
 #[test]
 fn barcode_track_places_the_sighting_in_the_odometry_frame() {
     let mut h = Harness::<BarcodeTrack>::new();

@@ -94,7 +94,7 @@ fn the_plan_takes_the_robot_from_the_lab_to_the_office_and_the_message_is_delive
         "push_button",
         "deliver",
     ];
-    let (kills, kill_list) = crate::replay::mid_mission_kills(&rec, &building);
+    let (kills, kill_list) = crate::replay::mid_mission_kills(&rec, &building, &[]);
     let (r, out) = crate::replay::replay(
         &t,
         &rec,

@@ -90,8 +90,14 @@ pub(crate) fn records(file: &Path) -> Vec<Json> {
 
 /// The cycle after which to kill each of `skills` in a replay of `rec`: the middle of the
 /// cycles it published in (it runs then, with what it learnt since its activation), in the
-/// order of those cycles; and the `--kill` argument that asks for them.
-pub(crate) fn mid_mission_kills(rec: &Path, skills: &[&str]) -> (Vec<(String, u64)>, String) {
+/// order of those cycles; and the `--kill` argument that asks for them. A skill of `silent`
+/// may have published nothing (active all through, it proposed nothing in this run): it is
+/// killed at the middle of the recording's cycles.
+pub(crate) fn mid_mission_kills(
+    rec: &Path,
+    skills: &[&str],
+    silent: &[&str],
+) -> (Vec<(String, u64)>, String) {
     // Who published in which cycle (a long mission's samples are many: no value decoded).
     let mut heads: Vec<(String, u64)> = Vec::new();
     read_file(rec, |r| {
@@ -109,6 +115,9 @@ pub(crate) fn mid_mission_kills(rec: &Path, skills: &[&str]) -> (Vec<(String, u6
                 .map(|h| h.1)
                 .collect();
             // (`deliver` publishes only when its progress changes: a few samples.)
+            if cycles.is_empty() && silent.contains(skill) {
+                return (skill.to_string(), heads[heads.len() / 2].1);
+            }
             assert!(cycles.len() >= 3, "{skill} ran in the recorded mission");
             (skill.to_string(), cycles[cycles.len() / 2])
         })
@@ -188,7 +197,9 @@ fn a_recorded_lockstep_mission_replays_identically_through_kills_and_a_changed_d
         "door_locate",
         "go_through",
     ];
-    let (kills, kill_list) = mid_mission_kills(&rec, &ours);
+    // (`avoid` proposes only with something near the way ahead: in this run, since the lab
+    // plan lowered its `beside` while `explore` and `home` drive, nothing.)
+    let (kills, kill_list) = mid_mission_kills(&rec, &ours, &["avoid"]);
     let to = through_last_kill(&kills);
     let all = [
         "--skills",
@@ -319,7 +330,7 @@ fn a_recording_cut_short_by_kill_9_replays_to_its_last_complete_cycle_wander_kil
     );
     // From the first cycle on, so wander's memory is replayed too; wander killed half-way
     // and started again goes on with it (its visit map, its generator).
-    let (kills, kill_list) = mid_mission_kills(&rec, &["wander"]);
+    let (kills, kill_list) = mid_mission_kills(&rec, &["wander"], &[]);
     let (r, out) = replay(
         &t,
         &rec,

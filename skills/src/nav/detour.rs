@@ -21,6 +21,16 @@
 //! 30°). A wall near and nearly along the line can still count (a barcode approached within
 //! 0.65 m of its wall at a shallow angle); a detour started there cannot end round, and gives
 //! up after [`ROUND_S`], one side after the other.
+//!
+//! What holds the robot may also stand beside the line, not on it: a box's corner that the
+//! body's own corridor toward the goal clips ([`BODY`] each side of the line, [`BODY_AHEAD`]
+//! ahead), which the device's safety layer stops the robot for. No sonar facing the goal hears
+//! it (building F seeds 5, 15 and 18: `go_through` lining up from 0.1 m above a box's top,
+//! the approach point past the box's far corner, held there for 800 s). With
+//! [`Watch::LineAndBody`] (`go_through`'s), held with the corridor not clear counts as held
+//! with something on the line, and round is when the corridor is clear too. `home` watches
+//! the line only ([`Watch::Line`]): with the corridor, the held-out lab north-maze lost 6
+//! of its 9 exits (docs/measurements.md, "The body's corridor").
 
 use super::*;
 
@@ -43,6 +53,12 @@ pub const ON_LINE: f64 = PI / 12.0;
 pub const OFF_LINE: f64 = PI / 9.0;
 /// Half a lane (m, from its centre line): the robot's radius (0.36 m) and a margin.
 pub const HALF_WIDTH: f64 = 0.55;
+/// Half the body's own corridor toward the goal (m, from its centre line): the robot's
+/// radius and the safety layer's lateral margin (0.04 m), and a little.
+pub const BODY: f64 = 0.45;
+/// The body's corridor is judged this far toward the goal (m, from the robot's centre; the
+/// radius, the safety layer's stop gap and braking), and no nearer than [`SHORT`] to it.
+pub const BODY_AHEAD: f64 = 0.9;
 /// The lane the robot takes round must be clear this far (m, from its centre).
 const LANE_LENGTH: f64 = 1.2;
 /// Lanes tried round, from the goal's bearing outward (rad, 10°).
@@ -72,6 +88,15 @@ impl Side {
     }
 }
 
+/// What counts as something in the way of a held approach (see the module's doc).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Watch {
+    /// Something near on the line, heard by a sonar facing the goal.
+    Line,
+    /// That, or something in the body's own corridor toward the goal.
+    LineAndBody,
+}
+
 /// The watch on one straight approach (see the module's doc). Kept with its skill's state.
 #[derive(Debug, Default, Clone, Copy, Serialize, Deserialize)]
 pub struct Detour {
@@ -97,8 +122,16 @@ impl Detour {
     /// The bearing (rad, the robot's frame) to steer for this cycle, approaching a goal at
     /// `bearing` and `far` (m, from the robot's centre) with the ring `s`: the goal's own
     /// bearing, or going round, the clear lane nearest it on the side taken (the goal's
-    /// bearing when no lane on that side is clear). Counts a cycle of `period_ms`.
-    pub fn steer(&mut self, s: &Sonar, bearing: f64, far: f64, period_ms: f64) -> f64 {
+    /// bearing when no lane on that side is clear). Counts a cycle of `period_ms`; `watch`
+    /// says what holds the way.
+    pub fn steer(
+        &mut self,
+        s: &Sonar,
+        bearing: f64,
+        far: f64,
+        period_ms: f64,
+        watch: Watch,
+    ) -> f64 {
         match self.best {
             Some(best) if far > best - PROGRESS => self.since += 1,
             _ => {
@@ -109,7 +142,7 @@ impl Detour {
         let cycles = |secs: f64| (secs * 1000.0 / period_ms.max(1.0)) as u32;
         let side = match self.side {
             None => {
-                if self.since < cycles(HELD_S) || !on_the_line(s, bearing, far, ON_LINE) {
+                if self.since < cycles(HELD_S) || !in_the_way(s, bearing, far, ON_LINE, watch) {
                     return bearing;
                 }
                 let side = self
@@ -118,7 +151,7 @@ impl Detour {
                 self.remaining = cycles(ROUND_S);
                 side
             }
-            Some(side) if self.remaining == 0 || !on_the_line(s, bearing, far, OFF_LINE) => {
+            Some(side) if self.remaining == 0 || !in_the_way(s, bearing, far, OFF_LINE, watch) => {
                 // Given up, or round: straight again, counting afresh.
                 self.gave_up = (self.remaining == 0).then_some(side);
                 self.side = None;
@@ -144,16 +177,24 @@ fn on_the_line(s: &Sonar, bearing: f64, far: f64, within: f64) -> bool {
     })
 }
 
+/// Whether something holds the way to a goal at `bearing` and `far`: on the line
+/// ([`on_the_line`] with `within`), or with [`Watch::LineAndBody`] in the body's corridor
+/// toward it ([`BODY`], [`BODY_AHEAD`]).
+fn in_the_way(s: &Sonar, bearing: f64, far: f64, within: f64, watch: Watch) -> bool {
+    on_the_line(s, bearing, far, within)
+        || (watch == Watch::LineAndBody && !clear(s, bearing, BODY_AHEAD.min(far - SHORT), BODY))
+}
+
 /// Whether the lane toward `heading` (rad, the robot's frame) is clear for `length` (m from
 /// the robot's centre): no place an echo of the ring may come from ([`echo_places`]) within
-/// [`HALF_WIDTH`] of its centre line before `length`. Unread sonars see nothing.
-fn clear(s: &Sonar, heading: f64, length: f64) -> bool {
+/// `half` of its centre line before `length`. Unread sonars see nothing.
+fn clear(s: &Sonar, heading: f64, length: f64, half: f64) -> bool {
     let (c, sn) = (heading.cos(), heading.sin());
     let mut clear = true;
     for i in 0..SONARS {
         echo_places(s, i, |x, y| {
             let along = x * c + y * sn;
-            clear &= along <= 0.0 || along >= length || (y * c - x * sn).abs() >= HALF_WIDTH;
+            clear &= along <= 0.0 || along >= length || (y * c - x * sn).abs() >= half;
         });
     }
     clear
@@ -163,7 +204,7 @@ fn clear(s: &Sonar, heading: f64, length: f64) -> bool {
 fn way_round(s: &Sonar, bearing: f64, side: Side) -> Option<f64> {
     (1..18)
         .map(|k| wrap(bearing + side.sign() * f64::from(k) * STEP))
-        .find(|&h| clear(s, h, LANE_LENGTH))
+        .find(|&h| clear(s, h, LANE_LENGTH, HALF_WIDTH))
 }
 
 /// The side whose clear lane is nearer the goal's bearing (left on a tie or when neither has

@@ -61,7 +61,8 @@ pub struct GoOut<'a> {
 /// [`REFINE_HEADING`]. Backing off a post lets the door go.
 ///
 /// Held on its way to the approach point with something in the way (a box on the door's
-/// axis inside the room), it goes round ([`Detour`]).
+/// axis inside the room, or one whose corner its body's corridor clips), it goes round
+/// ([`Detour`], [`Watch::LineAndBody`]).
 ///
 /// An estimate off the opening's centre is mended on the way through: between the posts the
 /// aim moves toward the side with more room ([`SHIFT_RATE`]), and pushing a post in front of
@@ -228,7 +229,9 @@ impl Skill for GoThrough {
         let mut err = wrap(want - od.theta);
         if lining_up {
             let far = (goal.0 - od.x).hypot(goal.1 - od.y);
-            err = self.detour.steer(&s, err, far, period_ms(ctx));
+            err = self
+                .detour
+                .steer(&s, err, far, period_ms(ctx), Watch::LineAndBody);
         } else {
             self.detour.reset();
         }

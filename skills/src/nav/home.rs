@@ -103,7 +103,8 @@ impl Skill for Home {
         }
         let period = period_ms(ctx);
         let bearing = if t.range > p.stop_distance {
-            self.detour.steer(&i.sonar, t.bearing, t.range, period)
+            self.detour
+                .steer(&i.sonar, t.bearing, t.range, period, Watch::Line)
         } else {
             self.detour.reset();
             t.bearing

@@ -19,7 +19,7 @@ mod wander;
 
 pub use avoid::*;
 pub use barcode_track::*;
-pub use detour::Detour;
+pub use detour::{Detour, Watch};
 pub use door_locate::*;
 pub use explore::*;
 pub use go_through::*;

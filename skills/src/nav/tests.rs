@@ -852,37 +852,85 @@ fn a_detour_leaves_an_approach_alone_until_it_is_held_with_something_on_the_line
     let boxed = ring(|a| if a.abs() < 0.7 { 0.3 } else { 5.0 });
     let mut d = Detour::default();
     for _ in 0..2000 {
-        assert_eq!(d.steer(&open, 0.2, 4.0, 10.0), 0.2, "held, the line clear");
+        assert_eq!(
+            d.steer(&open, 0.2, 4.0, 10.0, Watch::Line),
+            0.2,
+            "held, the line clear"
+        );
     }
     let mut d = Detour::default();
     for k in 0..800 {
         assert_eq!(
-            d.steer(&boxed, 0.0, 4.0, 10.0),
+            d.steer(&boxed, 0.0, 4.0, 10.0, Watch::Line),
             0.0,
             "cycle {k}: not held 8 s yet"
         );
     }
-    let first = d.steer(&boxed, 0.0, 4.0, 10.0);
+    let first = d.steer(&boxed, 0.0, 4.0, 10.0, Watch::Line);
     assert!(first.abs() > 0.7, "round the box: {first}");
     for _ in 0..3000 {
-        assert_eq!(d.steer(&boxed, 0.0, 4.0, 10.0).signum(), first.signum());
+        assert_eq!(
+            d.steer(&boxed, 0.0, 4.0, 10.0, Watch::Line).signum(),
+            first.signum()
+        );
     }
     // Given up after 30 s: straight again, then held 8 s more, round the other side.
-    assert_eq!(d.steer(&boxed, 0.0, 4.0, 10.0), 0.0);
+    assert_eq!(d.steer(&boxed, 0.0, 4.0, 10.0, Watch::Line), 0.0);
     for _ in 0..800 {
-        d.steer(&boxed, 0.0, 4.0, 10.0);
+        d.steer(&boxed, 0.0, 4.0, 10.0, Watch::Line);
     }
-    let second = d.steer(&boxed, 0.0, 4.0, 10.0);
+    let second = d.steer(&boxed, 0.0, 4.0, 10.0, Watch::Line);
     assert!(
         second.signum() == -first.signum() && second.abs() > 0.7,
         "{second}"
     );
     // The line clear (round the box): straight at once.
-    assert_eq!(d.steer(&open, 0.3, 3.5, 10.0), 0.3);
+    assert_eq!(d.steer(&open, 0.3, 3.5, 10.0, Watch::Line), 0.3);
     // Getting nearer resets the count: a slow approach with the box ahead is left alone.
     let mut d = Detour::default();
     for k in 0..5000 {
         let far = 4.0 - 0.3 * f64::from(k / 700);
-        assert_eq!(d.steer(&boxed, 0.0, far.max(1.5), 10.0), 0.0, "cycle {k}");
+        assert_eq!(
+            d.steer(&boxed, 0.0, far.max(1.5), 10.0, Watch::Line),
+            0.0,
+            "cycle {k}"
+        );
+    }
+}
+
+#[test]
+fn a_detour_goes_round_a_corner_its_body_clips_that_no_sonar_facing_the_goal_hears() {
+    // A box's corner at the right front, 0.1 m from the ring, for the sonars facing 45–90°
+    // right; none facing within 15° of the goal (straight ahead) hears it, but the body's
+    // corridor toward the goal clips it (building F seed 5's lining up above a box).
+    let corner = ring(|a| if (-1.6..-0.7).contains(&a) { 0.1 } else { 5.0 });
+    let mut d = Detour::default();
+    for k in 0..800 {
+        assert_eq!(
+            d.steer(&corner, 0.0, 2.0, 10.0, Watch::LineAndBody),
+            0.0,
+            "cycle {k}: not held 8 s yet"
+        );
+    }
+    let round = d.steer(&corner, 0.0, 2.0, 10.0, Watch::LineAndBody);
+    assert!(
+        round > 0.3,
+        "round on the left, away from the corner: {round}"
+    );
+    for _ in 0..100 {
+        assert!(
+            d.steer(&corner, 0.0, 2.0, 10.0, Watch::LineAndBody) > 0.3,
+            "still round"
+        );
+    }
+    // Past the corner (the ring clear): straight again.
+    assert_eq!(
+        d.steer(&ring(|_| 5.0), 0.0, 1.8, 10.0, Watch::LineAndBody),
+        0.0
+    );
+    // Watching the line only (`home`'s), the corner beside it holds nothing.
+    let mut d = Detour::default();
+    for _ in 0..2000 {
+        assert_eq!(d.steer(&corner, 0.0, 2.0, 10.0, Watch::Line), 0.0);
     }
 }

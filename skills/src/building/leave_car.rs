@@ -97,6 +97,21 @@ fn gap_middle(s: &Sonar) -> f64 {
     (left + right) / 2.0
 }
 
+/// The side (+1 left, −1 right) whose sonar square to the heading reads past `clear` while
+/// the one behind and the one square on the other side read short of it: waiting in a cabin
+/// squared to the wrong wall, the doors open beside the robot. `None` otherwise (an unread
+/// sonar opens nothing and shuts nothing).
+fn doors_beside(s: &Sonar, clear: f64) -> Option<f64> {
+    let shut = |deg: f64| arc(s, deg - 5.0, deg + 5.0).is_some_and(|(_, far)| far < clear);
+    let open = |deg: f64| arc(s, deg - 5.0, deg + 5.0).is_some_and(|(near, _)| near > clear);
+    if !shut(180.0) {
+        return None;
+    }
+    [1.0, -1.0]
+        .into_iter()
+        .find(|&side: &f64| open(side * 90.0) && shut(-side * 90.0))
+}
+
 /// Told to drive out and not moving this many cycles (0.5 s), it steers by the gap alone.
 const PINNED: u32 = 50;
 /// ... for this far along the way out (m): past the posts.
@@ -114,7 +129,9 @@ const GAP_LOOK: f64 = 0.3;
 /// line while its side walls are beside, then centred between the door posts by the side
 /// sonars, until `distance` from where it started; there it stops. Doors
 /// seen closing in front before it reached the doorway (`doorway` from the start) make it
-/// wait again.
+/// wait again. Waiting with `go`, shut ahead and behind and on one side but open square to
+/// the way on the other (doors opening beside it: the way out squared to the wrong wall), it
+/// turns the way out a quarter toward them.
 ///
 /// For a sequencer: `leave_car.progress.done == 1` (out of the car, stopped),
 /// `leave_car.progress.phase == 1` (turned, waiting for `go` and the doors); `progress.value`
@@ -207,6 +224,15 @@ impl Skill for LeaveCar {
         }
         if self.phase == WAITING && p.go == 1 && ahead > p.clear {
             self.phase = LEAVING;
+        } else if self.phase == WAITING
+            && p.go == 1
+            && let Some(side) = doors_beside(s, p.clear)
+        {
+            // The doors opened beside it: the way out was squared to the wrong wall (turned
+            // toward the panel's button at 45° to the walls, the half turn is as near one wall
+            // as the other; building G seed 5 waited at the cabin's side wall for 890 s).
+            self.way = wrap(self.way + side * FRAC_PI_2);
+            self.phase = TURNING;
         }
         if self.phase == LEAVING {
             if along >= p.distance {

@@ -374,6 +374,43 @@ fn leave_car_turns_to_the_doors_waits_for_go_and_for_them_to_open_then_drives_ou
     assert!(r.sim.vel[0].abs() < 1e-3, "stopped");
 }
 
+/// Building G seed 5: turned toward the panel's button at 45° to the walls, the half turn
+/// was squared to the cabin's side wall, and the robot waited there while the doors opened
+/// and closed beside it. Facing the side wall (activated facing the other one), told to go,
+/// the doors open on its left: it turns to them and drives out.
+#[test]
+fn leave_car_squared_to_a_side_wall_turns_to_doors_that_open_beside_it() {
+    let start = [0.9, 0.95, 0.0];
+    let mut r = Robot::new(&lobby(start, true), 9);
+    let mut h = Harness::<LeaveCar>::new();
+    h.set_param("go=1").unwrap();
+    let mut p = Progress::default();
+    let mut turned_west = false;
+    for _ in 0..2500 {
+        h.input("odometry", r.odometry).input("sonar", r.sonar);
+        let step = h.step().unwrap();
+        p = *step.output::<Progress>("progress").unwrap();
+        r.drive(*step.output::<Drive>("drive").unwrap());
+        turned_west |= wrap(r.sim.pose[2] - PI).abs() < 0.1;
+        if p.done {
+            break;
+        }
+    }
+    assert!(turned_west, "first the half turn, to the west wall");
+    let [x, y, _] = r.sim.pose;
+    assert!(
+        p.done && p.phase == leave_phase::OUT,
+        "{p:?} at {:?}",
+        r.sim.pose
+    );
+    assert_eq!(r.sim.collisions, 0);
+    assert!(
+        (y - (0.95 - 1.8)).abs() < 0.15,
+        "out through the doors: {y}"
+    );
+    assert!((x - 0.9).abs() < 0.15, "straight out: {x}");
+}
+
 /// leave_car activated facing the back wall (+y), all clear, told to go: it leaves along −y.
 fn told_to_leave() -> Harness<LeaveCar> {
     let mut h = Harness::<LeaveCar>::new();

@@ -102,8 +102,8 @@ fn gap_middle(s: &Sonar) -> f64 {
 /// squared to the wrong wall, the doors open beside the robot. `None` otherwise (an unread
 /// sonar opens nothing and shuts nothing).
 fn doors_beside(s: &Sonar, clear: f64) -> Option<f64> {
-    let shut = |deg: f64| arc(s, deg - 5.0, deg + 5.0).is_some_and(|(_, far)| far < clear);
-    let open = |deg: f64| arc(s, deg - 5.0, deg + 5.0).is_some_and(|(near, _)| near > clear);
+    let shut = |deg: f64| at(s, deg).is_some_and(|r| r < clear);
+    let open = |deg: f64| at(s, deg).is_some_and(|r| r > clear);
     if !shut(180.0) {
         return None;
     }
